@@ -1,0 +1,143 @@
+"""The OpenCL renderer: runs vertex → setup → bin → raster for one frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from .config import CULL_MODES, MAX_IMAGE_SIZE, RasterConfig, guard_band_factors
+from .device import default_context
+from .frame import Frame, FrameStats
+from .stages._buffers import GrowBuffer
+from .stages.bin import BinStage
+from .stages.raster import RasterStage
+from .stages.setup import SetupStage
+from .stages.vertex import VertexStage
+
+
+def check_size(width: int, height: int) -> tuple[int, int]:
+    """Validate an image size; returns it as plain ints."""
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise ValueError(f"{name} must be an integer, got {v!r}")
+        if not 0 < v <= MAX_IMAGE_SIZE:
+            raise ValueError(f"{name} must be in 1..{MAX_IMAGE_SIZE}, got {v}")
+    return int(width), int(height)
+
+
+def check_cull(cull: str) -> str:
+    if cull not in CULL_MODES:
+        raise ValueError(f"cull must be one of {sorted(CULL_MODES)}, got {cull!r}")
+    return cull
+
+
+def mvp_matrix(camera, width: int, height: int) -> np.ndarray:
+    """Row-major float32 (4, 4) view-projection matrix of ``camera`` for this image size."""
+    m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError("camera.view_projection() must be a finite (4, 4) matrix")
+    return np.ascontiguousarray(m, dtype=np.float32)
+
+
+def empty_frame(width: int, height: int, stats: FrameStats) -> Frame:
+    return Frame(np.ones((height, width), np.float32), np.full((height, width), -1, np.int32),
+                 np.zeros((height, width, 3), np.float32), stats)
+
+
+class Renderer:
+    """Rasterizes meshes on an OpenCL device into depth, triangle-id and barycentric buffers.
+
+    Args:
+        width, height: image size in pixels, 1..16384.
+        config: tunables (tile size, bin chunks); they never change the output.
+        context: an OpenCL context; default `clraster.device.default_context()` (honours
+            PYOPENCL_CTX, else the first PoCL CPU device).
+
+    Device buffers are kept and grown between frames; programs are built once per context
+    and config. A Renderer is not thread-safe; use one per thread.
+    """
+
+    def __init__(self, width: int, height: int, *, config: RasterConfig | None = None,
+                 context: cl.Context | None = None) -> None:
+        self.width, self.height = check_size(width, height)
+        self.config = config or RasterConfig()
+        self.context = context or default_context()
+        dev = self.context.devices[0]
+        need = 12 * self.width * self.height
+        if need > dev.max_mem_alloc_size:
+            raise ValueError(f"{self.width}x{self.height} needs a {need / 2**20:.0f} MiB "
+                             f"barycentric buffer; {dev.name} allocates at most "
+                             f"{dev.max_mem_alloc_size / 2**20:.0f} MiB per buffer")
+        self.queue = cl.CommandQueue(
+            self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
+        self.vertex = VertexStage(self.context, self.config)
+        self.setup = SetupStage(self.context, self.config)
+        self.binning = BinStage(self.context, self.config)
+        self.raster = RasterStage(self.context, self.config)
+        self._positions = GrowBuffer(self.context)
+        self._faces = GrowBuffer(self.context)
+        self._mesh = None
+
+    def _upload(self, mesh) -> None:
+        if self._mesh is mesh:
+            return
+        v = np.ascontiguousarray(mesh.vertices, np.float32)
+        f = np.ascontiguousarray(mesh.faces, np.int32)
+        cl.enqueue_copy(self.queue, self._positions.ensure(v.nbytes), v)
+        cl.enqueue_copy(self.queue, self._faces.ensure(f.nbytes), f)
+        self._mesh = mesh
+
+    def render(self, mesh, camera, *, cull: str = "back") -> Frame:
+        """Render ``mesh`` (a `clraster.Mesh`) seen by ``camera``.
+
+        Args:
+            cull: "back" (drop faces that are clockwise in NDC, i.e. counter-clockwise is
+                front, the OpenGL default), "front", or "none".
+
+        Returns:
+            A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
+            conventions. Triangles with a NaN/Inf vertex are dropped and counted in
+            ``stats.invalid``.
+        """
+        check_cull(cull)
+        w, h = self.width, self.height
+        mvp = mvp_matrix(camera, w, h)
+        n, m = int(mesh.vertices.shape[0]), int(mesh.faces.shape[0])
+        if m == 0 or n == 0:
+            return empty_frame(w, h, FrameStats(triangles_in=m))
+        kx, ky = guard_band_factors(w, h)
+        q = self.queue
+        self._upload(mesh)
+        ev_v = self.vertex.run(q, self._positions.buf, n, mvp, kx, ky)
+        cb = self.vertex.buffers
+        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, self._faces.buf, m, w, h,
+                                 cull, kx, ky)
+        sb = self.setup.buffers
+        e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
+                                   sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
+        bb = self.binning.buffers
+        ev_r = self.raster.run(q, sb.pieces.buf, sb.clip_pieces.buf, sb.clip_bary.buf, m,
+                               bb.tile_start.buf, bb.entries.buf, w, h)
+        fb = self.raster.buffers
+        depth = np.empty((h, w), np.float32)
+        ids = np.empty((h, w), np.int32)
+        bary = np.empty((h, w, 3), np.float32)
+        status = np.empty(m, np.uint8)
+        tiles = int(np.prod(self.config.tiles(w, h)))
+        tstats = np.empty((tiles, 2), np.int64)
+        cl.enqueue_copy(q, depth, fb.depth.buf, is_blocking=False)
+        cl.enqueue_copy(q, ids, fb.ids.buf, is_blocking=False)
+        cl.enqueue_copy(q, bary, fb.bary.buf, is_blocking=False)
+        cl.enqueue_copy(q, status, sb.status.buf, is_blocking=False)
+        cl.enqueue_copy(q, tstats, fb.tile_stats.buf, is_blocking=True)
+        stats = FrameStats.from_status(
+            status, clip_pieces=p, binned_entries=e,
+            fragments_tested=int(tstats[:, 0].sum()), fragments_passed=int(tstats[:, 1].sum()))
+        stats.timings_ms = {
+            "vertex": _ms([ev_v]), "setup": _ms(ev_s), "bin": _ms(ev_b), "raster": _ms([ev_r])}
+        return Frame(depth, ids, bary, stats)
+
+
+def _ms(events: list[cl.Event]) -> float:
+    """Sum of device execution times of ``events`` in milliseconds."""
+    return sum((ev.profile.end - ev.profile.start) for ev in events) * 1e-6

@@ -1,0 +1,70 @@
+"""Binning host side (kernels/bin.cl): count → offsets → scan → scatter."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from ..config import RasterConfig
+from ..device import program
+from ._buffers import GrowBuffer
+
+
+@dataclass
+class BinBuffers:
+    """Binning → raster boundary, T = number of tiles, C = bin chunks, E = entries.
+
+    counts: int32 (C, T) per-chunk tile counts, then per-chunk offsets within each tile.
+    tile_count: int32 (T,). tile_start: int32 (T + 1,), tile_start[T] = E.
+    overflow: int32 (1,) set when E would not fit an int32.
+    entries: int32 (E,) piece indices (unified space, see kernels/bin.cl), tile-major,
+    submission order within a tile.
+    """
+
+    counts: GrowBuffer
+    tile_count: GrowBuffer
+    tile_start: GrowBuffer
+    overflow: GrowBuffer
+    entries: GrowBuffer
+
+
+class BinStage:
+    def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
+        prg = program(ctx, "bin", config.build_options())
+        self.k_count, self.k_offsets = prg.bin_count, prg.bin_offsets
+        self.k_scan, self.k_scatter = prg.bin_scan_tiles, prg.bin_scatter
+        self.config = config
+        self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))
+
+    def run(self, queue: cl.CommandQueue, status: cl.Buffer, clip_count: cl.Buffer,
+            clip_offset: cl.Buffer, pieces: cl.Buffer, clip_pieces: cl.Buffer, m: int,
+            width: int, height: int) -> tuple[int, list[cl.Event]]:
+        """Bin the pieces of ``m`` triangles. Returns (E = entries, profiling events)."""
+        b = self.buffers
+        tiles_x, tiles_y = self.config.tiles(width, height)
+        n_tiles = tiles_x * tiles_y
+        chunks = max(1, min(self.config.bin_chunks, m))
+        counts = b.counts.ensure(4 * chunks * n_tiles)
+        common = (status, clip_count, clip_offset, pieces, clip_pieces, np.uint32(m),
+                  np.uint32(chunks), np.int32(tiles_x), np.int32(n_tiles), counts)
+        ev = [self.k_count(queue, (chunks,), (1,), *common)]
+        ev.append(self.k_offsets(queue, (n_tiles,), None, np.uint32(chunks),
+                                 np.int32(n_tiles), counts, b.tile_count.ensure(4 * n_tiles)))
+        tile_start = b.tile_start.ensure(4 * (n_tiles + 1))
+        ev.append(self.k_scan(queue, (1,), (1,), np.int32(n_tiles), b.tile_count.buf,
+                              tile_start, b.overflow.ensure(4)))
+        head = np.zeros(1, np.int32)
+        over = np.zeros(1, np.int32)
+        cl.enqueue_copy(queue, over, b.overflow.buf)
+        cl.enqueue_copy(queue, head, tile_start, src_offset=4 * n_tiles)
+        if over[0]:
+            raise ValueError(
+                f"binning would need more than 2**31 (piece, tile) entries at {width}x{height} "
+                f"with {self.config.tile_size}px tiles; use a larger tile size "
+                "(RasterConfig(tile_log2=...)) or a smaller image")
+        e = int(head[0])
+        entries = b.entries.ensure(4 * e)
+        ev.append(self.k_scatter(queue, (chunks,), (1,), *common, tile_start, entries))
+        return e, ev

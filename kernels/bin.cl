@@ -1,0 +1,103 @@
+/* Binning: setup records -> per-tile lists, in submission order, exact sizes.
+ *
+ * The triangle slots are cut into `chunks` contiguous ranges (one work-item each).
+ *   bin_count:   each chunk counts its pieces per tile into its own row counts[chunk][tile].
+ *   bin_offsets: per tile, turns the column counts[.][tile] into exclusive offsets within the
+ *                tile and writes the tile's total.
+ *   bin_scan_tiles: one work-item scans the tile totals into tile_start[0..tiles]; the host
+ *                reads tile_start[tiles] (total entries) and sizes the entry buffer to fit.
+ *   bin_scatter: each chunk walks its pieces again and writes their indices at
+ *                tile_start[tile] + counts[chunk][tile]++.
+ * Chunks are ordered and each writes its pieces in order, so every tile list is in
+ * submission order with no atomics: deterministic, and nothing can overflow.
+ *
+ * Piece index space: 0..m-1 are the unclipped slots (Piece at pieces[t]); m + j is clipped
+ * piece j (clip_pieces[j]). A clipped triangle's pieces stay at its position in the stream.
+ */
+#include "common.h"
+
+inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int *ty1)
+{
+    *tx0 = bb_x(bb_min) >> TILE_LOG2;
+    *ty0 = bb_y(bb_min) >> TILE_LOG2;
+    *tx1 = bb_x(bb_max) >> TILE_LOG2;
+    *ty1 = bb_y(bb_max) >> TILE_LOG2;
+}
+
+/* Visit every (piece, tile) pair of the chunk's slots in submission order. BODY sees `piece`
+ * (index in the unified space) and `tile`. */
+#define FOR_EACH_CHUNK_ENTRY(BODY)                                                        \
+    uint s0 = (uint)(((ulong)chunk * m) / chunks);                                        \
+    uint s1 = (uint)(((ulong)(chunk + 1) * m) / chunks);                                  \
+    for (uint t = s0; t < s1; ++t) {                                                      \
+        uchar st = status[t];                                                             \
+        int first, count;                                                                 \
+        if (st == ST_RASTER) { first = (int)t; count = 1; }                               \
+        else if (st == ST_CLIPPED) { first = (int)m + clip_offset[t]; count = clip_count[t]; } \
+        else continue;                                                                    \
+        for (int piece = first; piece < first + count; ++piece) {                         \
+            __global const Piece *pc = piece < (int)m ? &pieces[piece]                    \
+                                                      : &clip_pieces[piece - (int)m];      \
+            int tx0, ty0, tx1, ty1;                                                       \
+            tile_rect(pc->bb_min, pc->bb_max, &tx0, &ty0, &tx1, &ty1);                    \
+            for (int ty = ty0; ty <= ty1; ++ty)                                           \
+                for (int tx = tx0; tx <= tx1; ++tx) {                                     \
+                    int tile = ty * tiles_x + tx;                                         \
+                    BODY                                                                  \
+                }                                                                         \
+        }                                                                                 \
+    }
+
+__kernel void bin_count(__global const uchar *status, __global const int *clip_count,
+                        __global const int *clip_offset, __global const Piece *pieces,
+                        __global const Piece *clip_pieces, const uint m, const uint chunks,
+                        const int tiles_x, const int n_tiles, __global int *counts)
+{
+    uint chunk = get_global_id(0);
+    if (chunk >= chunks) return;
+    __global int *row = counts + (size_t)chunk * n_tiles;
+    for (int i = 0; i < n_tiles; ++i) row[i] = 0;
+    FOR_EACH_CHUNK_ENTRY(row[tile] += 1;)
+}
+
+__kernel void bin_offsets(const uint chunks, const int n_tiles, __global int *counts,
+                          __global int *tile_count)
+{
+    int tile = get_global_id(0);
+    if (tile >= n_tiles) return;
+    int s = 0;
+    for (uint c = 0; c < chunks; ++c) {
+        size_t i = (size_t)c * n_tiles + tile;
+        int v = counts[i];
+        counts[i] = s;
+        s += v;
+    }
+    tile_count[tile] = s;
+}
+
+/* tile_start has n_tiles + 1 entries; tile_start[n_tiles] is the total. If the total does
+ * not fit an int, overflow[0] is set and the host refuses the frame with an error. */
+__kernel void bin_scan_tiles(const int n_tiles, __global const int *tile_count,
+                             __global int *tile_start, __global int *overflow)
+{
+    if (get_global_id(0) != 0) return;
+    long s = 0;
+    for (int i = 0; i < n_tiles; ++i) {
+        tile_start[i] = (int)min(s, (long)INT_MAX);
+        s += tile_count[i];
+    }
+    tile_start[n_tiles] = (int)min(s, (long)INT_MAX);
+    overflow[0] = s > (long)INT_MAX;
+}
+
+__kernel void bin_scatter(__global const uchar *status, __global const int *clip_count,
+                          __global const int *clip_offset, __global const Piece *pieces,
+                          __global const Piece *clip_pieces, const uint m, const uint chunks,
+                          const int tiles_x, const int n_tiles, __global int *counts,
+                          __global const int *tile_start, __global int *entries)
+{
+    uint chunk = get_global_id(0);
+    if (chunk >= chunks) return;
+    __global int *row = counts + (size_t)chunk * n_tiles;
+    FOR_EACH_CHUNK_ENTRY(entries[tile_start[tile] + row[tile]++] = piece;)
+}

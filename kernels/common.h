@@ -1,0 +1,91 @@
+/* clraster — types and constants shared by every stage.
+ *
+ * Mirrors clraster/config.py (outcode bits, status codes, piece flags, PIECE_DTYPE). Change
+ * both together. Stage sources say `#include "common.h"`; the host inlines this file.
+ *
+ * Every float expression here is written out operation by operation and FP contraction is
+ * off, so the NumPy twin (clraster/reference), doing the same IEEE float32 operations in the
+ * same order, gets bit-identical clip positions, fixed-point vertices and depths — that is
+ * what lets the tests compare triangle ids exactly.
+ */
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef TILE_LOG2
+#error "TILE_LOG2 must be defined (see clraster/config.py RasterConfig.build_options)"
+#endif
+#ifndef SUBPIXEL_BITS
+#define SUBPIXEL_BITS 8
+#endif
+
+#define TILE_SIZE (1 << TILE_LOG2)
+#define SUB_ONE (1 << SUBPIXEL_BITS)          /* 256: one pixel in 24.8 fixed point */
+#define SUB_HALF (1 << (SUBPIXEL_BITS - 1))   /* pixel centres sit at +0.5 */
+
+/* Outcode bits (vertex stage). Bits 0..5 are the classic 6-bit frustum outcode; 6..9 say the
+ * vertex is outside the guard band (x/y clipping needed); bit 10 marks NaN/Inf. */
+#define OC_X_NEG 1
+#define OC_X_POS 2
+#define OC_Y_NEG 4
+#define OC_Y_POS 8
+#define OC_Z_NEG 16
+#define OC_Z_POS 32
+#define OC_FRUSTUM 63
+#define OC_GB_X_NEG 64
+#define OC_GB_X_POS 128
+#define OC_GB_Y_NEG 256
+#define OC_GB_Y_POS 512
+#define OC_INVALID 1024
+#define OC_NEEDS_CLIP (OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | OC_GB_Y_POS)
+
+/* Per-triangle status (triangle setup). */
+#define ST_RASTER 0
+#define ST_CLIPPED 1
+#define ST_INVALID 2
+#define ST_TRIVIAL_REJECT 3
+#define ST_BACKFACE 4
+#define ST_DEGENERATE 5
+#define ST_NO_SAMPLE 6
+
+#define PF_SWAPPED 1
+#define PF_CLIPPED 2
+
+#define CULL_NONE 0
+#define CULL_BACK 1
+#define CULL_FRONT 2
+
+#define MAX_CLIP_VERTICES 9
+
+/* One triangle setup record: 64 bytes. Window coordinates are 24.8 fixed point with y down
+ * (row 0 at the top) and the vertex order makes the doubled area positive. bb_min/bb_max are
+ * the inclusive pixel ranges of pixel centres inside the bounding box, clamped to the
+ * viewport, packed x | y << 16. See config.PIECE_DTYPE. */
+typedef struct {
+    int x[3];
+    int y[3];
+    int bb_min;
+    int bb_max;
+    float z0, dz10, dz20, inv_area;
+    int id;
+    int flags;
+    float r1, r2;   /* w0/w1, w0/w2: perspective correction of screen-space weights */
+} Piece;
+
+/* Edge function of the directed edge a->b at fixed-point point p, exact in 64 bits:
+ * E(p) = (bx-ax)(py-ay) - (by-ay)(px-ax). Positive inside a positive-area triangle. */
+inline long edge_fn(int ax, int ay, int bx, int by, int px, int py)
+{
+    return (long)(bx - ax) * (long)(py - ay) - (long)(by - ay) * (long)(px - ax);
+}
+
+/* D3D11 top-left rule for positive-area (clockwise on screen, y down) triangles: a top edge
+ * is horizontal and runs left-to-right; a left edge runs upwards. A pixel centre exactly on
+ * an edge is covered only if that edge is top or left, so a shared edge covers it once.
+ * Returned as the minimum edge value that counts as inside: 0 for top-left, 1 otherwise. */
+inline long edge_bias(int ax, int ay, int bx, int by)
+{
+    int dx = bx - ax, dy = by - ay;
+    return (dy < 0 || (dy == 0 && dx > 0)) ? 0 : 1;
+}
+
+inline int bb_x(int packed) { return packed & 0xFFFF; }
+inline int bb_y(int packed) { return packed >> 16; }

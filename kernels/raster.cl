@@ -1,0 +1,117 @@
+/* Tile raster: one work-item per screen tile walks its bin list in submission order.
+ *
+ * Per entry: intersect the piece's pixel box with the tile, step three exact 64-bit edge
+ * functions across it (top-left rule via edge_bias), interpolate window depth linearly in
+ * screen space and depth-test LESS against the tile's private z-buffer (first drawn wins
+ * ties). Only the winning piece per pixel is kept; depth, id and perspective-correct
+ * barycentrics (relative to the parent triangle's vertices) are resolved once at the end.
+ *
+ * Depth arithmetic is spelled out operation by operation; clraster/reference/raster.py does
+ * the same float32 operations, so both z-buffers and hence the triangle ids agree exactly.
+ */
+#include "common.h"
+
+#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
+
+inline __global const Piece *piece_at(__global const Piece *pieces,
+                                      __global const Piece *clip_pieces, uint m, int e)
+{
+    return e < (int)m ? &pieces[e] : &clip_pieces[e - (int)m];
+}
+
+__kernel void raster_tiles(__global const Piece *pieces, __global const Piece *clip_pieces,
+                           __global const float *clip_bary, const uint m,
+                           __global const int *tile_start, __global const int *entries,
+                           const int width, const int height, const int tiles_x,
+                           __global float *depth_out, __global int *id_out,
+                           __global float *bary_out, __global long *tile_stats)
+{
+    int tile = get_global_id(0);
+    int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
+    if (tile >= tiles_x * tiles_y) return;
+    int tx0 = (tile % tiles_x) << TILE_LOG2, ty0 = (tile / tiles_x) << TILE_LOG2;
+    int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
+
+    float zbuf[TILE_PIXELS];
+    int win[TILE_PIXELS];
+    for (int i = 0; i < TILE_PIXELS; ++i) { zbuf[i] = 1.0f; win[i] = -1; }
+    long tested = 0, passed = 0;
+
+    int e0 = tile_start[tile], e1 = tile_start[tile + 1];
+    for (int k = e0; k < e1; ++k) {
+        int e = entries[k];
+        __global const Piece *pc = piece_at(pieces, clip_pieces, m, e);
+        int x0 = max(bb_x(pc->bb_min), tx0), x1 = min(bb_x(pc->bb_max), tx1);
+        int y0 = max(bb_y(pc->bb_min), ty0), y1 = min(bb_y(pc->bb_max), ty1);
+        if (x0 > x1 || y0 > y1) continue;
+        int X0 = pc->x[0], X1 = pc->x[1], X2 = pc->x[2];
+        int Y0 = pc->y[0], Y1 = pc->y[1], Y2 = pc->y[2];
+        /* edge i is opposite vertex i, so E_i / area is vertex i's screen-space weight */
+        long b0 = edge_bias(X1, Y1, X2, Y2), b1 = edge_bias(X2, Y2, X0, Y0);
+        long b2 = edge_bias(X0, Y0, X1, Y1);
+        int px = (x0 << SUBPIXEL_BITS) + SUB_HALF, py = (y0 << SUBPIXEL_BITS) + SUB_HALF;
+        long r0 = edge_fn(X1, Y1, X2, Y2, px, py);
+        long r1 = edge_fn(X2, Y2, X0, Y0, px, py);
+        long r2 = edge_fn(X0, Y0, X1, Y1, px, py);
+        /* stepping one pixel right adds -dy·256, one pixel down adds dx·256 */
+        long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
+        long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
+        long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
+        float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
+        for (int y = y0; y <= y1; ++y) {
+            long w0 = r0, w1 = r1, w2 = r2;
+            int row = (y - ty0) << TILE_LOG2;
+            for (int x = x0; x <= x1; ++x) {
+                if (w0 >= b0 && w1 >= b1 && w2 >= b2) {
+                    float l1 = (float)w1 * inv_area;
+                    float l2 = (float)w2 * inv_area;
+                    float z = (z0 + l1 * dz10) + l2 * dz20;
+                    int i = row + (x - tx0);
+                    ++tested;
+                    if (z < zbuf[i]) { zbuf[i] = z; win[i] = e; ++passed; }
+                }
+                w0 += sx0; w1 += sx1; w2 += sx2;
+            }
+            r0 += sy0; r1 += sy1; r2 += sy2;
+        }
+    }
+
+    /* resolve: id and perspective-correct barycentrics of the winner, per pixel */
+    for (int y = ty0; y <= ty1; ++y) {
+        for (int x = tx0; x <= tx1; ++x) {
+            int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
+            size_t o = (size_t)y * width + x;
+            depth_out[o] = zbuf[i];
+            int e = win[i];
+            float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
+            int id = -1;
+            if (e >= 0) {
+                __global const Piece *pc = piece_at(pieces, clip_pieces, m, e);
+                int px = (x << SUBPIXEL_BITS) + SUB_HALF, py = (y << SUBPIXEL_BITS) + SUB_HALF;
+                float l0 = (float)edge_fn(pc->x[1], pc->y[1], pc->x[2], pc->y[2], px, py) * pc->inv_area;
+                float l1 = (float)edge_fn(pc->x[2], pc->y[2], pc->x[0], pc->y[0], px, py) * pc->inv_area;
+                float l2 = (float)edge_fn(pc->x[0], pc->y[0], pc->x[1], pc->y[1], px, py) * pc->inv_area;
+                float q1 = l1 * pc->r1, q2 = l2 * pc->r2;
+                float s = (l0 + q1) + q2;
+                float c0 = l0 / s, c1 = q1 / s, c2 = q2 / s;
+                if (pc->flags & PF_CLIPPED) {
+                    __global const float *pb = clip_bary + 9 * (e - (int)m);
+                    B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];
+                    B1 = (c0 * pb[1] + c1 * pb[4]) + c2 * pb[7];
+                    B2 = (c0 * pb[2] + c1 * pb[5]) + c2 * pb[8];
+                } else if (pc->flags & PF_SWAPPED) {
+                    B0 = c0; B1 = c2; B2 = c1;
+                } else {
+                    B0 = c0; B1 = c1; B2 = c2;
+                }
+                id = pc->id;
+            }
+            id_out[o] = id;
+            bary_out[3 * o] = B0;
+            bary_out[3 * o + 1] = B1;
+            bary_out[3 * o + 2] = B2;
+        }
+    }
+    tile_stats[2 * tile] = tested;
+    tile_stats[2 * tile + 1] = passed;
+}

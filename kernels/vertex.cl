@@ -1,0 +1,36 @@
+/* Vertex stage: object space -> clip space, and outcodes.
+ * One work-item per vertex. mvp is row-major (clip = M · [x y z 1]ᵀ), float32.
+ * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
+ * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
+#include "common.h"
+
+__kernel void vertex_transform(__global const float *pos, const uint n,
+                               __constant const float *mvp, const float kx, const float ky,
+                               __global float4 *clip, __global ushort *outcode)
+{
+    uint i = get_global_id(0);
+    if (i >= n) return;
+    float px = pos[3 * i], py = pos[3 * i + 1], pz = pos[3 * i + 2];
+    float4 c;
+    c.x = ((mvp[0] * px + mvp[1] * py) + mvp[2] * pz) + mvp[3];
+    c.y = ((mvp[4] * px + mvp[5] * py) + mvp[6] * pz) + mvp[7];
+    c.z = ((mvp[8] * px + mvp[9] * py) + mvp[10] * pz) + mvp[11];
+    c.w = ((mvp[12] * px + mvp[13] * py) + mvp[14] * pz) + mvp[15];
+    uint oc = 0;
+    if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
+        oc = OC_INVALID;
+    } else {
+        oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
+        oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
+        oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
+        oc |= (c.w - c.y < 0.0f) ? OC_Y_POS : 0;
+        oc |= (c.z + c.w < 0.0f) ? OC_Z_NEG : 0;
+        oc |= (c.w - c.z < 0.0f) ? OC_Z_POS : 0;
+        oc |= (c.x + kx * c.w < 0.0f) ? OC_GB_X_NEG : 0;
+        oc |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
+        oc |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;
+        oc |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
+    }
+    clip[i] = c;
+    outcode[i] = (ushort)oc;
+}
