@@ -23,10 +23,14 @@ import pyopencl as cl
 log = logging.getLogger(__name__)
 
 _INSTALL_HINT = (
-    "clraster needs an OpenCL platform. `pip install pocl-binary-distribution` gives a CPU "
-    "device with no system packages (it is a dependency of clraster, so reinstalling "
-    "clraster brings it back); or set PYOPENCL_CTX to pick another platform."
+    "clraster needs an OpenCL CPU platform. `pip install pocl-binary-distribution` gives one "
+    "with no system packages (it is a dependency of clraster). Its LLVM 14 cannot compile for "
+    "CPUs newer than it knows (e.g. AMD Zen 5: 'unknown target CPU generic'); there, install "
+    "a newer PoCL, e.g. Debian/Ubuntu `apt-get install pocl-opencl-icd`, which clraster picks "
+    "up automatically. Or set PYOPENCL_CTX to choose a platform yourself."
 )
+
+_PROBE_SRC = "__kernel void probe(__global float *a) { a[get_global_id(0)] *= 2.0f; }"
 
 
 class NoDeviceError(RuntimeError):
@@ -55,8 +59,9 @@ def kernel_source(stage: str) -> str:
     return re.sub(r'^#include "common\.h"\s*$', lambda _m: header, text, flags=re.M)
 
 
+@functools.lru_cache(maxsize=1)
 def default_context() -> cl.Context:
-    """The context clraster uses when none is given (see module docstring)."""
+    """The context clraster uses when none is given (see module docstring); made once."""
     if os.environ.get("PYOPENCL_CTX"):
         try:
             return cl.create_some_context(interactive=False)
@@ -67,17 +72,34 @@ def default_context() -> cl.Context:
         platforms = cl.get_platforms()
     except cl.Error as exc:
         raise NoDeviceError(f"no OpenCL platform found ({exc}). {_INSTALL_HINT}") from exc
+    # PoCL first; never the Oclgrind simulator. A platform is used only if it can actually
+    # compile a kernel: several PoCLs may be installed side by side and an old one may be
+    # unable to target this CPU.
     ordered = sorted(platforms, key=lambda p: "portable computing" not in p.name.lower())
+    failures = []
     for plat in ordered:
+        if "oclgrind" in plat.name.lower():
+            continue
         try:
             devs = plat.get_devices(device_type=cl.device_type.CPU)
         except cl.Error:
-            devs = []
-        if devs and "oclgrind" not in plat.name.lower():
-            log.debug("clraster: using %s / %s", plat.name, devs[0].name)
-            return cl.Context([devs[0]])
+            continue
+        if not devs:
+            continue
+        ctx = cl.Context([devs[0]])
+        try:
+            cl.Program(ctx, _PROBE_SRC).build()
+        except cl.Error as exc:
+            first = str(exc).strip().splitlines()[-1] if str(exc).strip() else repr(exc)
+            failures.append(f"{plat.version}: {first}")
+            continue
+        log.debug("clraster: using %s / %s", plat.version, devs[0].name)
+        return ctx
     names = ", ".join(p.name for p in platforms) or "none"
-    raise NoDeviceError(f"no OpenCL CPU device found (platforms: {names}). {_INSTALL_HINT}")
+    why = ("; platforms that failed to compile a probe kernel: " + " | ".join(failures)
+           if failures else "")
+    raise NoDeviceError(f"no usable OpenCL CPU device (platforms: {names}){why}. "
+                        f"{_INSTALL_HINT}")
 
 
 _programs: dict[tuple[int, str, tuple[str, ...]], cl.Program] = {}

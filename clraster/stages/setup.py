@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 from pyopencl.scan import GenericScanKernel
 
 from ..config import CULL_MODES, PIECE_DTYPE, RasterConfig
@@ -62,8 +63,10 @@ class SetupStage:
                            b.status.ensure(m), b.clip_count.ensure(4 * m))]
         total = np.zeros(1, np.int32)
         if m:
-            ev.append(self.scan(b.clip_count.buf, b.clip_offset.ensure(4 * m),
-                                b.clip_total.ensure(4), np.int32(m), size=m, queue=queue))
+            cnt = cla.Array(queue, (m,), np.int32, data=b.clip_count.buf)
+            off = cla.Array(queue, (m,), np.int32, data=b.clip_offset.ensure(4 * m))
+            tot = cla.Array(queue, (1,), np.int32, data=b.clip_total.ensure(4))
+            ev.append(self.scan(cnt, off, tot, np.int32(m), size=m, queue=queue))
             cl.enqueue_copy(queue, total, b.clip_total.buf)
         p = int(total[0])
         if p:
