@@ -226,10 +226,11 @@ class Camera:
         """A look_at camera that sees the whole axis-aligned box ``[bounds_min, bounds_max]``.
 
         The camera looks at the box centre from ``centre + distance · direction/|direction|``,
-        with world +Y as up (world −Z when `direction` is vertical), far enough that the
-        box's bounding sphere fits the narrower of the vertical field of view and the
-        horizontal one implied by `aspect`. near/far bracket the sphere, so nothing of the
-        box is clipped.
+        with world +Y as up (world −Z when `direction` is vertical), at the smallest
+        distance at which all 8 corners lie inside the vertical field of view and the
+        horizontal one implied by `aspect`, with a 5% margin. near is half the depth of
+        the nearest corner and far 1.5× that of the farthest, so nothing of the box is
+        clipped. A box of zero size frames a small cube around its point.
 
         Args:
             bounds_min, bounds_max: (3,) corners, bounds_min <= bounds_max per axis.
@@ -254,18 +255,29 @@ class Camera:
             raise ValueError(f"aspect must be finite and > 0, got {aspect}")
         centre = (lo + hi) / 2.0
         radius = float(np.linalg.norm(hi - lo)) / 2.0
-        if radius == 0.0:  # a single point: frame a unit-scale neighbourhood of it
+        if radius == 0.0:  # a single point: frame a small neighbourhood of it
             radius = max(1.0, float(np.abs(centre).max())) * 1e-3
-        half_y = math.radians(fov_y) / 2.0
-        half_x = math.atan(math.tan(half_y) * aspect)
-        half = min(half_x, half_y)
-        dist = radius / math.sin(half) * 1.05  # 5% margin around the sphere's silhouette
-        eye = centre + dist * d
+            lo, hi = centre - radius, centre + radius
         up = np.array([0.0, 1.0, 0.0])
         if np.linalg.norm(np.cross(d, up)) < 1e-3:
             up = np.array([0.0, 0.0, -1.0])
-        near = (dist - radius) * 0.5
-        far = (dist + radius) * 1.5
+        # Corners in the camera basis (x right, y up, z towards the eye, origin at the box
+        # centre). With the eye at distance D, a corner is at depth D − z and inside the
+        # frustum iff |x| <= (D − z)·tan(half_x) and |y| <= (D − z)·tan(half_y). The
+        # frustum is convex, so containing the 8 corners contains the whole box.
+        rot = look_at_matrix(centre + d, centre, up)[:3, :3]
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])]) - centre
+        cx, cy, cz = (corners @ rot.T).T
+        tan_y = math.tan(math.radians(fov_y) / 2.0)
+        tan_x = tan_y * aspect
+        margin = 1.05  # the outermost corner lands at most 1/1.05 of the way to the border
+        need = cz + margin * np.maximum(np.abs(cx) / tan_x, np.abs(cy) / tan_y)
+        dist = max(float(need.max()), float(cz.max()) + 0.05 * radius)
+        eye = centre + dist * d
+        # Depths of the corners along the view axis lie in [dist − max z, dist − min z].
+        near = (dist - float(cz.max())) * 0.5
+        far = (dist - float(cz.min())) * 1.5
         return cls.look_at(eye, centre, up, fov_y=fov_y, near=near, far=far)
 
     # -- properties ---------------------------------------------------------------------

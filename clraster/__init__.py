@@ -1,0 +1,53 @@
+"""clraster: a tile-based software rasterizer on CPU OpenCL (PoCL), with an exact NumPy twin.
+
+Quick start::
+
+    import clraster
+    mesh = clraster.Mesh.load("bunny.ply")
+    cam = clraster.Camera.look_at(eye=(0, 0, 3), target=(0, 0, 0), up=(0, 1, 0))
+    frame = clraster.Renderer(1280, 720).render(mesh, cam)        # OpenCL
+    same = clraster.reference.render(mesh, cam, 1280, 720)        # NumPy reference
+
+``Renderer``, ``reference``, ``Frame`` and ``FrameStats`` are imported on first use, so
+``import clraster`` (and ``Mesh``, ``Camera``, ``RasterConfig``) works without touching
+OpenCL.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from .camera import Camera
+from .config import RasterConfig
+from .mesh import Mesh
+
+if TYPE_CHECKING:
+    from . import reference
+    from .frame import Frame, FrameStats
+    from .renderer import Renderer
+
+__all__ = ["Camera", "Frame", "FrameStats", "Mesh", "RasterConfig", "Renderer", "reference"]
+__version__ = "0.1.0"
+
+_LAZY = {
+    "Renderer": (".renderer", "Renderer"),
+    "reference": (".reference", None),
+    "Frame": (".frame", "Frame"),
+    "FrameStats": (".frame", "FrameStats"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: load the OpenCL side only when it is asked for.
+    if name in _LAZY:
+        module_name, attr = _LAZY[name]
+        module = importlib.import_module(module_name, __name__)
+        value = module if attr is None else getattr(module, attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'clraster' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

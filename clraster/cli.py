@@ -1,0 +1,221 @@
+"""Command-line interface: ``clraster render MESH --size WxH --out image.png``.
+
+Exit codes: 0 success; 1 the mesh, camera or output could not be used (one line on stderr,
+no traceback); 2 bad command-line arguments (argparse's usage message).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .camera import Camera
+from .config import MAX_IMAGE_SIZE, RasterConfig
+from .device import NoDeviceError
+from .mesh import Mesh
+
+if TYPE_CHECKING:
+    from .frame import Frame
+
+__all__ = ["main"]
+
+EXAMPLE = "example"
+
+
+def _size(text: str) -> tuple[int, int]:
+    parts = text.lower().split("x")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        w, h = int(parts[0]), int(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT in pixels, e.g. 1280x720, got {text!r}") from None
+    if not (0 < w <= MAX_IMAGE_SIZE and 0 < h <= MAX_IMAGE_SIZE):
+        raise argparse.ArgumentTypeError(
+            f"width and height must be in 1..{MAX_IMAGE_SIZE}, got {text!r}")
+    return w, h
+
+
+def _vec3(text: str) -> np.ndarray:
+    try:
+        v = np.array([float(t) for t in text.split(",")])
+    except ValueError:
+        v = np.array([])
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise argparse.ArgumentTypeError(
+            f"expected three finite numbers x,y,z, e.g. 0,1.5,4, got {text!r} "
+            f"(write --eye=-1,2,3 when the first one is negative)")
+    return v
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (np.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="clraster", description="Tile-based software rasterizer on CPU OpenCL (PoCL).")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    r = sub.add_parser(
+        "render", help="render a mesh to a shaded PNG (and optionally depth / ids)",
+        description="Render MESH and write a flat-shaded image. Without --eye/--target the "
+                    "camera frames the mesh's bounding box.")
+    r.add_argument("mesh", metavar="MESH",
+                   help=f"mesh file trimesh can read (PLY, OBJ, STL, ...), or "
+                        f"'{EXAMPLE}' for the built-in example scene")
+    r.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH",
+                   help="image size in pixels (default 1280x720)")
+    r.add_argument("--out", type=Path, required=True, metavar="PNG",
+                   help="shaded image to write (any format imageio writes)")
+    cam = r.add_argument_group(
+        "camera", "OpenGL conventions: right-handed world, the camera looks from EYE "
+                  "towards TARGET (down its −Z). Vectors are x,y,z; write --eye=-1,2,3 "
+                  "when the first number is negative.")
+    cam.add_argument("--eye", type=_vec3, metavar="X,Y,Z",
+                     help="camera position (default: framing the bounding box)")
+    cam.add_argument("--target", type=_vec3, metavar="X,Y,Z",
+                     help="point looked at (default: bounding-box centre)")
+    cam.add_argument("--up", type=_vec3, default=np.array([0.0, 1.0, 0.0]), metavar="X,Y,Z",
+                     help="up direction (default 0,1,0)")
+    cam.add_argument("--fov", type=float, default=45.0, metavar="DEG",
+                     help="vertical field of view in degrees (default 45)")
+    cam.add_argument("--near", type=_positive, metavar="N",
+                     help="near-plane distance (default: from the bounding sphere)")
+    cam.add_argument("--far", type=_positive, metavar="F",
+                     help="far-plane distance (default: from the bounding sphere)")
+    r.add_argument("--cull", choices=("back", "front", "none"), default="back",
+                   help="face culling; counter-clockwise is front (default back)")
+    r.add_argument("--depth", type=Path, metavar="NPY",
+                   help="also save the (H, W) float32 window depth as .npy")
+    r.add_argument("--ids", type=Path, metavar="NPY",
+                   help="also save the (H, W) int32 triangle ids (-1 background) as .npy")
+    r.add_argument("--tile-log2", type=int, choices=range(3, 7), default=4, metavar="{3..6}",
+                   help="tiles are 2**N pixels square (default 4); never changes the image")
+    r.add_argument("--reference", action="store_true",
+                   help="render with the NumPy reference pipeline instead of OpenCL")
+    r.add_argument("--repeat", type=int, default=1, metavar="N",
+                   help="render N times and report the first and the best frame time")
+    return p
+
+
+def _camera(args: argparse.Namespace, mesh: Mesh, width: int, height: int) -> Camera:
+    """The camera the arguments describe; missing parts are fitted to the mesh bounds."""
+    try:
+        lo, hi = mesh.bounds()
+    except ValueError:
+        if args.eye is None or args.target is None:
+            raise ValueError("the mesh has no finite vertex in a face, so the camera cannot "
+                             "frame it; give --eye and --target") from None
+        lo = hi = None
+    if lo is not None:
+        centre = (lo + hi) / 2.0
+        radius = float(np.linalg.norm(hi - lo)) / 2.0
+        framed = Camera.framing(lo, hi, fov_y=args.fov, aspect=width / height)
+        eye = framed.eye if args.eye is None else args.eye
+        target = centre if args.target is None else args.target
+        if args.eye is None and args.target is None:
+            near, far = framed.near, framed.far
+        else:  # bracket the bounding sphere as seen from the eye
+            dist = float(np.linalg.norm(eye - centre))
+            far = (dist + radius) * 1.5 if radius > 0 else framed.far
+            near = (dist - radius) * 0.5 if dist > radius * 1.01 else far * 1e-4
+    else:
+        eye, target, near, far = args.eye, args.target, 0.1, 100.0
+    near = args.near if args.near is not None else near
+    far = args.far if args.far is not None else far
+    if args.far is None and far <= near:
+        far = near * 1e4
+    return Camera.look_at(eye, target, args.up, fov_y=args.fov, near=near, far=far)
+
+
+def _render(args: argparse.Namespace) -> int:
+    import imageio.v3 as iio
+
+    from .shade import shade
+
+    width, height = args.size
+    if args.mesh == EXAMPLE:
+        from .examples import example_mesh
+
+        mesh = example_mesh()
+    else:
+        mesh = Mesh.load(args.mesh)
+    print(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
+    camera = _camera(args, mesh, width, height)
+    print(f"camera: {camera!r}")
+
+    if args.reference:
+        from .reference import render as reference_render
+
+        print("pipeline: NumPy reference")
+
+        def draw() -> Frame:
+            return reference_render(mesh, camera, width, height, cull=args.cull)
+    else:
+        from .renderer import Renderer
+
+        renderer = Renderer(width, height, config=RasterConfig(tile_log2=args.tile_log2))
+        print(f"device: {renderer.context.devices[0].name.strip()}")
+
+        def draw() -> Frame:
+            return renderer.render(mesh, camera, cull=args.cull)
+
+    times = []
+    frame = None
+    for _ in range(max(1, args.repeat)):
+        t0 = time.perf_counter()
+        frame = draw()
+        times.append((time.perf_counter() - t0) * 1e3)
+    assert frame is not None
+
+    iio.imwrite(args.out, shade(frame, mesh))
+    if args.depth is not None:
+        np.save(args.depth, frame.depth)
+    if args.ids is not None:
+        np.save(args.ids, frame.triangle_id)
+
+    print(frame.stats)
+    line = f"frame time: {times[0]:.1f} ms (first frame"
+    line += ", includes kernel build)" if not args.reference else ")"
+    if len(times) > 1:
+        line += f"; best of {len(times)}: {min(times):.1f} ms"
+    print(line)
+    written = [args.out] + [p for p in (args.depth, args.ids) if p is not None]
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI with `argv` (default ``sys.argv[1:]``); returns the exit code."""
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return int(exc.code or 0)
+    if args.repeat < 1:
+        parser.print_usage(sys.stderr)
+        print(f"clraster: error: --repeat must be >= 1, got {args.repeat}", file=sys.stderr)
+        return 2
+    try:
+        return _render(args)
+    except (ValueError, OSError, NoDeviceError) as exc:
+        # Bad mesh, camera, output path or no OpenCL device: a message, not a traceback.
+        print(f"clraster: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,108 @@
+"""The `clraster` command line: argument errors (exit 2), input errors (exit 1), renders."""
+
+from __future__ import annotations
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from clraster.cli import main
+
+SIZE = (96, 64)  # small, not a multiple of the tile size
+WHITE = np.array([255, 255, 255], dtype=np.uint8)
+
+
+def _render(tmp_path, *extra: str) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+    out, depth, ids = tmp_path / "img.png", tmp_path / "depth.npy", tmp_path / "ids.npy"
+    code = main(["render", "example", "--size", f"{SIZE[0]}x{SIZE[1]}", "--out", str(out),
+                 "--depth", str(depth), "--ids", str(ids), *extra])
+    assert code == 0
+    return code, iio.imread(out), np.load(depth), np.load(ids)
+
+
+@pytest.mark.parametrize("extra", [(), ("--reference",)], ids=["opencl", "reference"])
+def test_render_example(tmp_path, capsys, extra):
+    _, img, depth, ids = _render(tmp_path, *extra)
+    w, h = SIZE
+    assert img.shape == (h, w, 3) and img.dtype == np.uint8
+    assert depth.shape == (h, w) and depth.dtype == np.float32
+    assert ids.shape == (h, w) and ids.dtype == np.int32
+    background = ids == -1
+    assert 0 < background.sum() < 0.9 * background.size  # the framed scene fills the view
+    assert np.all(img[background] == WHITE)
+    assert np.any(img[~background] != WHITE)
+    assert np.all(depth[background] == 1.0)
+    assert np.all((depth[~background] >= 0) & (depth[~background] < 1))
+    out = capsys.readouterr().out
+    assert "frame time" in out and "triangles in" in out
+
+
+def test_tile_size_does_not_change_output(tmp_path):
+    _, img, depth, ids = _render(tmp_path, "--tile-log2", "4")
+    for log2 in ("3", "5", "6"):
+        _, img2, depth2, ids2 = _render(tmp_path, "--tile-log2", log2)
+        np.testing.assert_array_equal(ids2, ids)
+        np.testing.assert_array_equal(depth2, depth)
+        np.testing.assert_array_equal(img2, img)
+
+
+def test_explicit_camera(tmp_path):
+    _, img, _, ids = _render(tmp_path, "--eye=-6,3,6", "--target", "0,1,0", "--up", "0,1,0",
+                             "--fov", "50", "--near", "0.5", "--far", "40")
+    assert (ids >= 0).any()
+
+
+@pytest.mark.parametrize("args", [
+    ["render", "example", "--size", "0x10"],
+    ["render", "example", "--size", "100"],
+    ["render", "example", "--size", "axb"],
+    ["render", "example", "--size", "100x-5"],
+    ["render", "example", "--size", "99999x10"],
+    ["render", "example"],  # --out missing
+    ["render", "example", "--cull", "sideways"],
+    ["render", "example", "--eye", "1,2"],
+    ["render", "example", "--near", "-1"],
+    ["render", "example", "--tile-log2", "9"],
+    ["render", "example", "--repeat", "0"],
+    ["paint", "example"],
+    [],
+])
+def test_bad_arguments_exit_2(tmp_path, capsys, args):
+    if "render" in args and "--out" not in args and args != ["render", "example"]:
+        args = [*args, "--out", str(tmp_path / "x.png")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "usage:" in err and "Traceback" not in err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_bad_size_message(capsys, tmp_path):
+    assert main(["render", "example", "--size", "12by7", "--out", str(tmp_path / "a.png")]) == 2
+    assert "expected WIDTHxHEIGHT" in capsys.readouterr().err
+
+
+def test_missing_mesh_exit_1(tmp_path, capsys):
+    missing = tmp_path / "missing.ply"
+    assert main(["render", str(missing), "--size", "32x32", "--out", str(tmp_path / "a.png")]) == 1
+    err = capsys.readouterr().err
+    assert "missing.ply" in err and "Traceback" not in err
+
+
+def test_unreadable_mesh_exit_1(tmp_path, capsys):
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(b"not a mesh")
+    assert main(["render", str(bad), "--size", "32x32", "--out", str(tmp_path / "a.png")]) == 1
+    assert "bad.ply" in capsys.readouterr().err
+
+
+def test_bad_camera_exit_1(tmp_path, capsys):
+    code = main(["render", "example", "--size", "32x32", "--out", str(tmp_path / "a.png"),
+                 "--eye", "1,1,1", "--target", "1,1,1"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "eye and target must differ" in err and "Traceback" not in err
+
+
+def test_help_exit_0(capsys):
+    assert main(["render", "--help"]) == 0
+    assert "--size" in capsys.readouterr().out
