@@ -100,6 +100,12 @@ class Frame:
     barycentrics: np.ndarray
     stats: FrameStats
 
+    @classmethod
+    def empty(cls, width: int, height: int, stats: FrameStats | None = None) -> Frame:
+        """A frame with nothing drawn: depth 1.0, ids −1, barycentrics 0."""
+        return cls(np.ones((height, width), np.float32), np.full((height, width), -1, np.int32),
+                   np.zeros((height, width, 3), np.float32), stats or FrameStats())
+
     @property
     def width(self) -> int:
         return int(self.depth.shape[1])

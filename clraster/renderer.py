@@ -5,43 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from .config import CULL_MODES, MAX_IMAGE_SIZE, RasterConfig, guard_band_factors
+from .config import RasterConfig, guard_band_factors
 from .device import default_context
 from .frame import Frame, FrameStats
+from .inputs import check_cull, check_mesh, check_size, mvp_matrix
 from .stages._buffers import GrowBuffer
 from .stages.bin import BinStage
 from .stages.raster import RasterStage
 from .stages.setup import SetupStage
 from .stages.vertex import VertexStage
-
-
-def check_size(width: int, height: int) -> tuple[int, int]:
-    """Validate an image size; returns it as plain ints."""
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            raise ValueError(f"{name} must be an integer, got {v!r}")
-        if not 0 < v <= MAX_IMAGE_SIZE:
-            raise ValueError(f"{name} must be in 1..{MAX_IMAGE_SIZE}, got {v}")
-    return int(width), int(height)
-
-
-def check_cull(cull: str) -> str:
-    if cull not in CULL_MODES:
-        raise ValueError(f"cull must be one of {sorted(CULL_MODES)}, got {cull!r}")
-    return cull
-
-
-def mvp_matrix(camera, width: int, height: int) -> np.ndarray:
-    """Row-major float32 (4, 4) view-projection matrix of ``camera`` for this image size."""
-    m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise ValueError("camera.view_projection() must be a finite (4, 4) matrix")
-    return np.ascontiguousarray(m, dtype=np.float32)
-
-
-def empty_frame(width: int, height: int, stats: FrameStats) -> Frame:
-    return Frame(np.ones((height, width), np.float32), np.full((height, width), -1, np.int32),
-                 np.zeros((height, width, 3), np.float32), stats)
 
 
 class Renderer:
@@ -81,8 +53,8 @@ class Renderer:
     def _upload(self, mesh) -> None:
         if self._mesh is mesh:
             return
-        v = np.ascontiguousarray(mesh.vertices, np.float32)
-        f = np.ascontiguousarray(mesh.faces, np.int32)
+        v, f = check_mesh(mesh)
+        v, f = np.ascontiguousarray(v), np.ascontiguousarray(f)
         cl.enqueue_copy(self.queue, self._positions.ensure(v.nbytes), v)
         cl.enqueue_copy(self.queue, self._faces.ensure(f.nbytes), f)
         self._mesh = mesh
@@ -102,9 +74,10 @@ class Renderer:
         check_cull(cull)
         w, h = self.width, self.height
         mvp = mvp_matrix(camera, w, h)
-        n, m = int(mesh.vertices.shape[0]), int(mesh.faces.shape[0])
-        if m == 0 or n == 0:
-            return empty_frame(w, h, FrameStats(triangles_in=m))
+        verts, faces = check_mesh(mesh)
+        n, m = verts.shape[0], faces.shape[0]
+        if m == 0:
+            return Frame.empty(w, h)
         kx, ky = guard_band_factors(w, h)
         q = self.queue
         self._upload(mesh)

@@ -1,0 +1,57 @@
+"""NumPy twin of kernels/bin.cl: per-tile lists of piece indices in submission order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import ST_CLIPPED, ST_RASTER, RasterConfig
+
+
+def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.ndarray
+                  ) -> np.ndarray:
+    """Piece indices (unified space: t for slot t, M + j for clipped piece j) in submission
+    order: by triangle, and by fan position within a clipped triangle."""
+    m = status.size
+    raster = np.nonzero(status == ST_RASTER)[0]
+    clipped = np.nonzero((status == ST_CLIPPED) & (clip_count > 0))[0]
+    cnt = clip_count[clipped]
+    owner = np.repeat(clipped, cnt)
+    sub = np.arange(owner.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    cpiece = m + clip_offset[owner] + sub
+    tri = np.concatenate([raster, owner])
+    sub_all = np.concatenate([np.zeros(raster.size, np.int64), sub])
+    piece = np.concatenate([raster, cpiece]).astype(np.int64)
+    order = np.lexsort((sub_all, tri))
+    return piece[order]
+
+
+def bin_pieces(order: np.ndarray, bb_min: np.ndarray, bb_max: np.ndarray, width: int,
+               height: int, config: RasterConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Bin pieces into tiles.
+
+    Args:
+        order: int64 (K,) piece indices in submission order (`unified_order`).
+        bb_min, bb_max: int32 packed pixel boxes of those pieces (same order).
+
+    Returns:
+        tile_start int32 (T + 1,) and entries int32 (E,), tile-major, submission order
+        within each tile — the same arrays kernels/bin.cl produces.
+    """
+    tiles_x, tiles_y = config.tiles(width, height)
+    n_tiles = tiles_x * tiles_y
+    s = config.tile_log2
+    tx0, ty0 = (bb_min & 0xFFFF) >> s, (bb_min >> 16) >> s
+    tx1, ty1 = (bb_max & 0xFFFF) >> s, (bb_max >> 16) >> s
+    nx, ny = (tx1 - tx0 + 1).astype(np.int64), (ty1 - ty0 + 1).astype(np.int64)
+    cnt = nx * ny
+    owner = np.repeat(np.arange(order.size), cnt)
+    local = np.arange(owner.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    # per piece, tiles are visited row by row (ty outer, tx inner) as in the kernel
+    tile = (ty0[owner] + local // nx[owner]) * tiles_x + tx0[owner] + local % nx[owner]
+    srt = np.argsort(tile, kind="stable")
+    entries = order[owner[srt]].astype(np.int32)
+    counts = np.bincount(tile, minlength=n_tiles)
+    if counts.sum() > np.iinfo(np.int32).max:
+        raise ValueError("binning would need more than 2**31 entries; use larger tiles")
+    tile_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return tile_start, entries

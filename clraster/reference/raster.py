@@ -1,0 +1,148 @@
+"""NumPy twin of kernels/raster.cl: per-tile z-buffer raster over the bin lists.
+
+Every (entry, pixel) candidate of a tile is generated at once (in batches), coverage and
+depth use the kernel's exact integer edge functions and float32 operations, and the
+sequential LESS test (first drawn wins ties) is reproduced with a segmented running minimum
+over fragments sorted by (pixel, list position).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..config import PF_CLIPPED, PF_SWAPPED, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
+
+F32 = np.float32
+_BATCH = 1 << 22  # candidate pixels per batch (memory bound, not a semantic limit)
+
+
+def _edge(ax, ay, bx, by, px, py):
+    return (bx - ax) * (py - ay) - (by - ay) * (px - ax)
+
+
+def _bias(ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    return np.where((dy < 0) | ((dy == 0) & (dx > 0)), 0, 1)
+
+
+def _ordered(z: np.ndarray) -> np.ndarray:
+    """float32 → int64 whose order is the float order (−0.0 treated as +0.0)."""
+    b = np.where(z == 0, F32(0), z).view(np.int32).astype(np.int64)
+    return np.where(b < 0, -(b & 0x7FFFFFFF), b)
+
+
+def edges_at(pc: np.ndarray, px: np.ndarray, py: np.ndarray):
+    """Edge functions E0, E1, E2 (int64) of pieces ``pc`` at fixed-point points."""
+    X = pc["x"].astype(np.int64)
+    Y = pc["y"].astype(np.int64)
+    e0 = _edge(X[:, 1], Y[:, 1], X[:, 2], Y[:, 2], px, py)
+    e1 = _edge(X[:, 2], Y[:, 2], X[:, 0], Y[:, 0], px, py)
+    e2 = _edge(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1], px, py)
+    return e0, e1, e2
+
+
+def raster(pieces: np.ndarray, clip_bary: np.ndarray, m: int, tile_start: np.ndarray,
+           entries: np.ndarray, width: int, height: int, config: RasterConfig):
+    """Rasterize binned pieces.
+
+    Args:
+        pieces: PIECE_DTYPE (M + P,) unified piece array (slots, then clipped pieces).
+        clip_bary: float32 (P, 3, 3). m: number of slots M.
+        tile_start: int32 (T + 1,). entries: int32 (E,).
+
+    Returns:
+        depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3),
+        fragments tested, fragments passed.
+    """
+    s = config.tile_log2
+    tiles_x, _ = config.tiles(width, height)
+    npx = width * height
+    zbuf = np.ones(npx, F32)
+    win = np.full(npx, -1, np.int64)
+    tested = passed = 0
+
+    n_ent = entries.size
+    tile_of = np.repeat(np.arange(tile_start.size - 1), np.diff(tile_start))
+    pc_all = pieces[entries]
+    tx0 = (tile_of % tiles_x) << s
+    ty0 = (tile_of // tiles_x) << s
+    x0 = np.maximum(pc_all["bb_min"] & 0xFFFF, tx0)
+    y0 = np.maximum(pc_all["bb_min"] >> 16, ty0)
+    x1 = np.minimum(np.minimum(pc_all["bb_max"] & 0xFFFF, tx0 + (1 << s) - 1), width - 1)
+    y1 = np.minimum(np.minimum(pc_all["bb_max"] >> 16, ty0 + (1 << s) - 1), height - 1)
+    nx = np.maximum(x1 - x0 + 1, 0).astype(np.int64)
+    ny = np.maximum(y1 - y0 + 1, 0).astype(np.int64)
+    cnt = np.where((nx > 0) & (ny > 0), nx * ny, 0)
+    csum = np.cumsum(cnt)
+    start = 0
+    while start < n_ent:
+        # entries [start, stop) hold at most _BATCH candidates (at least one entry)
+        base = csum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(csum, base + _BATCH, side="right")), start + 1)
+        sl = slice(start, stop)
+        c = cnt[sl]
+        owner = np.repeat(np.arange(start, stop), c)
+        local = np.arange(owner.size) - np.repeat(np.cumsum(c) - c, c)
+        px_i = x0[owner] + local % nx[owner]
+        py_i = y0[owner] + local // nx[owner]
+        pc = pc_all[owner]
+        fx = (px_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        fy = (py_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        e0, e1, e2 = edges_at(pc, fx, fy)
+        X, Y = pc["x"].astype(np.int64), pc["y"].astype(np.int64)
+        cov = ((e0 >= _bias(X[:, 1], Y[:, 1], X[:, 2], Y[:, 2]))
+               & (e1 >= _bias(X[:, 2], Y[:, 2], X[:, 0], Y[:, 0]))
+               & (e2 >= _bias(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1])))
+        owner, pc = owner[cov], pc[cov]
+        pix = (py_i[cov].astype(np.int64) * width + px_i[cov])
+        l1 = e1[cov].astype(F32) * pc["inv_area"]
+        l2 = e2[cov].astype(F32) * pc["inv_area"]
+        z = (pc["z0"] + l1 * pc["dz10"]) + l2 * pc["dz20"]
+        tested += z.size
+        # sequential LESS in list order == segmented running min over (pixel, entry index)
+        srt = np.lexsort((owner, pix))
+        pix, z, owner = pix[srt], z[srt], owner[srt]
+        zk = _ordered(z)
+        first = np.ones(pix.size, bool)
+        first[1:] = pix[1:] != pix[:-1]
+        seg_off = (npx - pix) << 33  # decreasing per segment: accumulate resets at each one
+        incl = np.minimum.accumulate(zk + seg_off) - seg_off
+        prev = np.empty_like(incl)
+        prev[1:] = incl[:-1]
+        prev[first] = np.iinfo(np.int64).max
+        prev = np.minimum(prev, _ordered(zbuf[pix]))  # the z-buffer before this batch
+        ok = zk < prev
+        passed += int(ok.sum())
+        pix_ok, z_ok, own_ok = pix[ok], z[ok], owner[ok]
+        last = np.ones(pix_ok.size, bool)
+        last[:-1] = pix_ok[1:] != pix_ok[:-1]
+        zbuf[pix_ok[last]] = z_ok[last]
+        win[pix_ok[last]] = entries[own_ok[last]]
+        start = stop
+
+    ids = np.full(npx, -1, np.int32)
+    bary = np.zeros((npx, 3), F32)
+    hit = np.nonzero(win >= 0)[0]
+    if hit.size:
+        e = win[hit]
+        pc = pieces[e]
+        fx = ((hit % width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        fy = ((hit // width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        e0, e1, e2 = edges_at(pc, fx, fy)
+        inv = pc["inv_area"]
+        l0, l1, l2 = e0.astype(F32) * inv, e1.astype(F32) * inv, e2.astype(F32) * inv
+        q1, q2 = l1 * pc["r1"], l2 * pc["r2"]
+        ssum = (l0 + q1) + q2
+        c = np.stack([l0 / ssum, q1 / ssum, q2 / ssum], axis=1)
+        clipped = (pc["flags"] & PF_CLIPPED) != 0
+        swapped = ((pc["flags"] & PF_SWAPPED) != 0) & ~clipped
+        c[swapped] = c[swapped][:, [0, 2, 1]]
+        if clipped.any():
+            pb = clip_bary[e[clipped] - m]  # (K, 3 piece vertices, 3 parent weights)
+            cc = c[clipped]
+            c[clipped] = ((cc[:, 0:1] * pb[:, 0] + cc[:, 1:2] * pb[:, 1])
+                          + cc[:, 2:3] * pb[:, 2])
+        bary[hit] = c
+        ids[hit] = pc["id"]
+    return (zbuf.reshape(height, width), ids.reshape(height, width),
+            bary.reshape(height, width, 3), tested, passed)
