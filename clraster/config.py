@@ -34,6 +34,7 @@ OC_X_NEG, OC_X_POS, OC_Y_NEG, OC_Y_POS, OC_Z_NEG, OC_Z_POS = 1, 2, 4, 8, 16, 32
 OC_FRUSTUM = 63
 OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG, OC_GB_Y_POS = 64, 128, 256, 512
 OC_INVALID = 1024
+OC_W_NONPOS = 2048  #: w <= 0: the vertex has no window position
 #: Planes that force a triangle through the clipper: near, far and the four guard-band planes.
 OC_NEEDS_CLIP = OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | OC_GB_Y_POS
 
@@ -67,6 +68,11 @@ PIECE_DTYPE = np.dtype([
     ("id", np.int32), ("flags", np.int32), ("r1", np.float32), ("r2", np.float32),
 ])
 assert PIECE_DTYPE.itemsize == 64
+
+#: A vertex after the viewport transform (kernels/common.h WinVert): 24.8 fixed-point window
+#: x, y (y down), window depth z = (z/w + 1)/2 and iw = 1/w.
+WINVERT_DTYPE = np.dtype([("x", np.int32), ("y", np.int32), ("z", np.float32),
+                          ("iw", np.float32)])
 
 
 @dataclass(frozen=True)

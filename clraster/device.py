@@ -46,7 +46,7 @@ def kernel_dir() -> Path:
     raise FileNotFoundError(f"OpenCL kernels not found next to {here}; reinstall clraster")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def kernel_source(stage: str) -> str:
     """Source of ``kernels/<stage>.cl`` with ``#include "common.h"`` inlined.
 

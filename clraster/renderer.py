@@ -81,10 +81,10 @@ class Renderer:
         kx, ky = guard_band_factors(w, h)
         q = self.queue
         self._upload(mesh)
-        ev_v = self.vertex.run(q, self._positions.buf, n, mvp, kx, ky)
+        ev_v = self.vertex.run(q, self._positions.buf, n, mvp, kx, ky, w, h)
         cb = self.vertex.buffers
-        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, self._faces.buf, m, w, h,
-                                 cull, kx, ky)
+        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, cb.win.buf, self._faces.buf,
+                                 m, w, h, cull, kx, ky)
         sb = self.setup.buffers
         e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
                                    sb.pieces.buf, sb.clip_pieces.buf, m, w, h)

@@ -35,6 +35,7 @@
 #define OC_GB_Y_NEG 256
 #define OC_GB_Y_POS 512
 #define OC_INVALID 1024
+#define OC_W_NONPOS 2048   /* w <= 0: no window position; never set alone on a drawn vertex */
 #define OC_NEEDS_CLIP (OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | OC_GB_Y_POS)
 
 /* Per-triangle status (triangle setup). */
@@ -69,6 +70,25 @@ typedef struct {
     int flags;
     float r1, r2;   /* w0/w1, w0/w2: perspective correction of screen-space weights */
 } Piece;
+
+/* A vertex after the viewport transform: 24.8 fixed-point window x/y (y down), window depth
+ * (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the guard band
+ * and per clipped vertex in setup.cl, with this one function, so both are bit-identical. */
+typedef struct { int x, y; float z, iw; } WinVert;
+
+inline WinVert viewport_vertex(float4 c, float hw, float hh)
+{
+    WinVert v;
+    float iw = 1.0f / c.w;
+    float xn = c.x * iw, yn = c.y * iw, zn = c.z * iw;
+    float xw = (xn + 1.0f) * hw;
+    float yw = (1.0f - yn) * hh;
+    v.x = convert_int_rte(xw * (float)SUB_ONE);
+    v.y = convert_int_rte(yw * (float)SUB_ONE);
+    v.z = zn * 0.5f + 0.5f;
+    v.iw = iw;
+    return v;
+}
 
 /* Edge function of the directed edge a->b at fixed-point point p, exact in 64 bits:
  * E(p) = (bx-ax)(py-ay) - (by-ay)(px-ax). Positive inside a positive-area triangle. */

@@ -33,57 +33,40 @@ inline float plane_dist(int p, float4 v, float kx, float ky)
     }
 }
 
-/* Snap one clip-space triangle to a Piece. Returns ST_RASTER when it survives, otherwise the
- * reason it was dropped. *swapped says whether vertices 1 and 2 were exchanged. */
-inline int make_piece(float4 c0, float4 c1, float4 c2, int width, int height, int cull,
+/* Set up one triangle from its three window-space vertices. Returns ST_RASTER when it
+ * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
+ * exchanged to make the doubled area positive. */
+inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height, int cull,
                       Piece *pc, int *swapped)
 {
-    if (!(c0.w > 0.0f && c1.w > 0.0f && c2.w > 0.0f)) return ST_DEGENERATE;
-    float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
-    float4 c[3] = {c0, c1, c2};
-    int X[3], Y[3];
-    float Z[3], IW[3];
-    for (int k = 0; k < 3; ++k) {
-        float iw = 1.0f / c[k].w;
-        float xn = c[k].x * iw, yn = c[k].y * iw, zn = c[k].z * iw;
-        float xw = (xn + 1.0f) * hw;
-        float yw = (1.0f - yn) * hh;
-        X[k] = convert_int_rte(xw * (float)SUB_ONE);
-        Y[k] = convert_int_rte(yw * (float)SUB_ONE);
-        Z[k] = zn * 0.5f + 0.5f;
-        IW[k] = iw;
-    }
-    long area2 = edge_fn(X[0], Y[0], X[1], Y[1], X[2], Y[2]);
+    long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
     /* y points down in window space, so counter-clockwise in NDC is area2 < 0. */
     if ((cull == CULL_BACK && area2 > 0) || (cull == CULL_FRONT && area2 < 0))
         return ST_BACKFACE;
-    *swapped = 0;
+    *swapped = area2 < 0;
     if (area2 < 0) {
-        int ti = X[1]; X[1] = X[2]; X[2] = ti;
-        ti = Y[1]; Y[1] = Y[2]; Y[2] = ti;
-        float tf = Z[1]; Z[1] = Z[2]; Z[2] = tf;
-        tf = IW[1]; IW[1] = IW[2]; IW[2] = tf;
+        WinVert t = v1; v1 = v2; v2 = t;
         area2 = -area2;
-        *swapped = 1;
     }
-    int xmin = min(min(X[0], X[1]), X[2]), xmax = max(max(X[0], X[1]), X[2]);
-    int ymin = min(min(Y[0], Y[1]), Y[2]), ymax = max(max(Y[0], Y[1]), Y[2]);
+    int xmin = min(min(v0.x, v1.x), v2.x), xmax = max(max(v0.x, v1.x), v2.x);
+    int ymin = min(min(v0.y, v1.y), v2.y), ymax = max(max(v0.y, v1.y), v2.y);
     /* pixel x is inside iff its centre 256x + 128 lies in [xmin, xmax] */
     int px0 = max((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
     int px1 = min((xmax - SUB_HALF) >> SUBPIXEL_BITS, width - 1);
     int py0 = max((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
     int py1 = min((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
-    for (int k = 0; k < 3; ++k) { pc->x[k] = X[k]; pc->y[k] = Y[k]; }
+    pc->x[0] = v0.x; pc->x[1] = v1.x; pc->x[2] = v2.x;
+    pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
     pc->bb_min = px0 | (py0 << 16);
     pc->bb_max = px1 | (py1 << 16);
-    pc->z0 = Z[0];
-    pc->dz10 = Z[1] - Z[0];
-    pc->dz20 = Z[2] - Z[0];
+    pc->z0 = v0.z;
+    pc->dz10 = v1.z - v0.z;
+    pc->dz20 = v2.z - v0.z;
     pc->inv_area = 1.0f / (float)area2;
-    pc->r1 = IW[1] / IW[0];
-    pc->r2 = IW[2] / IW[0];
+    pc->r1 = v1.iw / v0.iw;
+    pc->r2 = v2.iw / v0.iw;
     return ST_RASTER;
 }
 
@@ -123,10 +106,16 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
         n = m;
     }
     int count = 0;
+    float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
     for (int k = 1; k + 1 < n; ++k) {
         Piece pc;
         int sw = 0;
-        if (make_piece(poly[0].p, poly[k].p, poly[k + 1].p, width, height, cull, &pc, &sw)
+        /* a piece with a vertex at w <= 0 can only come from a projection matrix that
+         * does not put w > 0 on the near plane; it has no window position: dropped */
+        if (!(poly[0].p.w > 0.0f && poly[k].p.w > 0.0f && poly[k + 1].p.w > 0.0f))
+            continue;
+        if (make_piece(viewport_vertex(poly[0].p, hw, hh), viewport_vertex(poly[k].p, hw, hh),
+                       viewport_vertex(poly[k + 1].p, hw, hh), width, height, cull, &pc, &sw)
             != ST_RASTER)
             continue;
         if (write) {
@@ -146,7 +135,8 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
 }
 
 __kernel void setup_triangles(__global const float4 *clip, __global const ushort *outcode,
-                              __global const int *faces, const uint m,
+                              __global const WinVert *win, __global const int *faces,
+                              const uint m,
                               const int width, const int height, const int cull,
                               const float kx, const float ky,
                               __global Piece *pieces, __global uchar *status,
@@ -166,10 +156,12 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
         st = ST_CLIPPED;
         nclip = clip_and_emit(clip[i0], clip[i1], clip[i2], o_or & OC_NEEDS_CLIP, kx, ky,
                               width, height, cull, (int)t, 0, pieces, 0, 0);
+    } else if (o_or & OC_W_NONPOS) {
+        st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
     } else {
         Piece pc;
         int sw = 0;
-        st = make_piece(clip[i0], clip[i1], clip[i2], width, height, cull, &pc, &sw);
+        st = make_piece(win[i0], win[i1], win[i2], width, height, cull, &pc, &sw);
         if (st == ST_RASTER) {
             pc.id = (int)t;
             pc.flags = sw ? PF_SWAPPED : 0;
@@ -181,7 +173,8 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
 }
 
 __kernel void setup_clipped(__global const float4 *clip, __global const ushort *outcode,
-                            __global const int *faces, const uint m,
+                            __global const WinVert *win, __global const int *faces,
+                            const uint m,
                             const int width, const int height, const int cull,
                             const float kx, const float ky,
                             __global const int *clip_count, __global const int *clip_offset,

@@ -1,12 +1,15 @@
 /* Vertex stage: object space -> clip space, and outcodes.
  * One work-item per vertex. mvp is row-major (clip = M · [x y z 1]ᵀ), float32.
+ * Also the viewport transform (WinVert) of every vertex that can be drawn unclipped.
  * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
  * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
 #include "common.h"
 
 __kernel void vertex_transform(__global const float *pos, const uint n,
                                __constant const float *mvp, const float kx, const float ky,
-                               __global float4 *clip, __global ushort *outcode)
+                               const int width, const int height,
+                               __global float4 *clip, __global ushort *outcode,
+                               __global WinVert *win)
 {
     uint i = get_global_id(0);
     if (i >= n) return;
@@ -30,7 +33,15 @@ __kernel void vertex_transform(__global const float *pos, const uint n,
         oc |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
         oc |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;
         oc |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
+        oc |= (c.w > 0.0f) ? 0 : OC_W_NONPOS;
     }
+    /* The viewport transform is done once per vertex here rather than once per triangle
+     * corner in setup. Only meaningful for vertices that triangles use unclipped (inside the
+     * guard band, near and far, w > 0); others are left as zeros and never read. */
+    WinVert v = {0, 0, 0.0f, 0.0f};
+    if (!(oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)))
+        v = viewport_vertex(c, 0.5f * (float)width, 0.5f * (float)height);
+    win[i] = v;
     clip[i] = c;
     outcode[i] = (ushort)oc;
 }

@@ -37,8 +37,8 @@ def render(mesh, camera, width: int, height: int, *, cull: str = "back",
     if m == 0:
         return Frame.empty(width, height)
     kx, ky = guard_band_factors(width, height)
-    clip, oc = vertex_.transform(verts, mvp, kx, ky)
-    st = setup_.setup(clip, oc, faces, width, height, cull, kx, ky)
+    clip, oc, win = vertex_.transform(verts, mvp, kx, ky, width, height)
+    st = setup_.setup(clip, oc, win, faces, width, height, cull, kx, ky)
     order = bin_.unified_order(st.status, st.clip_count, st.clip_offset)
     allp = np.concatenate([st.pieces, st.clip_pieces])
     tile_start, entries = bin_.bin_pieces(order, allp["bb_min"][order], allp["bb_max"][order],

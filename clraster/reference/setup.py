@@ -19,6 +19,7 @@ from ..config import (
     OC_GB_Y_POS,
     OC_INVALID,
     OC_NEEDS_CLIP,
+    OC_W_NONPOS,
     OC_Z_NEG,
     OC_Z_POS,
     PF_CLIPPED,
@@ -33,7 +34,9 @@ from ..config import (
     ST_TRIVIAL_REJECT,
     SUBPIXEL_BITS,
     SUBPIXEL_ONE,
+    WINVERT_DTYPE,
 )
+from .vertex import viewport
 
 POLY_MAX = 16  # kernels/setup.cl POLY_MAX
 PLANE_BITS = (OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG, OC_GB_Y_POS)
@@ -63,32 +66,21 @@ def plane_dist(p: int, v: np.ndarray, kx: F32, ky: F32) -> np.ndarray:
     return (z + w, w - z, x + kx * w, kx * w - x, y + ky * w, ky * w - y)[p]
 
 
-def make_pieces(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray, width: int, height: int,
-                cull: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Snap clip-space triangles (K, 4) ×3 to setup records, as make_piece in setup.cl.
+def make_pieces(wv: np.ndarray, width: int, height: int, cull: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Set up triangles from window-space vertices, as make_piece in setup.cl.
+
+    Args:
+        wv: WINVERT_DTYPE (K, 3).
 
     Returns (status uint8 (K,), pieces PIECE_DTYPE (K,) valid where status == ST_RASTER,
     swapped bool (K,)).
     """
-    k = c0.shape[0]
-    c = np.stack([c0, c1, c2], axis=1).astype(F32)  # (K, 3, 4)
-    hw, hh = F32(0.5) * F32(width), F32(0.5) * F32(height)
+    k = wv.shape[0]
+    X, Y = wv["x"].astype(np.int64), wv["y"].astype(np.int64)
     status = np.full(k, ST_RASTER, np.uint8)
-    wpos = np.all(c[:, :, 3] > 0, axis=1)
-    status[~wpos] = ST_DEGENERATE
-    with np.errstate(all="ignore"):
-        iw = F32(1) / c[:, :, 3]
-        xn, yn, zn = c[:, :, 0] * iw, c[:, :, 1] * iw, c[:, :, 2] * iw
-        xw = (xn + F32(1)) * hw
-        yw = (F32(1) - yn) * hh
-        xs = np.where(wpos[:, None], xw * F32(SUBPIXEL_ONE), 0)
-        ys = np.where(wpos[:, None], yw * F32(SUBPIXEL_ONE), 0)
-        X = np.rint(xs).astype(np.int64)
-        Y = np.rint(ys).astype(np.int64)
-        Z = zn * F32(0.5) + F32(0.5)
     area2 = (X[:, 1] - X[:, 0]) * (Y[:, 2] - Y[:, 0]) - (Y[:, 1] - Y[:, 0]) * (X[:, 2] - X[:, 0])
-    alive = status == ST_RASTER
-    status[alive & (area2 == 0)] = ST_DEGENERATE
+    status[area2 == 0] = ST_DEGENERATE
     alive = status == ST_RASTER
     # y points down in window space, so counter-clockwise in NDC is area2 < 0
     if cull == CULL_MODES["back"]:
@@ -97,8 +89,8 @@ def make_pieces(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray, width: int, heig
         status[alive & (area2 < 0)] = ST_BACKFACE
     swapped = area2 < 0
     perm = np.where(swapped[:, None], [0, 2, 1], [0, 1, 2])
-    rows = np.arange(k)[:, None]
-    X, Y, Z, iw = X[rows, perm], Y[rows, perm], Z[rows, perm], iw[rows, perm]
+    wv = wv[np.arange(k)[:, None], perm]
+    X, Y, Z, iw = wv["x"].astype(np.int64), wv["y"].astype(np.int64), wv["z"], wv["iw"]
     area2 = np.abs(area2)
     half, one = SUBPIXEL_ONE // 2, SUBPIXEL_ONE
     px0 = np.maximum((X.min(1) - half + one - 1) >> SUBPIXEL_BITS, 0)
@@ -173,9 +165,10 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
     return poly, n
 
 
-def setup(clip: np.ndarray, outcode: np.ndarray, faces: np.ndarray, width: int, height: int,
-          cull: str, kx: F32, ky: F32) -> SetupResult:
-    """Triangle setup for faces int32 (M, 3) over clip float32 (N, 4) / outcode uint16 (N,)."""
+def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, faces: np.ndarray,
+          width: int, height: int, cull: str, kx: F32, ky: F32) -> SetupResult:
+    """Triangle setup for faces int32 (M, 3) over the vertex stage's outputs (clip float32
+    (N, 4), outcode uint16 (N,), win WINVERT_DTYPE (N,))."""
     cull_i = CULL_MODES[cull]
     m = faces.shape[0]
     oc = outcode[faces].astype(np.uint32)  # (M, 3)
@@ -185,14 +178,15 @@ def setup(clip: np.ndarray, outcode: np.ndarray, faces: np.ndarray, width: int, 
     invalid = (o_or & OC_INVALID) != 0
     reject = ~invalid & ((o_and & OC_FRUSTUM) != 0)
     needs = ~invalid & ~reject & ((o_or & OC_NEEDS_CLIP) != 0)
-    plain = ~invalid & ~reject & ~needs
+    wzero = ~invalid & ~reject & ~needs & ((o_or & OC_W_NONPOS) != 0)
+    plain = ~invalid & ~reject & ~needs & ~wzero
     status[invalid] = ST_INVALID
     status[reject] = ST_TRIVIAL_REJECT
     status[needs] = ST_CLIPPED
+    status[wzero] = ST_DEGENERATE
     pieces = np.zeros(m, PIECE_DTYPE)
     idx = np.nonzero(plain)[0]
-    tri = clip[faces[idx]]  # (K, 3, 4)
-    st, pc, _ = make_pieces(tri[:, 0], tri[:, 1], tri[:, 2], width, height, cull_i)
+    st, pc, _ = make_pieces(win[faces[idx]], width, height, cull_i)
     status[idx] = st
     pc["id"] = idx
     ok = st == ST_RASTER
@@ -206,8 +200,12 @@ def setup(clip: np.ndarray, outcode: np.ndarray, faces: np.ndarray, width: int, 
     owner = np.repeat(np.arange(cidx.size), nfan)
     kk = np.arange(owner.size) - np.repeat(np.cumsum(nfan) - nfan, nfan) + 1
     v0, v1, v2 = poly[owner, 0], poly[owner, kk], poly[owner, kk + 1]
-    st, pc, sw = make_pieces(v0[:, :4], v1[:, :4], v2[:, :4], width, height, cull_i)
-    ok = st == ST_RASTER
+    c3 = np.stack([v0[:, :4], v1[:, :4], v2[:, :4]], axis=1)
+    wpos = np.all(c3[:, :, 3] > 0, axis=1)  # pieces with a vertex at w <= 0 are dropped
+    wv = np.zeros(c3.shape[:2], WINVERT_DTYPE)
+    wv[wpos] = viewport(c3[wpos], width, height)
+    st, pc, sw = make_pieces(wv, width, height, cull_i)
+    ok = (st == ST_RASTER) & wpos
     clip_count[cidx] = np.bincount(owner[ok], minlength=cidx.size)
     clip_pieces = pc[ok]
     clip_pieces["id"] = cidx[owner[ok]]

@@ -33,8 +33,9 @@ class BinBuffers:
 class BinStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "bin", config.build_options())
-        self.k_count, self.k_offsets = prg.bin_count, prg.bin_offsets
-        self.k_scan, self.k_scatter = prg.bin_scan_tiles, prg.bin_scatter
+        self.k_count, self.k_offsets, self.k_scan, self.k_scatter = (
+            cl.Kernel(prg, name)
+            for name in ("bin_count", "bin_offsets", "bin_scan_tiles", "bin_scatter"))
         self.config = config
         self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))
 

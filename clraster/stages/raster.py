@@ -28,7 +28,7 @@ class FrameBuffers:
 
 class RasterStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
-        self.kernel = program(ctx, "raster", config.build_options()).raster_tiles
+        self.kernel = cl.Kernel(program(ctx, "raster", config.build_options()), "raster_tiles")
         self.config = config
         self.buffers = FrameBuffers(*(GrowBuffer(ctx) for _ in range(4)))
 

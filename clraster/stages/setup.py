@@ -40,8 +40,8 @@ class SetupBuffers:
 class SetupStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "setup", config.build_options())
-        self.k_setup = prg.setup_triangles
-        self.k_clipped = prg.setup_clipped
+        self.k_setup = cl.Kernel(prg, "setup_triangles")
+        self.k_clipped = cl.Kernel(prg, "setup_clipped")
         self.scan = GenericScanKernel(
             ctx, np.int32,
             arguments="__global const int *cnt, __global int *off, __global int *total, "
@@ -51,12 +51,12 @@ class SetupStage:
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))
 
     def run(self, queue: cl.CommandQueue, clip: cl.Buffer, outcode: cl.Buffer,
-            faces: cl.Buffer, m: int, width: int, height: int, cull: str,
+            win: cl.Buffer, faces: cl.Buffer, m: int, width: int, height: int, cull: str,
             kx: np.float32, ky: np.float32) -> tuple[int, list[cl.Event]]:
         """Run setup for ``m`` triangles. Returns (P = clipped pieces, profiling events)."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize
-        args = (clip, outcode, faces, np.uint32(m), np.int32(width), np.int32(height),
+        args = (clip, outcode, win, faces, np.uint32(m), np.int32(width), np.int32(height),
                 np.int32(CULL_MODES[cull]), np.float32(kx), np.float32(ky))
         gsize = (max(m, 1),)
         ev = [self.k_setup(queue, gsize, None, *args, b.pieces.ensure(rec * m),
