@@ -52,6 +52,7 @@ STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "d
 # Piece flags.
 PF_SWAPPED = 1  #: vertices 1 and 2 were swapped to make the window-space area positive
 PF_CLIPPED = 2  #: made by the clipper; parent barycentrics live in the clipped-bary buffer
+PF_INDEX_SHIFT = 2  #: clipped pieces: flags >> 2 is their index in the clipped-bary buffer
 
 CULL_MODES = {"none": 0, "back": 1, "front": 2}
 

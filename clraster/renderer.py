@@ -89,8 +89,7 @@ class Renderer:
         e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
                                    sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
         bb = self.binning.buffers
-        ev_r = self.raster.run(q, sb.pieces.buf, sb.clip_pieces.buf, sb.clip_bary.buf, m,
-                               bb.tile_start.buf, bb.entries.buf, w, h)
+        ev_r = self.raster.run(q, sb.clip_bary.buf, bb.tile_start.buf, bb.entries.buf, w, h)
         fb = self.raster.buffers
         depth = np.empty((h, w), np.float32)
         ids = np.empty((h, w), np.int32)

@@ -49,6 +49,7 @@
 
 #define PF_SWAPPED 1
 #define PF_CLIPPED 2
+#define PF_INDEX_SHIFT 2   /* clipped pieces: flags >> 2 = index into the clipped-bary buffer */
 
 #define CULL_NONE 0
 #define CULL_BACK 1

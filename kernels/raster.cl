@@ -3,7 +3,7 @@
  * Per entry: intersect the piece's pixel box with the tile, step three exact 64-bit edge
  * functions across it (top-left rule via edge_bias), interpolate window depth linearly in
  * screen space and depth-test LESS against the tile's private z-buffer (first drawn wins
- * ties). Only the winning piece per pixel is kept; depth, id and perspective-correct
+ * ties). Only the winning entry per pixel is kept; depth, id and perspective-correct
  * barycentrics (relative to the parent triangle's vertices) are resolved once at the end.
  *
  * Depth arithmetic is spelled out operation by operation; clraster/reference/raster.py does
@@ -13,15 +13,8 @@
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 
-inline __global const Piece *piece_at(__global const Piece *pieces,
-                                      __global const Piece *clip_pieces, uint m, int e)
-{
-    return e < (int)m ? &pieces[e] : &clip_pieces[e - (int)m];
-}
-
-__kernel void raster_tiles(__global const Piece *pieces, __global const Piece *clip_pieces,
-                           __global const float *clip_bary, const uint m,
-                           __global const int *tile_start, __global const int *entries,
+__kernel void raster_tiles(__global const float *clip_bary,
+                           __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
                            __global float *depth_out, __global int *id_out,
                            __global float *bary_out, __global long *tile_stats)
@@ -32,15 +25,26 @@ __kernel void raster_tiles(__global const Piece *pieces, __global const Piece *c
     int tx0 = (tile % tiles_x) << TILE_LOG2, ty0 = (tile / tiles_x) << TILE_LOG2;
     int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
 
+    int e0 = tile_start[tile], e1 = tile_start[tile + 1];
+    if (e0 == e1) {
+        /* empty tile (most of a typical frame): clear values, in plain loops that vectorize */
+        for (int y = ty0; y <= ty1; ++y) {
+            size_t o = (size_t)y * width;
+            for (int x = tx0; x <= tx1; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
+            for (int x = 3 * tx0; x < 3 * (tx1 + 1); ++x) bary_out[3 * o + x] = 0.0f;
+        }
+        tile_stats[2 * tile] = 0;
+        tile_stats[2 * tile + 1] = 0;
+        return;
+    }
+
     float zbuf[TILE_PIXELS];
     int win[TILE_PIXELS];
     for (int i = 0; i < TILE_PIXELS; ++i) { zbuf[i] = 1.0f; win[i] = -1; }
     long tested = 0, passed = 0;
 
-    int e0 = tile_start[tile], e1 = tile_start[tile + 1];
     for (int k = e0; k < e1; ++k) {
-        int e = entries[k];
-        __global const Piece *pc = piece_at(pieces, clip_pieces, m, e);
+        __global const Piece *pc = &entries[k];
         int x0 = max(bb_x(pc->bb_min), tx0), x1 = min(bb_x(pc->bb_max), tx1);
         int y0 = max(bb_y(pc->bb_min), ty0), y1 = min(bb_y(pc->bb_max), ty1);
         if (x0 > x1 || y0 > y1) continue;
@@ -68,7 +72,7 @@ __kernel void raster_tiles(__global const Piece *pieces, __global const Piece *c
                     float z = (z0 + l1 * dz10) + l2 * dz20;
                     int i = row + (x - tx0);
                     ++tested;
-                    if (z < zbuf[i]) { zbuf[i] = z; win[i] = e; ++passed; }
+                    if (z < zbuf[i]) { zbuf[i] = z; win[i] = k; ++passed; }
                 }
                 w0 += sx0; w1 += sx1; w2 += sx2;
             }
@@ -86,7 +90,7 @@ __kernel void raster_tiles(__global const Piece *pieces, __global const Piece *c
             float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
             int id = -1;
             if (e >= 0) {
-                __global const Piece *pc = piece_at(pieces, clip_pieces, m, e);
+                __global const Piece *pc = &entries[e];
                 int px = (x << SUBPIXEL_BITS) + SUB_HALF, py = (y << SUBPIXEL_BITS) + SUB_HALF;
                 float l0 = (float)edge_fn(pc->x[1], pc->y[1], pc->x[2], pc->y[2], px, py) * pc->inv_area;
                 float l1 = (float)edge_fn(pc->x[2], pc->y[2], pc->x[0], pc->y[0], px, py) * pc->inv_area;
@@ -95,7 +99,7 @@ __kernel void raster_tiles(__global const Piece *pieces, __global const Piece *c
                 float s = (l0 + q1) + q2;
                 float c0 = l0 / s, c1 = q1 / s, c2 = q2 / s;
                 if (pc->flags & PF_CLIPPED) {
-                    __global const float *pb = clip_bary + 9 * (e - (int)m);
+                    __global const float *pb = clip_bary + 9 * (pc->flags >> PF_INDEX_SHIFT);
                     B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];
                     B1 = (c0 * pb[1] + c1 * pb[4]) + c2 * pb[7];
                     B2 = (c0 * pb[2] + c1 * pb[5]) + c2 * pb[8];

@@ -120,7 +120,7 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
             continue;
         if (write) {
             pc.id = id;
-            pc.flags = PF_CLIPPED | (sw ? PF_SWAPPED : 0);
+            pc.flags = PF_CLIPPED | (sw ? PF_SWAPPED : 0) | ((base + count) << PF_INDEX_SHIFT);
             out[base + count] = pc;
             /* parent barycentrics of the piece's vertices, in the piece's (swapped) order */
             ClipVert v1 = sw ? poly[k + 1] : poly[k], v2 = sw ? poly[k] : poly[k + 1];

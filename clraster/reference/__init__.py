@@ -41,10 +41,9 @@ def render(mesh, camera, width: int, height: int, *, cull: str = "back",
     st = setup_.setup(clip, oc, win, faces, width, height, cull, kx, ky)
     order = bin_.unified_order(st.status, st.clip_count, st.clip_offset)
     allp = np.concatenate([st.pieces, st.clip_pieces])
-    tile_start, entries = bin_.bin_pieces(order, allp["bb_min"][order], allp["bb_max"][order],
-                                          width, height, config)
-    depth, ids, bary, tested, passed = raster_.raster(allp, st.clip_bary, m, tile_start,
-                                                      entries, width, height, config)
+    tile_start, entries = bin_.bin_pieces(allp, order, width, height, config)
+    depth, ids, bary, tested, passed = raster_.raster(st.clip_bary, tile_start, entries, width,
+                                                      height, config)
     stats = FrameStats.from_status(st.status, clip_pieces=int(st.clip_pieces.size),
                                    binned_entries=int(entries.size), fragments_tested=tested,
                                    fragments_passed=passed)

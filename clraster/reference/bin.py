@@ -25,18 +25,19 @@ def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.nd
     return piece[order]
 
 
-def bin_pieces(order: np.ndarray, bb_min: np.ndarray, bb_max: np.ndarray, width: int,
-               height: int, config: RasterConfig) -> tuple[np.ndarray, np.ndarray]:
+def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
+               config: RasterConfig) -> tuple[np.ndarray, np.ndarray]:
     """Bin pieces into tiles.
 
     Args:
-        order: int64 (K,) piece indices in submission order (`unified_order`).
-        bb_min, bb_max: int32 packed pixel boxes of those pieces (same order).
+        pieces: PIECE_DTYPE (M + P,) unified piece array (slots, then clipped pieces).
+        order: int64 (K,) indices of the live pieces in submission order (`unified_order`).
 
     Returns:
-        tile_start int32 (T + 1,) and entries int32 (E,), tile-major, submission order
-        within each tile — the same arrays kernels/bin.cl produces.
+        tile_start int32 (T + 1,) and entries PIECE_DTYPE (E,) (copies of the records),
+        tile-major, submission order within each tile — what kernels/bin.cl produces.
     """
+    bb_min, bb_max = pieces["bb_min"][order], pieces["bb_max"][order]
     tiles_x, tiles_y = config.tiles(width, height)
     n_tiles = tiles_x * tiles_y
     s = config.tile_log2
@@ -49,7 +50,7 @@ def bin_pieces(order: np.ndarray, bb_min: np.ndarray, bb_max: np.ndarray, width:
     # per piece, tiles are visited row by row (ty outer, tx inner) as in the kernel
     tile = (ty0[owner] + local // nx[owner]) * tiles_x + tx0[owner] + local % nx[owner]
     srt = np.argsort(tile, kind="stable")
-    entries = order[owner[srt]].astype(np.int32)
+    entries = pieces[order[owner[srt]]]
     counts = np.bincount(tile, minlength=n_tiles)
     if counts.sum() > np.iinfo(np.int32).max:
         raise ValueError("binning would need more than 2**31 entries; use larger tiles")

@@ -10,7 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import PF_CLIPPED, PF_SWAPPED, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
+from ..config import (
+    PF_CLIPPED,
+    PF_INDEX_SHIFT,
+    PF_SWAPPED,
+    SUBPIXEL_BITS,
+    SUBPIXEL_ONE,
+    RasterConfig,
+)
 
 F32 = np.float32
 _BATCH = 1 << 22  # candidate pixels per batch (memory bound, not a semantic limit)
@@ -41,14 +48,13 @@ def edges_at(pc: np.ndarray, px: np.ndarray, py: np.ndarray):
     return e0, e1, e2
 
 
-def raster(pieces: np.ndarray, clip_bary: np.ndarray, m: int, tile_start: np.ndarray,
-           entries: np.ndarray, width: int, height: int, config: RasterConfig):
+def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, width: int,
+           height: int, config: RasterConfig):
     """Rasterize binned pieces.
 
     Args:
-        pieces: PIECE_DTYPE (M + P,) unified piece array (slots, then clipped pieces).
-        clip_bary: float32 (P, 3, 3). m: number of slots M.
-        tile_start: int32 (T + 1,). entries: int32 (E,).
+        clip_bary: float32 (P, 3, 3) parent barycentrics of clipped pieces.
+        tile_start: int32 (T + 1,). entries: PIECE_DTYPE (E,) records, tile-major.
 
     Returns:
         depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3),
@@ -63,7 +69,7 @@ def raster(pieces: np.ndarray, clip_bary: np.ndarray, m: int, tile_start: np.nda
 
     n_ent = entries.size
     tile_of = np.repeat(np.arange(tile_start.size - 1), np.diff(tile_start))
-    pc_all = pieces[entries]
+    pc_all = entries
     tx0 = (tile_of % tiles_x) << s
     ty0 = (tile_of // tiles_x) << s
     x0 = np.maximum(pc_all["bb_min"] & 0xFFFF, tx0)
@@ -117,15 +123,14 @@ def raster(pieces: np.ndarray, clip_bary: np.ndarray, m: int, tile_start: np.nda
         last = np.ones(pix_ok.size, bool)
         last[:-1] = pix_ok[1:] != pix_ok[:-1]
         zbuf[pix_ok[last]] = z_ok[last]
-        win[pix_ok[last]] = entries[own_ok[last]]
+        win[pix_ok[last]] = own_ok[last]
         start = stop
 
     ids = np.full(npx, -1, np.int32)
     bary = np.zeros((npx, 3), F32)
     hit = np.nonzero(win >= 0)[0]
     if hit.size:
-        e = win[hit]
-        pc = pieces[e]
+        pc = entries[win[hit]]
         fx = ((hit % width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
         fy = ((hit // width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
         e0, e1, e2 = edges_at(pc, fx, fy)
@@ -138,7 +143,8 @@ def raster(pieces: np.ndarray, clip_bary: np.ndarray, m: int, tile_start: np.nda
         swapped = ((pc["flags"] & PF_SWAPPED) != 0) & ~clipped
         c[swapped] = c[swapped][:, [0, 2, 1]]
         if clipped.any():
-            pb = clip_bary[e[clipped] - m]  # (K, 3 piece vertices, 3 parent weights)
+            # (K, 3 piece vertices, 3 parent weights)
+            pb = clip_bary[pc["flags"][clipped] >> PF_INDEX_SHIFT]
             cc = c[clipped]
             c[clipped] = ((cc[:, 0:1] * pb[:, 0] + cc[:, 1:2] * pb[:, 1])
                           + cc[:, 2:3] * pb[:, 2])

@@ -23,6 +23,7 @@ from ..config import (
     OC_Z_NEG,
     OC_Z_POS,
     PF_CLIPPED,
+    PF_INDEX_SHIFT,
     PF_SWAPPED,
     PIECE_DTYPE,
     ST_BACKFACE,
@@ -209,7 +210,8 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, faces: np.ndar
     clip_count[cidx] = np.bincount(owner[ok], minlength=cidx.size)
     clip_pieces = pc[ok]
     clip_pieces["id"] = cidx[owner[ok]]
-    clip_pieces["flags"] = PF_CLIPPED | np.where(sw[ok], PF_SWAPPED, 0)
+    clip_pieces["flags"] = (PF_CLIPPED | np.where(sw[ok], PF_SWAPPED, 0)
+                            | (np.arange(clip_pieces.size) << PF_INDEX_SHIFT))
     b1 = np.where(sw[:, None], v2[:, 4:], v1[:, 4:])
     b2 = np.where(sw[:, None], v1[:, 4:], v2[:, 4:])
     clip_bary = np.stack([v0[:, 4:], b1, b2], axis=1)[ok].astype(F32)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig
+from ..config import PIECE_DTYPE, RasterConfig
 from ..device import program
 from ._buffers import GrowBuffer
 
@@ -19,8 +19,8 @@ class BinBuffers:
     counts: int32 (C, T) per-chunk tile counts, then per-chunk offsets within each tile.
     tile_count: int32 (T,). tile_start: int32 (T + 1,), tile_start[T] = E.
     overflow: int32 (1,) set when E would not fit an int32.
-    entries: int32 (E,) piece indices (unified space, see kernels/bin.cl), tile-major,
-    submission order within a tile.
+    entries: PIECE_DTYPE (E,) copies of the setup records, tile-major, submission order
+    within a tile.
     """
 
     counts: GrowBuffer
@@ -66,6 +66,6 @@ class BinStage:
                 f"with {self.config.tile_size}px tiles; use a larger tile size "
                 "(RasterConfig(tile_log2=...)) or a smaller image")
         e = int(head[0])
-        entries = b.entries.ensure(4 * e)
+        entries = b.entries.ensure(PIECE_DTYPE.itemsize * e)
         ev.append(self.k_scatter(queue, (chunks,), (1,), *common, tile_start, entries))
         return e, ev

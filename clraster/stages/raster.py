@@ -32,15 +32,14 @@ class RasterStage:
         self.config = config
         self.buffers = FrameBuffers(*(GrowBuffer(ctx) for _ in range(4)))
 
-    def run(self, queue: cl.CommandQueue, pieces: cl.Buffer, clip_pieces: cl.Buffer,
-            clip_bary: cl.Buffer, m: int, tile_start: cl.Buffer, entries: cl.Buffer,
-            width: int, height: int) -> cl.Event:
+    def run(self, queue: cl.CommandQueue, clip_bary: cl.Buffer, tile_start: cl.Buffer,
+            entries: cl.Buffer, width: int, height: int) -> cl.Event:
         b = self.buffers
         tiles_x, tiles_y = self.config.tiles(width, height)
         n_tiles = tiles_x * tiles_y
         npx = width * height
-        return self.kernel(queue, (n_tiles,), (1,), pieces, clip_pieces, clip_bary,
-                           np.uint32(m), tile_start, entries, np.int32(width),
+        return self.kernel(queue, (n_tiles,), (1,), clip_bary, tile_start, entries,
+                           np.int32(width),
                            np.int32(height), np.int32(tiles_x), b.depth.ensure(4 * npx),
                            b.ids.ensure(4 * npx), b.bary.ensure(12 * npx),
                            b.tile_stats.ensure(16 * n_tiles))
