@@ -23,8 +23,17 @@ def check_cull(cull: str) -> str:
     return cull
 
 
+#: Faces per draw. Piece, entry and offset counters are int32; a triangle makes at most 14
+#: pieces, so this keeps every counter exact.
+MAX_FACES = 1 << 27
+
+
 def check_mesh(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices float32 (N, 3), faces int32 (M, 3)) of a `clraster.Mesh`-like object."""
+    """(vertices float32 (N, 3), faces int32 (M, 3)) of a `clraster.Mesh`-like object.
+
+    A `clraster.Mesh` validated its indices when it was built (its arrays are read-only);
+    any other object gets its indices checked here, since the kernels index with them.
+    """
     try:
         v, f = mesh.vertices, mesh.faces
     except AttributeError:
@@ -38,6 +47,16 @@ def check_mesh(mesh) -> tuple[np.ndarray, np.ndarray]:
     if f.dtype != np.int32 or f.ndim != 2 or f.shape[1] != 3:
         raise ValueError(f"mesh.faces must be int32 (M, 3), got {f.dtype} {f.shape}; "
                          "build it with clraster.Mesh(vertices, faces)")
+    if f.shape[0] > MAX_FACES:
+        raise ValueError(f"{f.shape[0]:,} faces in one draw; at most {MAX_FACES:,} are "
+                         "supported: split the mesh")
+    from .mesh import Mesh  # local: mesh.py is a sibling layer, imported only for the check
+
+    if f.size and not (isinstance(mesh, Mesh) and not f.flags.writeable):
+        lo, hi = int(f.min()), int(f.max())
+        if lo < 0 or hi >= v.shape[0]:
+            raise ValueError(f"mesh.faces index out of range: values span [{lo}, {hi}] for "
+                             f"{v.shape[0]} vertices")
     return v, f
 
 

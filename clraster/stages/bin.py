@@ -66,6 +66,6 @@ class BinStage:
                 f"with {self.config.tile_size}px tiles; use a larger tile size "
                 "(RasterConfig(tile_log2=...)) or a smaller image")
         e = int(head[0])
-        entries = b.entries.ensure(PIECE_DTYPE.itemsize * e)
+        entries = b.entries.ensure(PIECE_DTYPE.itemsize * e, "bin list")
         ev.append(self.k_scatter(queue, (chunks,), (1,), *common, tile_start, entries))
         return e, ev
