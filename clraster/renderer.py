@@ -89,19 +89,10 @@ class Renderer:
         e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
                                    sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
         bb = self.binning.buffers
-        ev_r = self.raster.run(q, sb.clip_bary.buf, bb.tile_start.buf, bb.entries.buf, w, h)
-        fb = self.raster.buffers
-        depth = np.empty((h, w), np.float32)
-        ids = np.empty((h, w), np.int32)
-        bary = np.empty((h, w, 3), np.float32)
+        depth, ids, bary, tstats, ev_r = self.raster.run(
+            q, sb.clip_bary.buf, bb.tile_start.buf, bb.entries.buf, w, h)
         status = np.empty(m, np.uint8)
-        tiles = int(np.prod(self.config.tiles(w, h)))
-        tstats = np.empty((tiles, 2), np.int64)
-        cl.enqueue_copy(q, depth, fb.depth.buf, is_blocking=False)
-        cl.enqueue_copy(q, ids, fb.ids.buf, is_blocking=False)
-        cl.enqueue_copy(q, bary, fb.bary.buf, is_blocking=False)
-        cl.enqueue_copy(q, status, sb.status.buf, is_blocking=False)
-        cl.enqueue_copy(q, tstats, fb.tile_stats.buf, is_blocking=True)
+        cl.enqueue_copy(q, status, sb.status.buf, is_blocking=True)
         stats = FrameStats.from_status(
             status, clip_pieces=p, binned_entries=e,
             fragments_tested=int(tstats[:, 0].sum()), fragments_passed=int(tstats[:, 1].sum()))

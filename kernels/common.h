@@ -84,8 +84,10 @@ inline WinVert viewport_vertex(float4 c, float hw, float hh)
     float xn = c.x * iw, yn = c.y * iw, zn = c.z * iw;
     float xw = (xn + 1.0f) * hw;
     float yw = (1.0f - yn) * hh;
-    v.x = convert_int_rte(xw * (float)SUB_ONE);
-    v.y = convert_int_rte(yw * (float)SUB_ONE);
+    /* round half to even (rint in the default rounding mode; one roundss on x86, where
+     * convert_int_rte may be a library call); the guard band keeps the values in range */
+    v.x = (int)rint(xw * (float)SUB_ONE);
+    v.y = (int)rint(yw * (float)SUB_ONE);
     v.z = zn * 0.5f + 0.5f;
     v.iw = iw;
     return v;
