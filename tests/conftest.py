@@ -1,0 +1,168 @@
+"""Shared fixtures and helpers for the rasterizer tests.
+
+* `renderer_for` / `render_both`: one OpenCL `Renderer` per (width, height, tile_log2),
+  built once per session and reused (program builds are slow the first time; the renderer
+  keeps its device buffers between frames).
+* `MatrixCamera`: a camera that returns a fixed clip matrix, so tests control exactly where
+  triangles land (identity view, vertices given in eye space).
+* `ndc_to_window` / `window_to_ndc`: the image convention the tests pin: row 0 is the top
+  row, pixel (x, y) is sampled at (x + 0.5, y + 0.5), x_win = (x_ndc + 1)/2·W,
+  y_win = (1 − y_ndc)/2·H.
+* `assert_frames_equal`: the differential check (ids and depth exact, barycentrics close,
+  every stat count equal), with a message that points at the first differing pixel.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clraster import Mesh, RasterConfig
+
+MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+
+TILE_LOG2S = (3, 4, 5, 6)
+
+
+class MatrixCamera:
+    """Any object with ``view_projection(width, height)`` is a camera: this one returns a
+    fixed (4, 4) world → clip matrix whatever the image size."""
+
+    def __init__(self, matrix: np.ndarray) -> None:
+        self.matrix = np.asarray(matrix, dtype=np.float64)
+
+    def view_projection(self, width: int, height: int) -> np.ndarray:
+        return self.matrix
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """gluPerspective, written out here independently of clraster.camera (float64)."""
+    f = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
+    p = np.zeros((4, 4))
+    p[0, 0] = f / aspect
+    p[1, 1] = f
+    p[2, 2] = (far + near) / (near - far)
+    p[2, 3] = 2.0 * far * near / (near - far)
+    p[3, 2] = -1.0
+    return p
+
+
+#: Identity clip matrix: vertices are clip-space (x, y, z) with w = 1, i.e. NDC directly.
+NDC_CAMERA = MatrixCamera(np.eye(4))
+
+
+def window_to_ndc(xw, yw, width: int, height: int):
+    """Window (pixels, y down, row 0 at the top) → NDC (y up)."""
+    xw = np.asarray(xw, dtype=np.float64)
+    yw = np.asarray(yw, dtype=np.float64)
+    return xw / width * 2.0 - 1.0, 1.0 - yw / height * 2.0
+
+
+def ndc_to_window(xn, yn, width: int, height: int):
+    xn = np.asarray(xn, dtype=np.float64)
+    yn = np.asarray(yn, dtype=np.float64)
+    return (xn + 1.0) * 0.5 * width, (1.0 - yn) * 0.5 * height
+
+
+def window_mesh(tris_win, width: int, height: int, z: float = 0.0) -> Mesh:
+    """A mesh for NDC_CAMERA from triangles given in window pixels: (T, 3, 2) → one face
+    per triangle, in the given vertex order, all at NDC depth ``z``.
+
+    Window coordinates that are multiples of 1/256 (with power-of-two sizes) map to NDC and
+    back exactly in float32, so these triangles snap to exactly the given positions."""
+    t = np.asarray(tris_win, dtype=np.float64).reshape(-1, 3, 2)
+    xn, yn = window_to_ndc(t[..., 0], t[..., 1], width, height)
+    v = np.stack([xn, yn, np.full_like(xn, z)], axis=-1).reshape(-1, 3)
+    return Mesh(v, np.arange(v.shape[0]).reshape(-1, 3))
+
+
+def pixel_centres(width: int, height: int):
+    """Window coordinates (xc, yc), each (H, W) float64, of all pixel centres."""
+    yc, xc = np.mgrid[0:height, 0:width] + 0.5
+    return xc, yc
+
+
+_RENDERERS: dict[tuple[int, int, int], object] = {}
+
+
+def get_renderer(width: int, height: int, tile_log2: int = 4):
+    """The session's Renderer for this size and tile size (built on first use)."""
+    from clraster import Renderer
+
+    key = (width, height, tile_log2)
+    r = _RENDERERS.get(key)
+    if r is None:
+        r = Renderer(width, height, config=RasterConfig(tile_log2=tile_log2))
+        _RENDERERS[key] = r
+    return r
+
+
+@pytest.fixture(scope="session")
+def renderer_for():
+    """``renderer_for(width, height, tile_log2=4)`` → a cached Renderer."""
+    return get_renderer
+
+
+def render_cl(mesh, camera, width, height, cull="none", tile_log2=4):
+    return get_renderer(width, height, tile_log2).render(mesh, camera, cull=cull)
+
+
+def render_ref(mesh, camera, width, height, cull="none", tile_log2=4):
+    from clraster import reference
+
+    return reference.render(mesh, camera, width, height, cull=cull,
+                            config=RasterConfig(tile_log2=tile_log2))
+
+
+def render_both(mesh, camera, width, height, cull="none", tile_log2=4):
+    """(OpenCL frame, NumPy-twin frame) for the same input and config."""
+    return (render_cl(mesh, camera, width, height, cull, tile_log2),
+            render_ref(mesh, camera, width, height, cull, tile_log2))
+
+
+def assert_frames_equal(a, b, context: str = "", bary_atol: float = 1e-5,
+                        depth_atol: float = 0.0, check_counts: bool = True) -> None:
+    """Ids identical, depth equal (exactly by default), barycentrics within ``bary_atol``,
+    all stat counts equal."""
+    assert a.triangle_id.shape == b.triangle_id.shape, context
+    assert a.triangle_id.dtype == np.int32 and b.triangle_id.dtype == np.int32
+    assert a.depth.dtype == np.float32 and b.depth.dtype == np.float32
+    assert a.barycentrics.dtype == np.float32 and b.barycentrics.dtype == np.float32
+    diff = a.triangle_id != b.triangle_id
+    if diff.any():
+        ys, xs = np.nonzero(diff)
+        y, x = int(ys[0]), int(xs[0])
+        raise AssertionError(
+            f"{context}: triangle ids differ at {int(diff.sum())} pixel(s); first at "
+            f"(x={x}, y={y}): {int(a.triangle_id[y, x])} vs {int(b.triangle_id[y, x])} "
+            f"(depth {a.depth[y, x]!r} vs {b.depth[y, x]!r})")
+    if depth_atol == 0.0:
+        bad = a.depth != b.depth
+    else:
+        bad = np.abs(a.depth.astype(np.float64) - b.depth) > depth_atol
+    if bad.any():
+        ys, xs = np.nonzero(bad)
+        y, x = int(ys[0]), int(xs[0])
+        raise AssertionError(
+            f"{context}: depth differs at {int(bad.sum())} pixel(s); first at (x={x}, y={y}):"
+            f" {a.depth[y, x]!r} vs {b.depth[y, x]!r} (id {int(a.triangle_id[y, x])})")
+    np.testing.assert_allclose(a.barycentrics, b.barycentrics, rtol=0, atol=bary_atol,
+                               err_msg=f"{context}: barycentrics")
+    if check_counts:
+        assert a.stats.counts() == b.stats.counts(), f"{context}: stats differ"
+
+
+def coverage_count(frames) -> np.ndarray:
+    """Per-pixel number of frames in which the pixel is covered."""
+    return np.sum([f.triangle_id >= 0 for f in frames], axis=0)
+
+
+def load_shared_mesh(name: str) -> Mesh:
+    path = MESH_DIR / name
+    if not path.is_file():
+        pytest.skip(f"shared mesh {name} not found in {MESH_DIR} (the shared mesh folder "
+                    f"next to the repository is absent)")
+    return Mesh.load(path)
