@@ -2,8 +2,8 @@
  *
  * Per entry: intersect the piece's pixel box with the tile, step three exact 64-bit edge
  * functions across it (top-left rule via edge_bias), interpolate window depth linearly in
- * screen space and depth-test LESS against the tile's private z-buffer (first drawn wins
- * ties). Only the winning entry per pixel is kept; depth, id and perspective-correct
+ * screen space and depth-test LESS against the tile's private z-buffer (equal depth: the
+ * lower triangle id wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id and perspective-correct
  * barycentrics (relative to the parent triangle's vertices) are resolved once at the end.
  *
  * Depth arithmetic is spelled out operation by operation; clraster/reference/raster.py does
@@ -39,8 +39,9 @@ __kernel void raster_tiles(__global const float *clip_bary,
     }
 
     float zbuf[TILE_PIXELS];
-    int win[TILE_PIXELS];
-    for (int i = 0; i < TILE_PIXELS; ++i) { zbuf[i] = 1.0f; win[i] = -1; }
+    int win[TILE_PIXELS];   /* winning entry index, -1 = background */
+    int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
+    for (int i = 0; i < TILE_PIXELS; ++i) { zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; }
     long tested = 0, passed = 0;
 
     for (int k = e0; k < e1; ++k) {
@@ -62,6 +63,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
         long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
         long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
         float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
+        int id = pc->id;
         for (int y = y0; y <= y1; ++y) {
             long w0 = r0, w1 = r1, w2 = r2;
             int row = (y - ty0) << TILE_LOG2;
@@ -72,7 +74,13 @@ __kernel void raster_tiles(__global const float *clip_bary,
                     float z = (z0 + l1 * dz10) + l2 * dz20;
                     int i = row + (x - tx0);
                     ++tested;
-                    if (z < zbuf[i]) { zbuf[i] = z; win[i] = k; ++passed; }
+                    /* LESS; on equal depth the lower triangle id wins, which is "first
+                     * drawn wins" for triangles submitted in id order, whatever order
+                     * culling or clustering actually submits them in. Nothing beats the
+                     * clear value 1.0. */
+                    if (z < zbuf[i] || (z == zbuf[i] && id < wid[i] && win[i] >= 0)) {
+                        zbuf[i] = z; win[i] = k; wid[i] = id; ++passed;
+                    }
                 }
                 w0 += sx0; w1 += sx1; w2 += sx2;
             }

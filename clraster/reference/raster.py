@@ -2,8 +2,8 @@
 
 Every (entry, pixel) candidate of a tile is generated at once (in batches), coverage and
 depth use the kernel's exact integer edge functions and float32 operations, and the
-sequential LESS test (first drawn wins ties) is reproduced with a segmented running minimum
-over fragments sorted by (pixel, list position).
+sequential depth test — LESS, equal depth won by the lower triangle id — is reproduced with a
+segmented running minimum of (depth, id) keys over fragments sorted by (pixel, list position).
 """
 
 from __future__ import annotations
@@ -38,6 +38,12 @@ def _ordered(z: np.ndarray) -> np.ndarray:
     return np.where(b < 0, -(b & 0x7FFFFFFF), b)
 
 
+def _key(z: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """int64 keys ordered as the depth test orders (depth, id): depth first, then id.
+    ids are −1 for the clear value, which only loses to a strictly nearer depth."""
+    return ((_ordered(z) + (1 << 31)) << 31) | (ids.astype(np.int64) + 1)
+
+
 def edges_at(pc: np.ndarray, px: np.ndarray, py: np.ndarray):
     """Edge functions E0, E1, E2 (int64) of pieces ``pc`` at fixed-point points."""
     X = pc["x"].astype(np.int64)
@@ -65,6 +71,7 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
     npx = width * height
     zbuf = np.ones(npx, F32)
     win = np.full(npx, -1, np.int64)
+    wid = np.full(npx, -1, np.int64)  # winning id (−1: clear value)
     tested = passed = 0
 
     n_ent = entries.size
@@ -108,22 +115,29 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         # sequential LESS in list order == segmented running min over (pixel, entry index)
         srt = np.lexsort((owner, pix))
         pix, z, owner = pix[srt], z[srt], owner[srt]
-        zk = _ordered(z)
+        ids = pc["id"][srt]
+        # Ranks of the keys (fragments and the z-buffer before this batch) keep the order
+        # and fit 24 bits, so a per-segment offset lets one minimum.accumulate restart at
+        # every pixel (offsets decrease along the sorted pixels).
+        keys = np.concatenate([_key(z, ids), _key(zbuf[pix], wid[pix])])
+        rank = np.unique(keys, return_inverse=True)[1].reshape(-1).astype(np.int64)
+        rk, rbuf = rank[:pix.size], rank[pix.size:]
         first = np.ones(pix.size, bool)
         first[1:] = pix[1:] != pix[:-1]
-        seg_off = (npx - pix) << 33  # decreasing per segment: accumulate resets at each one
-        incl = np.minimum.accumulate(zk + seg_off) - seg_off
+        seg_off = (npx - pix) << 24
+        incl = np.minimum.accumulate(rk + seg_off) - seg_off
         prev = np.empty_like(incl)
         prev[1:] = incl[:-1]
         prev[first] = np.iinfo(np.int64).max
-        prev = np.minimum(prev, _ordered(zbuf[pix]))  # the z-buffer before this batch
-        ok = zk < prev
+        prev = np.minimum(prev, rbuf)
+        ok = rk < prev
         passed += int(ok.sum())
-        pix_ok, z_ok, own_ok = pix[ok], z[ok], owner[ok]
+        pix_ok, z_ok, own_ok, id_ok = pix[ok], z[ok], owner[ok], ids[ok]
         last = np.ones(pix_ok.size, bool)
         last[:-1] = pix_ok[1:] != pix_ok[:-1]
         zbuf[pix_ok[last]] = z_ok[last]
         win[pix_ok[last]] = own_ok[last]
+        wid[pix_ok[last]] = id_ok[last]
         start = stop
 
     ids = np.full(npx, -1, np.int32)
