@@ -1,0 +1,477 @@
+"""A bounding volume hierarchy over axis-aligned boxes, culled against frustum planes.
+
+:class:`BVH` is a binary tree stored in flat arrays and built level by level with NumPy:
+every node splits its items at the median of their box centroids along the axis where the
+centroids spread most (so the tree is balanced: depth ``ceil(log2(K / leaf_size))``). Cost
+O(K log K): the items are sorted once per axis, and each level partitions those orders
+stably in O(K).
+
+Culling is a level-synchronous traversal with plane masks: every (query, node) pair of the
+frontier is classified against the planes still set in its 6-bit mask (bit k = "plane k is
+still crossed higher up: test it here"); a node inside plane k clears bit k for its whole
+subtree, a node outside any plane is dropped with its subtree, a node inside every plane
+makes all its items INSIDE without further tests, and a leaf that is still intersecting
+tests its items one by one.
+
+Plane classification (also used by :mod:`clraster.cull`): a plane is a row (a, b, c, d)
+whose value ``a·x + b·y + c·z + d`` is >= 0 inside. With a relative margin μ and a
+per-plane *scale* row s >= 0 (the magnitude of the terms the renderer adds up in float32
+when it evaluates that plane; see :func:`clraster.cull.frustum_plane_scales`), a volume with
+coordinate magnitudes <= m (per axis) is
+
+* inside plane k iff ``min over the volume of plane_k >= μ_in · (s_k[:3]·m + s_k[3])``,
+* outside plane k iff ``max over the volume of plane_k < −μ_out · (s_k[:3]·m + s_k[3])``,
+
+so both answers hold with room to spare for float32 rounding in clip space. Boxes use the
+n-vertex / p-vertex (the corner that minimizes / maximizes the plane), spheres centre ± r·|n|.
+NaN bounds compare false both ways: they are never culled and never INSIDE.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["ALL_PLANES", "BVH", "DEFAULT_MARGIN", "Visibility"]
+
+
+class Visibility(IntEnum):
+    """Classification of a bounding volume against the frustum."""
+
+    INSIDE = 0  #: inside every plane (by the inside margin): clip tests may be skipped
+    INTERSECTING = 1  #: neither: may cross a plane
+    OUTSIDE = 2  #: outside some plane (by the outside margin): cannot touch the frustum
+
+
+INSIDE, INTERSECTING, OUTSIDE = 0, 1, 2
+#: Default relative margin for INSIDE and OUTSIDE (see the module docstring and
+#: :mod:`clraster.cull`): 1e-5 of the float32 term magnitude, about 170× float32's unit
+#: roundoff and >10× the error of evaluating a plane through an object and a view matrix.
+DEFAULT_MARGIN = 1e-5
+#: Mask with all 6 plane bits set (test every plane).
+ALL_PLANES = np.uint8(63)
+_BITS = (1 << np.arange(6)).astype(np.uint8)
+#: _MASK_PLANES[m, k]: bit k of mask m is set.
+_MASK_PLANES = (np.arange(64, dtype=np.uint8)[:, None] & _BITS) != 0
+
+
+# -- plane classification primitives ----------------------------------------------------
+
+def _decide(dmin: np.ndarray, dmax: np.ndarray, mterm: np.ndarray, mask: np.ndarray,
+            inside_margin: float, outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """States and reduced masks from per-plane extremes (..., 6) of the plane values and
+    plane masks broadcastable to their leading shape."""
+    active = np.take(_MASK_PLANES, mask, axis=0)
+    outside = ((dmax < -outside_margin * mterm) & active).any(axis=-1)
+    inside = (dmin >= inside_margin * mterm) & active
+    new_mask = mask & ~np.packbits(inside, axis=-1, bitorder="little")[..., 0]
+    state = (new_mask != 0).view(np.uint8)  # INTERSECTING (1) or INSIDE (0)
+    state[outside] = OUTSIDE
+    return state, new_mask
+
+
+def dense_box_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
+                     lo: np.ndarray, hi: np.ndarray, mag: np.ndarray, *,
+                     inside_margin: float, outside_margin: float):
+    """Classify every box against every plane set: states and masks, uint8 (Q, K).
+
+    planes, scales: (Q, 6, 4); masks: (Q,) uint8; lo, hi, mag: (K, 3). Three matrix
+    products of (K, 7) by (7, 6Q) (plane value at the n-vertex, at the p-vertex, margin
+    term), so it pays for small K and many plane sets, where a per-(query, node) traversal
+    would gather planes for every pair.
+    """
+    n_q, n_k = planes.shape[0], lo.shape[0]
+    n = planes[..., :3]
+    w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0), planes[..., 3:]], axis=-1)
+    w = w.reshape(n_q * 6, 7).T  # (7, 6Q)
+    one = np.ones((n_k, 1))
+    dmin = np.hstack([lo, hi, one]) @ w
+    dmax = np.hstack([hi, lo, one]) @ w
+    mterm = np.hstack([mag, one]) @ scales.reshape(n_q * 6, 4).T
+    shape = (n_k, n_q, 6)
+    state, new_mask = _decide(dmin.reshape(shape), dmax.reshape(shape), mterm.reshape(shape),
+                              masks[None, :], inside_margin, outside_margin)
+    return state.T, new_mask.T
+
+
+def _box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  mag: np.ndarray):
+    """Min and max of each plane over each box, and the margin term.
+
+    planes, scales: (6, 4) shared by all boxes, or (F, 6, 4) one set per box.
+    lo, hi, mag: (F, 3).
+    """
+    n = planes[..., :3]
+    if planes.ndim == 2:
+        npos = np.maximum(n, 0.0).T  # (3, 6)
+        nneg = np.minimum(n, 0.0).T
+        dmin = lo @ npos + hi @ nneg + planes[:, 3]
+        dmax = hi @ npos + lo @ nneg + planes[:, 3]
+        mterm = mag @ scales[:, :3].T + scales[:, 3]
+        return dmin, dmax, mterm
+    npos = np.maximum(n, 0.0)
+    nneg = np.minimum(n, 0.0)
+    dmin = planes[..., 3].copy()
+    dmax = planes[..., 3].copy()
+    mterm = scales[..., 3].copy()
+    for j in range(3):
+        lj, hj = lo[:, j, None], hi[:, j, None]
+        dmin += npos[..., j] * lj + nneg[..., j] * hj
+        dmax += npos[..., j] * hj + nneg[..., j] * lj
+        mterm += scales[..., j] * mag[:, j, None]
+    return dmin, dmax, mterm
+
+
+def _sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
+                     radii: np.ndarray):
+    """Like `_box_extremes` for spheres (centre ± r·|n|); (6, 4) planes only."""
+    n = planes[:, :3]
+    dist = centers @ n.T + planes[:, 3]
+    reach = radii[:, None] * np.linalg.norm(n, axis=1)[None, :]
+    mag = np.abs(centers) + radii[:, None]
+    mterm = mag @ scales[:, :3].T + scales[:, 3]
+    return dist - reach, dist + reach, mterm
+
+
+def _check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None, batch: bool):
+    shape = "(Q, 6, 4)" if batch else "(6, 4)"
+    p = np.asarray(planes, dtype=np.float64)
+    if p.shape[-2:] != (6, 4) or p.ndim != (3 if batch else 2):
+        raise ValueError(f"planes must have shape {shape} (left, right, bottom, top, near, "
+                         f"far rows a, b, c, d), got shape {p.shape}")
+    if scales is None:
+        s = np.abs(p)
+    else:
+        s = np.asarray(scales, dtype=np.float64)
+        if s.shape != p.shape:
+            raise ValueError(f"scales must have the planes' shape {p.shape}, got {s.shape}")
+    return p, s
+
+
+def _check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
+    if mask is None:
+        return np.full(n, ALL_PLANES, np.uint8)
+    m = np.asarray(mask)
+    if m.ndim == 0:
+        m = np.full(n, m)
+    if m.shape != (n,) or m.dtype.kind not in "iu" or (m.size and (m.min() < 0 or m.max() > 63)):
+        raise ValueError(f"mask must be a scalar or ({n},) array of 6-bit plane masks in "
+                         f"0..63, got {m.dtype} {m.shape}")
+    return m.astype(np.uint8)
+
+
+def _check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.asarray(mins, dtype=np.float64)
+    hi = np.asarray(maxs, dtype=np.float64)
+    if lo.ndim == 1 and lo.size == 0:
+        lo = lo.reshape(0, 3)
+    if hi.ndim == 1 and hi.size == 0:
+        hi = hi.reshape(0, 3)
+    if lo.ndim != 2 or lo.shape[1] != 3 or hi.shape != lo.shape:
+        raise ValueError(f"box mins and maxs must both have shape (K, 3), got {lo.shape} and "
+                         f"{hi.shape}")
+    return lo, hi
+
+
+def box_magnitudes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(K, 3): largest |coordinate| per axis over each box (its margin magnitude)."""
+    return np.maximum(np.abs(lo), np.abs(hi))
+
+
+# -- the tree ---------------------------------------------------------------------------
+
+def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Concatenation of arange(s, s + c) for each (s, c), int64."""
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64)
+    offs = np.cumsum(counts) - counts
+    return np.repeat(starts - offs, counts) + np.arange(total)
+
+
+@dataclass(frozen=True)
+class BVH:
+    """A binary BVH over K axis-aligned boxes, in flat arrays (all read-only).
+
+    Node 0 is the root (no nodes when K = 0). Node n covers the items
+    ``order[first[n] : first[n] + count[n]]``; its children are ``left[n]`` and
+    ``left[n] + 1``, or ``left[n] == −1`` for a leaf (<= leaf_size items). Nodes are stored
+    level by level.
+
+    Attributes:
+        n_items: K.
+        leaf_size: most items per leaf.
+        order: int32 (K,): item indices in leaf order.
+        node_min, node_max: float64 (N, 3): node boxes (union of their items' boxes).
+        node_mag: float64 (N, 3): per-axis max of the items' margin magnitudes.
+        first, count, left: int32 (N,).
+        item_min, item_max, item_mag: float64 (K, 3), by item index.
+    """
+
+    n_items: int
+    leaf_size: int
+    order: np.ndarray
+    node_min: np.ndarray
+    node_max: np.ndarray
+    node_mag: np.ndarray
+    first: np.ndarray
+    count: np.ndarray
+    left: np.ndarray
+    item_min: np.ndarray
+    item_max: np.ndarray
+    item_mag: np.ndarray
+
+    def __post_init__(self) -> None:
+        # Gather-friendly copies: [min | max | mag] rows, nodes by index, items in leaf order
+        # (a leaf's items are then one contiguous run).
+        nodes = np.ascontiguousarray(np.hstack([self.node_min, self.node_max, self.node_mag]))
+        items = np.ascontiguousarray(np.hstack([self.item_min, self.item_max,
+                                                self.item_mag])[self.order])
+        nodes.flags.writeable = False
+        items.flags.writeable = False
+        object.__setattr__(self, "_nodes9", nodes)
+        object.__setattr__(self, "_items9", items)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.first.size)
+
+    @classmethod
+    def build(cls, mins: npt.ArrayLike, maxs: npt.ArrayLike, leaf_size: int = 4,
+              mags: npt.ArrayLike | None = None) -> BVH:
+        """Build over the boxes ``[mins[k], maxs[k]]``.
+
+        Args:
+            mins, maxs: (K, 3) finite, ``mins <= maxs``; zero-size boxes are fine.
+            leaf_size: most items per leaf, >= 1.
+            mags: (K, 3) per-axis coordinate magnitudes used for the margins (default: the
+                boxes' own, ``max(|min|, |max|)``); pass larger ones when the renderer's
+                arithmetic sees larger numbers than the boxes' coordinates (e.g. instance
+                boxes: magnitudes before the object → world transform).
+
+        Raises:
+            ValueError: wrong shapes, NaN/Inf, ``mins > maxs`` or a bad leaf_size.
+        """
+        lo, hi = _check_boxes(mins, maxs)
+        if isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer)) \
+                or leaf_size < 1:
+            raise ValueError(f"leaf_size must be a positive integer, got {leaf_size!r}")
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+            raise ValueError("BVH boxes must be finite; keep unbounded items out of the tree "
+                             "and treat them as INTERSECTING")
+        if np.any(lo > hi):
+            k = int(np.flatnonzero((lo > hi).any(axis=1))[0])
+            raise ValueError(f"box {k} has mins > maxs ({lo[k].tolist()} vs "
+                             f"{hi[k].tolist()})")
+        mag = box_magnitudes(lo, hi) if mags is None else np.asarray(mags, np.float64)
+        if mag.shape != lo.shape:
+            raise ValueError(f"mags must have shape {lo.shape}, got {mag.shape}")
+        k_items = lo.shape[0]
+        leaf_size = int(leaf_size)
+        if k_items == 0:
+            z = np.zeros((0, 3))
+            e = np.zeros(0, np.int32)
+            return _freeze(cls(0, leaf_size, e, z, z.copy(), z.copy(), e.copy(), e.copy(),
+                               e.copy(), lo.copy(), hi.copy(), mag.copy()))
+
+        cen = (lo + hi) * 0.5
+        orders = np.ascontiguousarray(np.argsort(cen, axis=0, kind="stable").T)  # (3, K)
+        axes = np.arange(3)[:, None]
+        goes_left = np.zeros(k_items, dtype=bool)
+        start = np.zeros(1, np.int64)
+        cnt = np.array([k_items], np.int64)
+        firsts, counts, lefts = [], [], []
+        base = 0
+        while True:
+            split = cnt > leaf_size
+            left = np.full(cnt.size, -1, np.int64)
+            firsts.append(start)
+            counts.append(cnt)
+            lefts.append(left)
+            if not split.any():
+                break
+            s_start, s_cnt = start[split], cnt[split]
+            n_split = s_start.size
+            last = s_start + s_cnt - 1
+            extent = cen[orders[:, last], axes] - cen[orders[:, s_start], axes]  # (3, S)
+            axis = np.argmax(extent, axis=0)
+            half = s_cnt // 2
+            mid = s_start + half
+            # Items of the left halves (in the chosen axis' order) go left.
+            pos = _ranges(s_start, half)
+            goes_left[orders[np.repeat(axis, half), pos]] = True
+            # Stable partition of every axis order within each split segment.
+            all_pos = _ranges(s_start, s_cnt)
+            seg = np.repeat(np.arange(n_split), s_cnt)
+            seg_begin = np.cumsum(s_cnt) - s_cnt  # index in all_pos of each segment start
+            for a in range(3):
+                items = orders[a, all_pos]
+                flag = goes_left[items]
+                cl = np.cumsum(flag)
+                cr = np.cumsum(~flag)
+                rank_l = cl - 1 - (cl - flag)[seg_begin][seg]
+                rank_r = cr - 1 - (cr - ~flag)[seg_begin][seg]
+                new_pos = np.where(flag, s_start[seg] + rank_l, mid[seg] + rank_r)
+                orders[a, new_pos] = items
+            goes_left[orders[0, all_pos]] = False
+            left[split] = base + cnt.size + 2 * np.arange(n_split)
+            base += cnt.size
+            start = np.stack([s_start, mid], axis=1).ravel()
+            cnt = np.stack([half, s_cnt - half], axis=1).ravel()
+
+        first = np.concatenate(firsts)
+        count = np.concatenate(counts)
+        left = np.concatenate(lefts)
+        order = orders[0]
+        n_nodes = first.size
+        node_min = np.empty((n_nodes, 3))
+        node_max = np.empty((n_nodes, 3))
+        node_mag = np.empty((n_nodes, 3))
+        leaves = np.flatnonzero(left < 0)
+        leaves = leaves[np.argsort(first[leaves])]  # leaves partition 0..K-1
+        starts = first[leaves]
+        node_min[leaves] = np.minimum.reduceat(lo[order], starts, axis=0)
+        node_max[leaves] = np.maximum.reduceat(hi[order], starts, axis=0)
+        node_mag[leaves] = np.maximum.reduceat(mag[order], starts, axis=0)
+        level_ends = np.cumsum([c.size for c in counts])
+        for lv in range(len(counts) - 1, -1, -1):  # bottom-up: parents from children
+            ids = np.arange(level_ends[lv] - counts[lv].size, level_ends[lv])
+            ids = ids[left[ids] >= 0]
+            if ids.size:
+                c0, c1 = left[ids], left[ids] + 1
+                node_min[ids] = np.minimum(node_min[c0], node_min[c1])
+                node_max[ids] = np.maximum(node_max[c0], node_max[c1])
+                node_mag[ids] = np.maximum(node_mag[c0], node_mag[c1])
+        return _freeze(cls(k_items, leaf_size, order.astype(np.int32), node_min, node_max,
+                           node_mag, first.astype(np.int32), count.astype(np.int32),
+                           left.astype(np.int32), lo.copy(), hi.copy(), mag.copy()))
+
+    # -- culling --------------------------------------------------------------------------
+
+    def cull(self, planes: npt.ArrayLike, scales: npt.ArrayLike | None = None, *,
+             mask: int = 63, inside_margin: float = DEFAULT_MARGIN,
+             outside_margin: float = DEFAULT_MARGIN, return_mask: bool = False):
+        """Items not outside the planes, with their state.
+
+        Args:
+            planes: (6, 4) plane rows (>= 0 inside), e.g. `clraster.cull.frustum_planes`.
+            scales: (6, 4) margin scales (default ``abs(planes)``).
+            mask: planes to test (bit k = plane k), 0..63.
+            inside_margin, outside_margin: relative margins (see the module docstring).
+            return_mask: also return each item's remaining plane mask (bits of the planes
+                it may still cross; 0 for INSIDE items).
+
+        Returns:
+            (items int32 (D,), state uint8 (D,)) sorted by item index — OUTSIDE items are
+            left out, the others are `Visibility.INSIDE` or `INTERSECTING` — and the masks
+            uint8 (D,) if `return_mask`. Equal to classifying every item box on its own
+            with :func:`clraster.cull.classify_aabbs` (same margins), minus the OUTSIDE ones.
+        """
+        p, s = _check_planes(planes, scales, batch=False)
+        m = _check_mask(mask, 1)
+        _, items, state, masks = self.cull_batch(p[None], s[None], m, inside_margin=inside_margin,
+                                                 outside_margin=outside_margin)
+        return (items, state, masks) if return_mask else (items, state)
+
+    def cull_batch(self, planes: np.ndarray, scales: np.ndarray | None = None,
+                   masks: npt.ArrayLike | None = None, *,
+                   inside_margin: float = DEFAULT_MARGIN,
+                   outside_margin: float = DEFAULT_MARGIN):
+        """Cull the tree against Q plane sets at once (e.g. one per instance of a mesh).
+
+        Args:
+            planes, scales: (Q, 6, 4) plane rows and margin scales (scales default
+                ``abs(planes)``).
+            masks: (Q,) uint8 starting plane masks (default all 63).
+
+        Returns:
+            (query int32, item int32, state uint8, mask uint8), all (D,), sorted by
+            (query, item); OUTSIDE pairs left out.
+        """
+        p, s = _check_planes(planes, scales, batch=True)
+        n_q = p.shape[0]
+        qmask = _check_mask(masks, n_q)
+        empty = (np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.uint8),
+                 np.zeros(0, np.uint8))
+        if self.n_items == 0 or n_q == 0:
+            return empty
+        single = n_q == 1
+        out_q, out_item, out_state, out_mask = [], [], [], []
+        fq = np.arange(n_q)
+        fn = np.zeros(n_q, np.int64)
+        fm = qmask
+        while fq.size:
+            data = np.take(self._nodes9, fn, axis=0)
+            lo, hi, mag = data[:, 0:3], data[:, 3:6], data[:, 6:9]
+            if single:
+                ext = _box_extremes(p[0], s[0], lo, hi, mag)
+            else:
+                ext = _box_extremes(p[fq], s[fq], lo, hi, mag)
+            state, nmask = _decide(*ext, fm, inside_margin, outside_margin)
+            inside = state == INSIDE
+            if inside.any():  # every item of the node is inside: no further tests
+                pos = _ranges(self.first[fn[inside]].astype(np.int64),
+                              self.count[fn[inside]].astype(np.int64))
+                n_each = self.count[fn[inside]]
+                out_q.append(np.repeat(fq[inside], n_each))
+                out_item.append(np.take(self.order, pos))
+                out_state.append(np.zeros(pos.size, np.uint8))
+                out_mask.append(np.zeros(pos.size, np.uint8))
+            inter = state == INTERSECTING
+            child = self.left[fn]
+            leaf = inter & (child < 0)
+            if leaf.any():  # test the leaf's items one by one, with the reduced mask
+                n_each = self.count[fn[leaf]].astype(np.int64)
+                pos = _ranges(self.first[fn[leaf]].astype(np.int64), n_each)
+                items = np.take(self.order, pos)
+                iq = np.repeat(fq[leaf], n_each)
+                im = np.repeat(nmask[leaf], n_each)
+                data = np.take(self._items9, pos, axis=0)
+                lo_i, hi_i, mag_i = data[:, 0:3], data[:, 3:6], data[:, 6:9]
+                if single:
+                    ext = _box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
+                else:
+                    ext = _box_extremes(p[iq], s[iq], lo_i, hi_i, mag_i)
+                ist, imask = _decide(*ext, im, inside_margin, outside_margin)
+                keep = ist != OUTSIDE
+                out_q.append(iq[keep])
+                out_item.append(items[keep])
+                out_state.append(ist[keep])
+                out_mask.append(imask[keep])
+            go = inter & (child >= 0)
+            fq = np.repeat(fq[go], 2)
+            fn = np.stack([child[go], child[go] + 1], axis=1).ravel().astype(np.int64)
+            fm = np.repeat(nmask[go], 2)
+        if not out_q:
+            return empty
+        q = np.concatenate(out_q).astype(np.int64)
+        item = np.concatenate(out_item).astype(np.int64)
+        st = np.concatenate(out_state)
+        mk = np.concatenate(out_mask)
+        order = _sort_keys(q * self.n_items + item, n_q * self.n_items)
+        return (q[order].astype(np.int32), item[order].astype(np.int32), st[order],
+                mk[order])
+
+
+def _sort_keys(keys: np.ndarray, key_range: int) -> np.ndarray:
+    """Permutation sorting distinct non-negative int64 `keys` < key_range.
+
+    Scatters into a dense bitmap when the range is small relative to the key count
+    (O(range), no comparison sort), else arg-sorts.
+    """
+    if keys.size and key_range <= 16 * keys.size + 4096:
+        slot = np.full(key_range, -1, np.int64)
+        slot[keys] = np.arange(keys.size)
+        out = slot[slot >= 0]
+        return out
+    return np.argsort(keys, kind="stable")
+
+
+def _freeze(b: BVH) -> BVH:
+    for value in vars(b).values():
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+    return b
