@@ -59,18 +59,91 @@ _MASK_PLANES = (np.arange(64, dtype=np.uint8)[:, None] & _BITS) != 0
 
 
 # -- plane classification primitives ----------------------------------------------------
+#
+# Plane-major layout: the per-plane values of F volumes are (6, F) arrays, so the reductions
+# over the planes run along the first axis (row operations, fast in NumPy; a reduction
+# along a length-6 last axis is not).
+
+#: Plane bit weights, (6, 1) for broadcasting against (6, F).
+_WEIGHTS = (1 << np.arange(6)).astype(np.uint8)
+
 
 def _decide(dmin: np.ndarray, dmax: np.ndarray, mterm: np.ndarray, mask: np.ndarray,
             inside_margin: float, outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """States and reduced masks from per-plane extremes (..., 6) of the plane values and
-    plane masks broadcastable to their leading shape."""
-    active = np.take(_MASK_PLANES, mask, axis=0)
-    outside = ((dmax < -outside_margin * mterm) & active).any(axis=-1)
-    inside = (dmin >= inside_margin * mterm) & active
-    new_mask = mask & ~np.packbits(inside, axis=-1, bitorder="little")[..., 0]
+    """States and reduced masks from the plane values' extremes over each volume.
+
+    dmin, dmax, mterm: (6, *S) plane-major (min and max of each plane over each volume, and
+    its margin term); mask: uint8 plane masks broadcastable to S. Returns (state, mask),
+    uint8, of shape S (broadcast with the mask's).
+    """
+    active = np.take(_MASK_PLANES.T, mask, axis=1)  # (6, *mask.shape)
+    out = dmax < mterm * -outside_margin
+    out &= active
+    outside = out.any(axis=0)
+    inside = dmin >= mterm * inside_margin
+    inside &= active
+    weights = _WEIGHTS.reshape((6,) + (1,) * (inside.ndim - 1))
+    inside_bits = (inside.view(np.uint8) * weights).sum(axis=0, dtype=np.uint8)
+    new_mask = mask & ~inside_bits
     state = (new_mask != 0).view(np.uint8)  # INTERSECTING (1) or INSIDE (0)
     state[outside] = OUTSIDE
     return state, new_mask
+
+
+def _plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
+    """(66, Q) per-query rows for `_box_extremes_table`: n⁺ (3×6, axis-major), n⁻ (3×6),
+    d (6), scale xyz (3×6), scale w (6)."""
+    n = np.moveaxis(planes[..., :3], -1, 0)  # (3, Q, 6) → rows j, columns (q, k)
+    q = planes.shape[0]
+
+    def rows(a: np.ndarray) -> np.ndarray:  # (..., Q, 6) → (... · 6, Q)
+        return np.moveaxis(a, -2, -1).reshape(-1, q)
+
+    return np.concatenate([rows(np.maximum(n, 0.0)), rows(np.minimum(n, 0.0)),
+                           rows(planes[..., 3]), rows(np.moveaxis(scales[..., :3], -1, 0)),
+                           rows(scales[..., 3])], axis=0)
+
+
+def _box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  mag: np.ndarray):
+    """Min and max of each plane over each box, and the margin term: (6, F) each.
+
+    planes, scales: (6, 4) shared by all boxes. lo, hi, mag: (3, F) coordinate-major.
+    """
+    n = planes[:, :3]
+    npos = np.maximum(n, 0.0)
+    nneg = np.minimum(n, 0.0)
+    d = planes[:, 3:4]
+    dmin = npos @ lo + nneg @ hi + d
+    dmax = npos @ hi + nneg @ lo + d
+    mterm = scales[:, :3] @ mag + scales[:, 3:4]
+    return dmin, dmax, mterm
+
+
+def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray):
+    """`_box_extremes` with one plane set per box: table (66, F) from `_plane_table`
+    (gathered per box), lo, hi, mag (3, F)."""
+    f = lo.shape[1]
+    npos = table[0:18].reshape(3, 6, f)
+    nneg = table[18:36].reshape(3, 6, f)
+    s3 = table[42:60].reshape(3, 6, f)
+    lo3, hi3, mag3 = lo[:, None, :], hi[:, None, :], mag[:, None, :]
+    dmin = table[36:42] + (npos * lo3).sum(axis=0) + (nneg * hi3).sum(axis=0)
+    dmax = table[36:42] + (npos * hi3).sum(axis=0) + (nneg * lo3).sum(axis=0)
+    mterm = table[60:66] + (s3 * mag3).sum(axis=0)
+    return dmin, dmax, mterm
+
+
+def _sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
+                     radii: np.ndarray):
+    """Like `_box_extremes` for spheres (centre ± r·|n|): centers (K, 3), radii (K,);
+    (6, K) results."""
+    n = planes[:, :3]
+    dist = n @ centers.T + planes[:, 3:4]
+    reach = np.linalg.norm(n, axis=1)[:, None] * radii[None, :]
+    mag = (np.abs(centers) + radii[:, None]).T
+    mterm = scales[:, :3] @ mag + scales[:, 3:4]
+    return dist - reach, dist + reach, mterm
 
 
 def dense_box_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
@@ -79,61 +152,22 @@ def dense_box_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
     """Classify every box against every plane set: states and masks, uint8 (Q, K).
 
     planes, scales: (Q, 6, 4); masks: (Q,) uint8; lo, hi, mag: (K, 3). Three matrix
-    products of (K, 7) by (7, 6Q) (plane value at the n-vertex, at the p-vertex, margin
+    products of (6Q, 7) by (7, K) (plane value at the n-vertex, at the p-vertex, margin
     term), so it pays for small K and many plane sets, where a per-(query, node) traversal
     would gather planes for every pair.
     """
     n_q, n_k = planes.shape[0], lo.shape[0]
     n = planes[..., :3]
     w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0), planes[..., 3:]], axis=-1)
-    w = w.reshape(n_q * 6, 7).T  # (7, 6Q)
-    one = np.ones((n_k, 1))
-    dmin = np.hstack([lo, hi, one]) @ w
-    dmax = np.hstack([hi, lo, one]) @ w
-    mterm = np.hstack([mag, one]) @ scales.reshape(n_q * 6, 4).T
-    shape = (n_k, n_q, 6)
-    state, new_mask = _decide(dmin.reshape(shape), dmax.reshape(shape), mterm.reshape(shape),
-                              masks[None, :], inside_margin, outside_margin)
-    return state.T, new_mask.T
-
-
-def _box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                  mag: np.ndarray):
-    """Min and max of each plane over each box, and the margin term.
-
-    planes, scales: (6, 4) shared by all boxes, or (F, 6, 4) one set per box.
-    lo, hi, mag: (F, 3).
-    """
-    n = planes[..., :3]
-    if planes.ndim == 2:
-        npos = np.maximum(n, 0.0).T  # (3, 6)
-        nneg = np.minimum(n, 0.0).T
-        dmin = lo @ npos + hi @ nneg + planes[:, 3]
-        dmax = hi @ npos + lo @ nneg + planes[:, 3]
-        mterm = mag @ scales[:, :3].T + scales[:, 3]
-        return dmin, dmax, mterm
-    npos = np.maximum(n, 0.0)
-    nneg = np.minimum(n, 0.0)
-    dmin = planes[..., 3].copy()
-    dmax = planes[..., 3].copy()
-    mterm = scales[..., 3].copy()
-    for j in range(3):
-        lj, hj = lo[:, j, None], hi[:, j, None]
-        dmin += npos[..., j] * lj + nneg[..., j] * hj
-        dmax += npos[..., j] * hj + nneg[..., j] * lj
-        mterm += scales[..., j] * mag[:, j, None]
-    return dmin, dmax, mterm
-
-
-def _sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
-                     radii: np.ndarray):
-    """Like `_box_extremes` for spheres (centre ± r·|n|); (6, 4) planes only."""
-    n = planes[:, :3]
-    dist = centers @ n.T + planes[:, 3]
-    reach = radii[:, None] * np.linalg.norm(n, axis=1)[None, :]
-    mag = np.abs(centers) + radii[:, None]
-    mterm = mag @ scales[:, :3].T + scales[:, 3]
-    return dist - reach, dist + reach, mterm
+    w = np.ascontiguousarray(np.swapaxes(w, 0, 1)).reshape(6 * n_q, 7)  # rows (k, q)
+    sc = np.ascontiguousarray(np.swapaxes(scales, 0, 1)).reshape(6 * n_q, 4)
+    one = np.ones((1, n_k))
+    lo_t, hi_t = lo.T, hi.T
+    shape = (6, n_q, n_k)
+    dmin = (w @ np.vstack([lo_t, hi_t, one])).reshape(shape)
+    dmax = (w @ np.vstack([hi_t, lo_t, one])).reshape(shape)
+    mterm = (sc @ np.vstack([mag.T, one])).reshape(shape)
+    return _decide(dmin, dmax, mterm, masks[:, None], inside_margin, outside_margin)
 
 
 def _check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None, batch: bool):
@@ -225,11 +259,12 @@ class BVH:
     item_mag: np.ndarray
 
     def __post_init__(self) -> None:
-        # Gather-friendly copies: [min | max | mag] rows, nodes by index, items in leaf order
-        # (a leaf's items are then one contiguous run).
-        nodes = np.ascontiguousarray(np.hstack([self.node_min, self.node_max, self.node_mag]))
+        # Gather-friendly copies, coordinate-major (9, n): rows min xyz, max xyz, mag xyz;
+        # nodes by index, items in leaf order (a leaf's items are one contiguous run).
+        nodes = np.ascontiguousarray(np.hstack([self.node_min, self.node_max,
+                                                self.node_mag]).T)
         items = np.ascontiguousarray(np.hstack([self.item_min, self.item_max,
-                                                self.item_mag])[self.order])
+                                                self.item_mag])[self.order].T)
         nodes.flags.writeable = False
         items.flags.writeable = False
         object.__setattr__(self, "_nodes9", nodes)
@@ -399,17 +434,18 @@ class BVH:
         if self.n_items == 0 or n_q == 0:
             return empty
         single = n_q == 1
+        table = None if single else _plane_table(p, s)
         out_q, out_item, out_state, out_mask = [], [], [], []
         fq = np.arange(n_q)
         fn = np.zeros(n_q, np.int64)
         fm = qmask
         while fq.size:
-            data = np.take(self._nodes9, fn, axis=0)
-            lo, hi, mag = data[:, 0:3], data[:, 3:6], data[:, 6:9]
+            data = np.take(self._nodes9, fn, axis=1)
+            lo, hi, mag = data[0:3], data[3:6], data[6:9]
             if single:
                 ext = _box_extremes(p[0], s[0], lo, hi, mag)
             else:
-                ext = _box_extremes(p[fq], s[fq], lo, hi, mag)
+                ext = _box_extremes_table(np.take(table, fq, axis=1), lo, hi, mag)
             state, nmask = _decide(*ext, fm, inside_margin, outside_margin)
             inside = state == INSIDE
             if inside.any():  # every item of the node is inside: no further tests
@@ -429,12 +465,12 @@ class BVH:
                 items = np.take(self.order, pos)
                 iq = np.repeat(fq[leaf], n_each)
                 im = np.repeat(nmask[leaf], n_each)
-                data = np.take(self._items9, pos, axis=0)
-                lo_i, hi_i, mag_i = data[:, 0:3], data[:, 3:6], data[:, 6:9]
+                data = np.take(self._items9, pos, axis=1)
+                lo_i, hi_i, mag_i = data[0:3], data[3:6], data[6:9]
                 if single:
                     ext = _box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
                 else:
-                    ext = _box_extremes(p[iq], s[iq], lo_i, hi_i, mag_i)
+                    ext = _box_extremes_table(np.take(table, iq, axis=1), lo_i, hi_i, mag_i)
                 ist, imask = _decide(*ext, im, inside_margin, outside_margin)
                 keep = ist != OUTSIDE
                 out_q.append(iq[keep])

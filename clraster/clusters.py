@@ -309,6 +309,11 @@ def clusterize(mesh: Mesh, max_triangles: int = 128, max_vertices: int = 128) ->
     ends = np.minimum(np.append(starts[1:], n_faces), n_faces)
     ends[(starts < good.size) & (ends > good.size)] = good.size
     n_tri = (ends - starts).astype(np.int64)
+    # Within a chunk keep the caller's face order (Morton order only picks the members): a
+    # mesh of <= max_triangles faces is then drawn exactly in index order, and bigger ones
+    # in index order within each cluster. (Ties never depend on it — the depth test breaks
+    # them by triangle id — but per-fragment statistics such as depth-test passes do.)
+    face_seq = face_seq[np.lexsort((face_seq, np.repeat(np.arange(starts.size), n_tri)))]
 
     # Padded (chunk, 3·max_triangles) matrix of vertex ids, processed in batches of chunks.
     sentinel = np.int64(verts.shape[0])

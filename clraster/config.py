@@ -56,6 +56,20 @@ PF_INDEX_SHIFT = 2  #: clipped pieces: flags >> 2 is their index in the clipped-
 
 CULL_MODES = {"none": 0, "back": 1, "front": 2}
 
+#: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices; the vertex
+#: and setup kernels run one work-item per (draw, local index) (kernels/common.h).
+CLUSTER_LOG2 = 7
+CLUSTER_MAX = 1 << CLUSTER_LOG2
+DRAW_INSIDE = 1  #: draw flag: cluster inside the frustum by a margin, no clip tests needed
+
+#: One drawn (instance, cluster) pair; mirrors `Draw` in kernels/common.h. cluster: global
+#: cluster index in the geometry pool; vert_base / tri_base: first vertex / triangle slot of
+#: the draw in this frame's streams; face_base: triangle id of the instance's face 0.
+DRAW_DTYPE = np.dtype([("cluster", np.int32), ("instance", np.int32), ("vert_base", np.int32),
+                       ("tri_base", np.int32), ("face_base", np.int32), ("flags", np.int32),
+                       ("pad", np.int32, 2)])
+assert DRAW_DTYPE.itemsize == 32
+
 #: One triangle setup record, 64 bytes (one cache line). Mirrors `Piece` in kernels/common.h.
 #: x, y: 24.8 fixed-point window coordinates (y down, row 0 at top), oriented so that the
 #: window-space doubled area is > 0. bb_min/bb_max: inclusive pixel range of the pixel centres

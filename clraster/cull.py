@@ -47,6 +47,7 @@ from .bvh import (
     _check_mask,
     _check_planes,
     _decide,
+    _ranges,
     _sort_keys,
     _sphere_extremes,
     box_magnitudes,
@@ -250,7 +251,8 @@ def classify_aabbs(planes: npt.ArrayLike, mins: npt.ArrayLike, maxs: npt.ArrayLi
     mag = box_magnitudes(lo, hi) if mags is None else np.asarray(mags, np.float64)
     m = _check_mask(mask, lo.shape[0])
     with np.errstate(invalid="ignore", over="ignore"):
-        return _decide(*_box_extremes(p, s, lo, hi, mag), m, inside_margin, outside_margin)
+        return _decide(*_box_extremes(p, s, lo.T, hi.T, mag.T), m, inside_margin,
+                       outside_margin)
 
 
 # -- draw lists -------------------------------------------------------------------------
@@ -310,7 +312,7 @@ class _MeshCull:
         self.bvh_ids = ids.astype(np.int32)
         self.unbounded = np.flatnonzero(~bounded).astype(np.int32)
         self.bvh = BVH.build(cm.aabb_min[ids].astype(np.float64),
-                             cm.aabb_max[ids].astype(np.float64))
+                             cm.aabb_max[ids].astype(np.float64), leaf_size=CLUSTER_LEAF_SIZE)
         self.tri_count = np.diff(cm.tri_offset).astype(np.int64)
         self.cones = cone_table(cm.cone_apex.astype(np.float64),
                                 cm.cone_axis.astype(np.float64),
@@ -350,9 +352,52 @@ class _SceneCull:
         obj_mag = np.append(box_magnitudes(lo_o[ids], hi_o[ids]), np.ones((ids.size, 1)), 1)
         mags = np.einsum("ijk,ik->ij", self.abs_m[ids], obj_mag)[:, :3]
         self.inst_bvh = BVH.build(lo_w[ids], hi_w[ids], mags=mags)
-        # Instances grouped by mesh object, each group in scene order.
+        # Unique meshes: cluster tables concatenated (global cluster g = mesh_base + c).
+        uniq: dict[int, int] = {}
+        for mc in meshes:
+            uniq.setdefault(id(mc), len(uniq))
+        umesh = list({id(mc): mc for mc in meshes}.values())
+        self.inst_umesh = np.array([uniq[id(mc)] for mc in meshes], np.int64)
+        sizes = np.array([mc.cm.n_clusters for mc in umesh], np.int64)
+        self.mesh_base = np.cumsum(sizes) - sizes
+        self.g_tri = np.concatenate([mc.tri_count for mc in umesh]) if umesh \
+            else np.zeros(0, np.int64)
+        self.g_cones = np.concatenate([mc.cones for mc in umesh], axis=1) if umesh \
+            else np.zeros((9, 0))
+        self.g_can_cone = self.g_cones[7] < 1.0
+        # Flat path: bounded instances of small meshes, every (instance, cluster) pair with
+        # its cluster box moved to world space (centre M·c, half-extent |M|·e: the exact box
+        # around the transformed box), tested against the world planes all at once.
+        flat = self.bounded & (self.n_clusters <= FLAT_CLUSTERS)
+        if int(self.n_clusters[flat].sum()) > FLAT_MAX_PAIRS:
+            flat[:] = False
+        self.flat_ids = np.flatnonzero(flat)
+        fc = self.n_clusters[self.flat_ids]
+        self.flat_start = np.cumsum(fc) - fc
+        self.flat_count = fc
+        pi = np.repeat(self.flat_ids, fc)
+        pos = _ranges(self.flat_start, fc)
+        pc = pos - np.repeat(self.flat_start, fc)
+        self.flat_inst = pi
+        self.flat_cl = pc
+        self.flat_g = self.mesh_base[self.inst_umesh[pi]] + pc
+        lo_c = np.concatenate([mc.cm.aabb_min for mc in umesh]).astype(np.float64) if umesh \
+            else np.zeros((0, 3))
+        hi_c = np.concatenate([mc.cm.aabb_max for mc in umesh]).astype(np.float64) if umesh \
+            else np.zeros((0, 3))
+        centre = (lo_c[self.flat_g] + hi_c[self.flat_g]) * 0.5
+        half = (hi_c[self.flat_g] - lo_c[self.flat_g]) * 0.5
+        mt = self.m[pi]
+        cw = np.einsum("pij,pj->pi", mt[:, :3, :3], centre) + mt[:, :3, 3]
+        hw = np.einsum("pij,pj->pi", self.abs_m[pi][:, :3, :3], half)
+        omag = box_magnitudes(lo_c[self.flat_g], hi_c[self.flat_g])
+        magw = np.einsum("pij,pj->pi", self.abs_m[pi][:, :3, :3], omag) \
+            + self.abs_m[pi][:, :3, 3]
+        self.flat_boxes = np.ascontiguousarray(np.vstack([(cw - hw).T, (cw + hw).T, magw.T]))
+        # Other instances (big meshes, NaN/Inf vertices) are grouped by mesh, in scene order,
+        # and go through their mesh's object-space cluster BVH.
         groups: dict[int, list[int]] = {}
-        for i in np.flatnonzero(self.nonempty).tolist():
+        for i in np.flatnonzero(self.nonempty & ~flat).tolist():
             groups.setdefault(id(meshes[i]), []).append(i)
         self.groups = [(meshes[v[0]], np.array(v, np.int64)) for v in groups.values()]
 
@@ -367,6 +412,13 @@ def _prepare(scene: Scene, max_triangles: int, max_vertices: int) -> _SceneCull:
                       lambda: _SceneCull(scene, [mesh_data(i.mesh) for i in scene.instances]))
 
 
+#: Clusters per leaf of a mesh's cluster BVH.
+CLUSTER_LEAF_SIZE = 4
+#: Instances of meshes with at most this many clusters take the flat path: their
+#: (instance, cluster) boxes are precomputed in world space and tested all at once.
+FLAT_CLUSTERS = 64
+#: ... unless the scene has more such pairs than this (memory: 9 float64 + 3 int64 each).
+FLAT_MAX_PAIRS = 1 << 22
 #: Meshes with at most this many (bounded) clusters are tested densely, every cluster
 #: against every intersecting instance's planes (three matrix products), not through
 #: their BVH: for small meshes with many instances that is several times faster.
@@ -395,6 +447,36 @@ def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np
         out_i.append(item)
         out_s.append(st[q, item])
     return np.concatenate(out_q), np.concatenate(out_i), np.concatenate(out_s)
+
+
+def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarray,
+                  planes: np.ndarray | None, scales: np.ndarray | None,
+                  inside_margin: float, outside_margin: float):
+    """Frustum test of the flat-path pairs: (inst, cluster, inside, triangles, global
+    cluster) of those not culled, in (instance, cluster) order."""
+    ids = prep.flat_ids
+    st = inst_state[ids]
+    keep_inst = st != OUTSIDE
+    if planes is None:  # frustum off: every pair, none marked inside
+        pos = _ranges(prep.flat_start[keep_inst], prep.flat_count[keep_inst])
+        ins = np.zeros(pos.size, bool)
+    else:
+        test = st == INTERSECTING
+        pos_in = _ranges(prep.flat_start[st == INSIDE], prep.flat_count[st == INSIDE])
+        pos_t = _ranges(prep.flat_start[test], prep.flat_count[test])
+        if pos_t.size:
+            box = np.take(prep.flat_boxes, pos_t, axis=1)
+            mask = np.repeat(inst_mask[ids[test]], prep.flat_count[test])
+            cst, _ = _decide(*_box_extremes(planes, scales, box[0:3], box[3:6], box[6:9]),
+                             mask, inside_margin, outside_margin)
+            alive = cst != OUTSIDE
+            pos_t, cst = pos_t[alive], cst[alive]
+        else:
+            cst = np.zeros(0, np.uint8)
+        pos = np.concatenate([pos_in, pos_t])
+        ins = np.concatenate([np.ones(pos_in.size, bool), cst == INSIDE])
+    g = prep.flat_g[pos]
+    return prep.flat_inst[pos], prep.flat_cl[pos], ins, prep.g_tri[g], g
 
 
 def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndarray,
@@ -469,8 +551,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     inst_state = np.full(prep.n, OUTSIDE, np.uint8)
     inst_mask = np.zeros(prep.n, np.uint8)
     raw, rmag = _raw_planes(vp)
+    planes, scales = _normalize(raw, rmag)
     if frustum:
-        planes, scales = _normalize(raw, rmag)
         items, st, mk = prep.inst_bvh.cull(planes, scales, inside_margin=inside_margin,
                                            outside_margin=outside_margin, return_mask=True)
         ids = prep.inst_ids[items]
@@ -485,6 +567,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
 
     # Cone set-up: eye in each instance's object space, side and margin per instance.
     use_cones = cones and cull != "none"
+    eye_obj = side = sin_m = np.zeros(0)
+    ortho = False
     if use_cones:
         try:
             eye, flips = _eye_and_flip(vp)
@@ -512,6 +596,34 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     n_cone_tri = 0
     t_clusters = 0.0
     t_cones = 0.0
+    t0 = time.perf_counter()
+    if prep.flat_ids.size:
+        inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, planes if frustum
+                                              else None, scales if frustum else None,
+                                              inside_margin, outside_margin)
+        clusters_after_frustum += cl.size
+        tri_frustum += int(tri.sum())
+        t1 = time.perf_counter()
+        t_clusters += t1 - t0
+        if use_cones and cl.size:
+            sel = np.flatnonzero(prep.g_can_cone[g])
+            if sel.size:
+                ip = inst[sel]
+                table = np.take(prep.g_cones, g[sel], axis=1)
+                back_sel = cone_kernel(table, np.take(eye_obj, ip, axis=0).T, side[ip],
+                                       sin_m[ip], ortho)
+                if back_sel.any():
+                    back = np.zeros(cl.size, bool)
+                    back[sel[back_sel]] = True
+                    n_cone_cl += int(back_sel.sum())
+                    n_cone_tri += int(tri[back].sum())
+                    keep = ~back
+                    inst, cl, ins = inst[keep], cl[keep], ins[keep]
+            t_cones += time.perf_counter() - t1
+        out_inst.append(inst)
+        out_cl.append(cl)
+        out_in.append(ins)
+
     for mc, members in prep.groups:
         t0 = time.perf_counter()
         st = inst_state[members]

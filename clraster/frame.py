@@ -21,17 +21,22 @@ from .config import (
 class FrameStats:
     """Counts per pipeline stage for one frame, and stage timings when measured.
 
-    Triangle counts partition ``triangles_in``: every input triangle ends in exactly one of
-    invalid, trivially_rejected, backface_culled, degenerate, no_sample, clipped or
-    unclipped (= sent to binning unclipped). Clipped triangles make ``clip_pieces`` pieces
-    (0..14 each; a piece whose snapped area is zero or that faces away is dropped).
+    Object culling (instances, clusters, triangles): ``*_total`` = in the scene,
+    ``*_frustum_culled`` = rejected by the view-frustum test of their bounding volumes,
+    ``*_cone_culled`` = clusters whose normal cone faces away. ``triangles_in`` is what was
+    sent to triangle setup; it is partitioned into invalid, trivially_rejected,
+    backface_culled, degenerate, no_sample, clipped and the unclipped rest that is binned.
+    Clipped triangles make ``clip_pieces`` pieces (0..14 each).
 
     Attributes:
-        triangles_in: faces submitted.
+        instances_total, instances_frustum_culled, instances_empty (no faces)
+        clusters_total, clusters_frustum_culled, clusters_cone_culled, clusters_drawn
+        triangles_total, triangles_frustum_culled, triangles_cone_culled
+        triangles_in: sent to setup.
         invalid: dropped because a vertex (or its clip position) is NaN/Inf.
         trivially_rejected: all three vertices outside one frustum plane (outcode AND ≠ 0).
-        backface_culled: facing away under the cull mode (unclipped triangles).
-        degenerate: zero area after the 1/256-pixel snap.
+        backface_culled: facing away under the cull mode.
+        degenerate: zero area (edge-on, or after the 1/256-pixel snap).
         no_sample: bounding box contains no pixel centre, so it covers nothing.
         clipped: went through the clip-space clipper (near/far/guard band).
         clip_pieces: triangles the clipper produced that survived.
@@ -39,9 +44,19 @@ class FrameStats:
         binned_entries: (piece, tile) pairs in the tile lists.
         fragments_tested: covered pixel centres that reached the depth test.
         fragments_passed: depth-test passes (each one a depth/id write).
-        timings_ms: stage name → milliseconds (OpenCL profiling events; empty for the twin).
+        timings_ms: stage → milliseconds (device stages from OpenCL profiling events).
     """
 
+    instances_total: int = 0
+    instances_frustum_culled: int = 0
+    instances_empty: int = 0
+    clusters_total: int = 0
+    clusters_frustum_culled: int = 0
+    clusters_cone_culled: int = 0
+    clusters_drawn: int = 0
+    triangles_total: int = 0
+    triangles_frustum_culled: int = 0
+    triangles_cone_culled: int = 0
     triangles_in: int = 0
     invalid: int = 0
     trivially_rejected: int = 0
@@ -57,15 +72,20 @@ class FrameStats:
     timings_ms: dict[str, float] = field(default_factory=dict)
 
     @classmethod
-    def from_status(cls, status: np.ndarray, **kw: int) -> FrameStats:
-        """Triangle counts from the per-triangle setup status codes (uint8 (M,))."""
+    def from_counts(cls, counts: dict[str, int], status: np.ndarray, **kw: int) -> FrameStats:
+        """Stats from the culling counts (cull.DrawList.counts) and the per-triangle setup
+        status codes (uint8 (M,))."""
         c = np.bincount(status, minlength=8)
-        s = cls(triangles_in=int(status.size), invalid=int(c[ST_INVALID]),
+        obj = {k: int(counts.get(k, 0)) for k in (
+            "instances_total", "instances_frustum_culled", "instances_empty",
+            "clusters_total", "clusters_frustum_culled", "clusters_cone_culled",
+            "clusters_drawn", "triangles_total", "triangles_frustum_culled",
+            "triangles_cone_culled")}
+        s = cls(**obj, triangles_in=int(status.size), invalid=int(c[ST_INVALID]),
                 trivially_rejected=int(c[ST_TRIVIAL_REJECT]),
                 backface_culled=int(c[ST_BACKFACE]), degenerate=int(c[ST_DEGENERATE]),
                 no_sample=int(c[ST_NO_SAMPLE]), clipped=int(c[ST_CLIPPED]), **kw)
-        if "rasterized" not in kw:
-            s.rasterized = int(c[ST_RASTER]) + s.clip_pieces
+        s.rasterized = int(c[ST_RASTER]) + s.clip_pieces
         return s
 
     def counts(self) -> dict[str, int]:
@@ -75,10 +95,23 @@ class FrameStats:
         return d
 
     def __str__(self) -> str:
-        rows = [(k.replace("_", " "), f"{v:,}") for k, v in self.counts().items()]
-        rows += [(f"time {k} (ms)", f"{v:.3f}") for k, v in self.timings_ms.items()]
-        w = max(len(r[0]) for r in rows)
-        return "\n".join(f"{a:<{w}}  {b:>14}" for a, b in rows)
+        g = self.counts()
+        rows = [("", "instances", "clusters", "triangles"),
+                ("total", g["instances_total"], g["clusters_total"], g["triangles_total"]),
+                ("frustum culled", g["instances_frustum_culled"], g["clusters_frustum_culled"],
+                 g["triangles_frustum_culled"]),
+                ("cone culled", "", g["clusters_cone_culled"], g["triangles_cone_culled"]),
+                ("sent to setup", "", g["clusters_drawn"], g["triangles_in"])]
+        for k in ("invalid", "trivially_rejected", "backface_culled", "degenerate",
+                  "no_sample", "clipped", "clip_pieces", "rasterized", "binned_entries",
+                  "fragments_tested", "fragments_passed"):
+            rows.append((k.replace("_", " "), "", "", g[k]))
+        rows += [(f"time {k} (ms)", "", "", f"{v:.2f}") for k, v in self.timings_ms.items()]
+
+        def fmt(v):
+            return f"{v:,}" if isinstance(v, int) else str(v)
+
+        return "\n".join(f"{a:<22}{fmt(b):>12}{fmt(c):>12}{fmt(d):>14}" for a, b, c, d in rows)
 
 
 @dataclass

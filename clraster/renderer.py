@@ -1,16 +1,19 @@
-"""The OpenCL renderer: runs vertex → setup → bin → raster for one frame."""
+"""The OpenCL renderer: cull → vertex → setup → bin → raster for one frame."""
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 import pyopencl as cl
 
 from .config import RasterConfig, guard_band_factors
 from .device import default_context
+from .drawlist import PlanCache, plan_frame
 from .frame import Frame, FrameStats
-from .inputs import check_cull, check_mesh, check_size, mvp_matrix
-from .stages._buffers import GrowBuffer
+from .inputs import check_cull, check_size
 from .stages.bin import BinStage
+from .stages.geometry import GeometryStage
 from .stages.raster import RasterStage
 from .stages.setup import SetupStage
 from .stages.vertex import VertexStage
@@ -46,45 +49,47 @@ class Renderer:
         self.setup = SetupStage(self.context, self.config)
         self.binning = BinStage(self.context, self.config)
         self.raster = RasterStage(self.context, self.config)
-        self._positions = GrowBuffer(self.context)
-        self._faces = GrowBuffer(self.context)
-        self._mesh = None
+        self.geometry = GeometryStage(self.context)
+        self._plans = PlanCache()
 
-    def _upload(self, mesh) -> None:
-        if self._mesh is mesh:
-            return
-        v, f = check_mesh(mesh)
-        v, f = np.ascontiguousarray(v), np.ascontiguousarray(f)
-        cl.enqueue_copy(self.queue, self._positions.ensure(v.nbytes), v)
-        cl.enqueue_copy(self.queue, self._faces.ensure(f.nbytes), f)
-        self._mesh = mesh
-
-    def render(self, mesh, camera, *, cull: str = "back") -> Frame:
-        """Render ``mesh`` (a `clraster.Mesh`) seen by ``camera``.
+    def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
+               cones: bool = True) -> Frame:
+        """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) seen by ``camera``.
 
         Args:
             cull: "back" (drop faces that are clockwise in NDC, i.e. counter-clockwise is
                 front, the OpenGL default), "front", or "none".
+            frustum: cull instances and clusters against the view frustum through their
+                BVHs first. Conservative: it never changes the image, only the work.
+            cones: cull clusters whose normal cone faces away (with cull "back"/"front").
+                Conservative too.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
-            conventions. Triangles with a NaN/Inf vertex are dropped and counted in
-            ``stats.invalid``.
+            conventions. For a Scene, triangle ids are ``scene.face_base[instance] + face``
+            (`Scene.split_ids` splits them). Triangles with a NaN/Inf vertex are dropped
+            and counted in ``stats.invalid``.
         """
         check_cull(cull)
         w, h = self.width, self.height
-        mvp = mvp_matrix(camera, w, h)
-        verts, faces = check_mesh(mesh)
-        n, m = verts.shape[0], faces.shape[0]
+        t0 = time.perf_counter()
+        plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
+                          cache=self._plans)
+        fd = plan.frame
+        t_cull = (time.perf_counter() - t0) * 1e3
+        n_draws, m = fd.draws.shape[0], fd.n_tris
+        counts = plan.draw_list.counts
         if m == 0:
-            return Frame.empty(w, h)
+            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
         kx, ky = guard_band_factors(w, h)
         q = self.queue
-        self._upload(mesh)
-        ev_v = self.vertex.run(q, self._positions.buf, n, mvp, kx, ky, w, h)
+        self.geometry.upload_pool(q, plan.pool)
+        self.geometry.upload_frame(q, fd)
+        geo = self.geometry.buffers
+        ev_v = self.vertex.run(q, geo, n_draws, fd.n_verts, kx, ky, w, h)
         cb = self.vertex.buffers
-        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, cb.win.buf, self._faces.buf,
-                                 m, w, h, cull, kx, ky)
+        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, cb.win.buf, geo, n_draws, m,
+                                 w, h, cull, kx, ky)
         sb = self.setup.buffers
         e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
                                    sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
@@ -93,11 +98,11 @@ class Renderer:
             q, sb.clip_bary.buf, bb.tile_start.buf, bb.entries.buf, w, h)
         status = np.empty(m, np.uint8)
         cl.enqueue_copy(q, status, sb.status.buf, is_blocking=True)
-        stats = FrameStats.from_status(
-            status, clip_pieces=p, binned_entries=e,
+        stats = FrameStats.from_counts(
+            counts, status, clip_pieces=p, binned_entries=e,
             fragments_tested=int(tstats[:, 0].sum()), fragments_passed=int(tstats[:, 1].sum()))
-        stats.timings_ms = {
-            "vertex": _ms([ev_v]), "setup": _ms(ev_s), "bin": _ms(ev_b), "raster": _ms([ev_r])}
+        stats.timings_ms = {"cull (host)": t_cull, "vertex": _ms([ev_v]), "setup": _ms(ev_s),
+                            "bin": _ms(ev_b), "raster": _ms([ev_r])}
         return Frame(depth, ids, bary, stats)
 
 

@@ -72,6 +72,20 @@ typedef struct {
     float r1, r2;   /* w0/w1, w0/w2: perspective correction of screen-space weights */
 } Piece;
 
+/* Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
+ * and setup stages run one work-item per (draw, local vertex) and (draw, local triangle):
+ * work-item g serves draw g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1). */
+#define CLUSTER_LOG2 7
+#define CLUSTER_MAX (1 << CLUSTER_LOG2)
+
+/* One drawn cluster of one instance (config.DRAW_DTYPE). vert_base / tri_base: where its
+ * vertices / triangles start in this frame's vertex and triangle streams; face_base: triangle
+ * id of the instance's face 0. */
+typedef struct {
+    int cluster, instance, vert_base, tri_base, face_base, flags, pad0, pad1;
+} Draw;
+#define DRAW_INSIDE 1   /* cluster inside the frustum by a margin: no clip tests needed */
+
 /* A vertex after the viewport transform: 24.8 fixed-point window x/y (y down), window depth
  * (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the guard band
  * and per clipped vertex in setup.cl, with this one function, so both are bit-identical. */

@@ -1,7 +1,7 @@
 /* Triangle setup: trivial reject, clipping, back-face / zero-area cull, fixed-point snap.
  *
- * setup_triangles (one work-item per triangle) writes, for every unclipped survivor, one
- * Piece at the triangle's own slot, a status per triangle and, for triangles that need the
+ * setup_triangles (one work-item per drawn triangle) writes, for every unclipped survivor,
+ * one Piece at the triangle's slot in the frame's triangle stream, a status per triangle and, for triangles that need the
  * clipper, the number of pieces they make. The host scans those counts; setup_clipped then
  * re-runs the clipper for just those triangles and writes their pieces in order. Clipping is
  * rare, so recomputing it beats storing up to 14 pieces per triangle for everyone.
@@ -15,13 +15,19 @@
 
 #define POLY_MAX 16   /* > 3 + 6: float rounding can make a clipped polygon a hair non-convex */
 
-typedef struct { float4 p; float b0, b1, b2; } ClipVert;
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+
+/* The clipper works in double: interpolating float32 positions between far-apart vertices
+ * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
+ * cancels away more than the plane's own scale, and whole triangles vanished. Inputs are
+ * the float32 clip positions; each new vertex is rounded to float once, at the end. */
+typedef struct { double4 p; double b0, b1, b2; } ClipVert;
 
 __constant uint PLANE_BIT[6] = {OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG,
                                 OC_GB_Y_POS};
 
 /* Signed distance to clip plane p, >= 0 inside; the same expressions as vertex.cl. */
-inline float plane_dist(int p, float4 v, float kx, float ky)
+inline double plane_dist(int p, double4 v, double kx, double ky)
 {
     switch (p) {
     case 0: return v.z + v.w;
@@ -33,17 +39,34 @@ inline float plane_dist(int p, float4 v, float kx, float ky)
     }
 }
 
+/* Facing from the homogeneous determinant det[x y w] of the clip-space vertices: > 0 is
+ * counter-clockwise in NDC (front by default), < 0 clockwise. It is the sign of the NDC
+ * area for w > 0 and stays meaningful for triangles that cross w = 0, so back-face culling
+ * happens before clipping (Olano & Greer 1997). Deciding facing on the unsnapped positions
+ * (not on the 1/256-snapped area, which can flip for sub-pixel triangles) is what lets the
+ * cluster normal-cone test be conservative: it culls only clusters whose every triangle
+ * faces away by a margin far above float32 rounding. Returns ST_RASTER (keep),
+ * ST_BACKFACE or ST_DEGENERATE (det exactly 0: edge-on). */
+inline int facing(float4 a, float4 b, float4 c, int cull)
+{
+    float det = (a.x * (b.y * c.w - b.w * c.y) - a.y * (b.x * c.w - b.w * c.x))
+                + a.w * (b.x * c.y - b.y * c.x);
+    if (det == 0.0f) return ST_DEGENERATE;
+    if ((cull == CULL_BACK && det < 0.0f) || (cull == CULL_FRONT && det > 0.0f))
+        return ST_BACKFACE;
+    return ST_RASTER;
+}
+
 /* Set up one triangle from its three window-space vertices. Returns ST_RASTER when it
  * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
  * exchanged to make the doubled area positive. */
-inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height, int cull,
+inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height,
                       Piece *pc, int *swapped)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
-    /* y points down in window space, so counter-clockwise in NDC is area2 < 0. */
-    if ((cull == CULL_BACK && area2 > 0) || (cull == CULL_FRONT && area2 < 0))
-        return ST_BACKFACE;
+    /* y points down in window space: counter-clockwise in NDC is area2 < 0. Rasterize
+     * every piece with positive area; facing was decided before (facing()). */
     *swapped = area2 < 0;
     if (area2 < 0) {
         WinVert t = v1; v1 = v2; v2 = t;
@@ -74,13 +97,14 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height,
  * piece. Returns the number of surviving pieces; with write != 0 also stores them (and their
  * parent barycentrics, 9 floats per piece) at index base, base+1, ... */
 inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx, float ky,
-                         int width, int height, int cull, int id, int write,
+                         int width, int height, int id, int write,
                          __global Piece *out, __global float *out_bary, int base)
 {
     ClipVert poly[POLY_MAX], tmp[POLY_MAX];
-    poly[0].p = c0; poly[0].b0 = 1.0f; poly[0].b1 = 0.0f; poly[0].b2 = 0.0f;
-    poly[1].p = c1; poly[1].b0 = 0.0f; poly[1].b1 = 1.0f; poly[1].b2 = 0.0f;
-    poly[2].p = c2; poly[2].b0 = 0.0f; poly[2].b1 = 0.0f; poly[2].b2 = 1.0f;
+    double kxd = (double)kx, kyd = (double)ky;
+    poly[0].p = convert_double4(c0); poly[0].b0 = 1.0; poly[0].b1 = 0.0; poly[0].b2 = 0.0;
+    poly[1].p = convert_double4(c1); poly[1].b0 = 0.0; poly[1].b1 = 1.0; poly[1].b2 = 0.0;
+    poly[2].p = convert_double4(c2); poly[2].b0 = 0.0; poly[2].b1 = 0.0; poly[2].b2 = 1.0;
     int n = 3;
     for (int p = 0; p < 6 && n >= 3; ++p) {
         if (!(planes & PLANE_BIT[p])) continue;
@@ -88,13 +112,13 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
         int m = 0;
         for (int i = 0; i < n && m < POLY_MAX; ++i) {
             ClipVert a = tmp[i], b = tmp[i + 1 == n ? 0 : i + 1];
-            float da = plane_dist(p, a.p, kx, ky), db = plane_dist(p, b.p, kx, ky);
-            bool ain = da >= 0.0f, bin = db >= 0.0f;
+            double da = plane_dist(p, a.p, kxd, kyd), db = plane_dist(p, b.p, kxd, kyd);
+            bool ain = da >= 0.0, bin = db >= 0.0;
             if (ain) poly[m++] = a;
             if (ain != bin && m < POLY_MAX) {
                 ClipVert vi = ain ? a : b, vo = ain ? b : a;
-                float di = ain ? da : db, dout = ain ? db : da;
-                float t = di / (di - dout);
+                double di = ain ? da : db, dout = ain ? db : da;
+                double t = di / (di - dout);
                 ClipVert r;
                 r.p = vi.p + t * (vo.p - vi.p);
                 r.b0 = vi.b0 + t * (vo.b0 - vi.b0);
@@ -110,12 +134,14 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
     for (int k = 1; k + 1 < n; ++k) {
         Piece pc;
         int sw = 0;
+        float4 f0 = convert_float4(poly[0].p), f1 = convert_float4(poly[k].p);
+        float4 f2 = convert_float4(poly[k + 1].p);
         /* a piece with a vertex at w <= 0 can only come from a projection matrix that
          * does not put w > 0 on the near plane; it has no window position: dropped */
-        if (!(poly[0].p.w > 0.0f && poly[k].p.w > 0.0f && poly[k + 1].p.w > 0.0f))
+        if (!(f0.w > 0.0f && f1.w > 0.0f && f2.w > 0.0f))
             continue;
-        if (make_piece(viewport_vertex(poly[0].p, hw, hh), viewport_vertex(poly[k].p, hw, hh),
-                       viewport_vertex(poly[k + 1].p, hw, hh), width, height, cull, &pc, &sw)
+        if (make_piece(viewport_vertex(f0, hw, hh), viewport_vertex(f1, hw, hh),
+                       viewport_vertex(f2, hw, hh), width, height, &pc, &sw)
             != ST_RASTER)
             continue;
         if (write) {
@@ -125,26 +151,52 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
             /* parent barycentrics of the piece's vertices, in the piece's (swapped) order */
             ClipVert v1 = sw ? poly[k + 1] : poly[k], v2 = sw ? poly[k] : poly[k + 1];
             __global float *b = out_bary + 9 * (base + count);
-            b[0] = poly[0].b0; b[1] = poly[0].b1; b[2] = poly[0].b2;
-            b[3] = v1.b0; b[4] = v1.b1; b[5] = v1.b2;
-            b[6] = v2.b0; b[7] = v2.b1; b[8] = v2.b2;
+            b[0] = (float)poly[0].b0; b[1] = (float)poly[0].b1; b[2] = (float)poly[0].b2;
+            b[3] = (float)v1.b0; b[4] = (float)v1.b1; b[5] = (float)v1.b2;
+            b[6] = (float)v2.b0; b[7] = (float)v2.b1; b[8] = (float)v2.b2;
         }
         ++count;
     }
     return count;
 }
 
+/* Which triangle work-item g sets up: local triangle g & (CLUSTER_MAX - 1) of draw
+ * g >> CLUSTER_LOG2. Gives its slot in the frame's triangle stream, its three vertices in
+ * the frame's vertex stream, and its id. Returns 0 for idle work-items. */
+inline int triangle_of(uint g, uint n_draws, __global const Draw *draws,
+                       __global const int4 *clusters, __global const uchar4 *local_tris,
+                       __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
+                       int *id)
+{
+    uint d = g >> CLUSTER_LOG2, lt = g & (CLUSTER_MAX - 1);
+    if (d >= n_draws) return 0;
+    Draw dr = draws[d];
+    int4 ci = clusters[dr.cluster];
+    if ((int)lt >= ci.y) return 0;
+    uchar4 tv = local_tris[ci.x + lt];
+    *slot = dr.tri_base + (int)lt;
+    *i0 = dr.vert_base + tv.x;
+    *i1 = dr.vert_base + tv.y;
+    *i2 = dr.vert_base + tv.z;
+    *id = dr.face_base + face_ids[ci.x + lt];
+    return 1;
+}
+
+#define DRAW_ARGS                                                                          \
+    __global const Draw *draws, const uint n_draws, __global const int4 *clusters,         \
+    __global const uchar4 *local_tris, __global const int *face_ids
+
 __kernel void setup_triangles(__global const float4 *clip, __global const ushort *outcode,
-                              __global const WinVert *win, __global const int *faces,
-                              const uint m,
+                              __global const WinVert *win, DRAW_ARGS,
                               const int width, const int height, const int cull,
                               const float kx, const float ky,
                               __global Piece *pieces, __global uchar *status,
                               __global int *clip_count)
 {
-    uint t = get_global_id(0);
-    if (t >= m) return;
-    int i0 = faces[3 * t], i1 = faces[3 * t + 1], i2 = faces[3 * t + 2];
+    int t, i0, i1, i2, id;
+    if (!triangle_of(get_global_id(0), n_draws, draws, clusters, local_tris, face_ids, &t,
+                     &i0, &i1, &i2, &id))
+        return;
     uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
     uint o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
     int st, nclip = 0;
@@ -152,20 +204,25 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
         st = ST_INVALID;
     } else if (o_and & OC_FRUSTUM) {
         st = ST_TRIVIAL_REJECT;
-    } else if (o_or & OC_NEEDS_CLIP) {
-        st = ST_CLIPPED;
-        nclip = clip_and_emit(clip[i0], clip[i1], clip[i2], o_or & OC_NEEDS_CLIP, kx, ky,
-                              width, height, cull, (int)t, 0, pieces, 0, 0);
-    } else if (o_or & OC_W_NONPOS) {
-        st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
     } else {
-        Piece pc;
-        int sw = 0;
-        st = make_piece(win[i0], win[i1], win[i2], width, height, cull, &pc, &sw);
-        if (st == ST_RASTER) {
-            pc.id = (int)t;
-            pc.flags = sw ? PF_SWAPPED : 0;
-            pieces[t] = pc;
+        float4 c0 = clip[i0], c1 = clip[i1], c2 = clip[i2];
+        st = facing(c0, c1, c2, cull);
+        if (st != ST_RASTER) {
+        } else if (o_or & OC_NEEDS_CLIP) {
+            st = ST_CLIPPED;
+            nclip = clip_and_emit(c0, c1, c2, o_or & OC_NEEDS_CLIP, kx, ky, width, height, id,
+                                  0, pieces, 0, 0);
+        } else if (o_or & OC_W_NONPOS) {
+            st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
+        } else {
+            Piece pc;
+            int sw = 0;
+            st = make_piece(win[i0], win[i1], win[i2], width, height, &pc, &sw);
+            if (st == ST_RASTER) {
+                pc.id = id;
+                pc.flags = sw ? PF_SWAPPED : 0;
+                pieces[t] = pc;
+            }
         }
     }
     status[t] = (uchar)st;
@@ -173,17 +230,45 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
 }
 
 __kernel void setup_clipped(__global const float4 *clip, __global const ushort *outcode,
-                            __global const WinVert *win, __global const int *faces,
-                            const uint m,
-                            const int width, const int height, const int cull,
+                            DRAW_ARGS, const int width, const int height,
                             const float kx, const float ky,
                             __global const int *clip_count, __global const int *clip_offset,
                             __global Piece *clip_pieces, __global float *clip_bary)
 {
-    uint t = get_global_id(0);
-    if (t >= m || clip_count[t] == 0) return;
-    int i0 = faces[3 * t], i1 = faces[3 * t + 1], i2 = faces[3 * t + 2];
+    int t, i0, i1, i2, id;
+    if (!triangle_of(get_global_id(0), n_draws, draws, clusters, local_tris, face_ids, &t,
+                     &i0, &i1, &i2, &id) || clip_count[t] == 0)
+        return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
     clip_and_emit(clip[i0], clip[i1], clip[i2], o_or & OC_NEEDS_CLIP, kx, ky, width, height,
-                  cull, (int)t, 1, clip_pieces, clip_bary, clip_offset[t]);
+                  id, 1, clip_pieces, clip_bary, clip_offset[t]);
+}
+
+/* Exclusive scan of clip_count into clip_offset (and the total), in two launches over
+ * `chunks` contiguous ranges: scan_partials sums each range; scan_offsets adds the sums of
+ * the ranges before it and writes the prefix. One work-item per range, no barriers or local
+ * memory (pyopencl's GenericScanKernel has a benign but real data race that Oclgrind
+ * reports, and is slower on PoCL for these sizes). */
+__kernel void scan_partials(__global const int *cnt, const uint m, const uint chunks,
+                            __global int *partial)
+{
+    uint c = get_global_id(0);
+    if (c >= chunks) return;
+    uint s0 = (uint)(((ulong)c * m) / chunks), s1 = (uint)(((ulong)(c + 1) * m) / chunks);
+    int s = 0;
+    for (uint i = s0; i < s1; ++i) s += cnt[i];
+    partial[c] = s;
+}
+
+__kernel void scan_offsets(__global const int *cnt, const uint m, const uint chunks,
+                           __global const int *partial, __global int *off,
+                           __global int *total)
+{
+    uint c = get_global_id(0);
+    if (c >= chunks) return;
+    int s = 0;
+    for (uint k = 0; k < c; ++k) s += partial[k];
+    uint s0 = (uint)(((ulong)c * m) / chunks), s1 = (uint)(((ulong)(c + 1) * m) / chunks);
+    for (uint i = s0; i < s1; ++i) { off[i] = s; s += cnt[i]; }
+    if (c + 1 == chunks) total[0] = s;
 }

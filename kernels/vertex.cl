@@ -1,19 +1,31 @@
-/* Vertex stage: object space -> clip space, and outcodes.
- * One work-item per vertex. mvp is row-major (clip = M · [x y z 1]ᵀ), float32.
+/* Vertex stage: object space -> clip space, and outcodes, for the vertices of this frame's
+ * draws (instance, cluster): one work-item per (draw, cluster-local vertex). Each instance has
+ * its own row-major float32 matrix (clip = M · [x y z 1]ᵀ) in mvps[16 * instance].
+ * Output vertex i = draw.vert_base + local index; a vertex shared by two clusters is
+ * transformed once per cluster, bit-identically.
  * Also the viewport transform (WinVert) of every vertex that can be drawn unclipped.
  * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
  * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
 #include "common.h"
 
-__kernel void vertex_transform(__global const float *pos, const uint n,
-                               __constant const float *mvp, const float kx, const float ky,
+__kernel void vertex_transform(__global const float *pos, __global const int *vert_ids,
+                               __global const int4 *clusters, __global const Draw *draws,
+                               const uint n_draws, __global const float *mvps,
+                               const float kx, const float ky,
                                const int width, const int height,
                                __global float4 *clip, __global ushort *outcode,
                                __global WinVert *win)
 {
-    uint i = get_global_id(0);
-    if (i >= n) return;
-    float px = pos[3 * i], py = pos[3 * i + 1], pz = pos[3 * i + 2];
+    uint g = get_global_id(0);
+    uint d = g >> CLUSTER_LOG2, lv = g & (CLUSTER_MAX - 1);
+    if (d >= n_draws) return;
+    Draw dr = draws[d];
+    int4 ci = clusters[dr.cluster];   /* tri_offset, n_tris, vert_offset, n_verts */
+    if ((int)lv >= ci.w) return;
+    int vi = vert_ids[ci.z + lv];
+    uint i = (uint)dr.vert_base + lv;
+    __global const float *mvp = mvps + 16 * dr.instance;
+    float px = pos[3 * vi], py = pos[3 * vi + 1], pz = pos[3 * vi + 2];
     float4 c;
     c.x = ((mvp[0] * px + mvp[1] * py) + mvp[2] * pz) + mvp[3];
     c.y = ((mvp[4] * px + mvp[5] * py) + mvp[6] * pz) + mvp[7];
@@ -22,7 +34,8 @@ __kernel void vertex_transform(__global const float *pos, const uint n,
     uint oc = 0;
     if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
         oc = OC_INVALID;
-    } else {
+    } else if (!(dr.flags & DRAW_INSIDE)) {
+        /* clusters inside the frustum by a margin skip the tests: all bits would be 0 */
         oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
         oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
         oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
@@ -41,7 +54,7 @@ __kernel void vertex_transform(__global const float *pos, const uint n,
     WinVert v = {0, 0, 0.0f, 0.0f};
     if (!(oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)))
         v = viewport_vertex(c, 0.5f * (float)width, 0.5f * (float)height);
-    win[i] = v;
     clip[i] = c;
     outcode[i] = (ushort)oc;
+    win[i] = v;
 }

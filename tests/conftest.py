@@ -106,21 +106,24 @@ def renderer_for():
     return get_renderer
 
 
-def render_cl(mesh, camera, width, height, cull="none", tile_log2=4):
-    return get_renderer(width, height, tile_log2).render(mesh, camera, cull=cull)
+# The core-pipeline tests pin per-triangle counts (every face reaches setup), so they render
+# with object culling off; tests/test_culling*.py cover it being on.
+def render_cl(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
+    return get_renderer(width, height, tile_log2).render(mesh, camera, cull=cull,
+                                                         frustum=culling, cones=culling)
 
 
-def render_ref(mesh, camera, width, height, cull="none", tile_log2=4):
+def render_ref(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
     from clraster import reference
 
-    return reference.render(mesh, camera, width, height, cull=cull,
-                            config=RasterConfig(tile_log2=tile_log2))
+    return reference.render(mesh, camera, width, height, cull=cull, frustum=culling,
+                            cones=culling, config=RasterConfig(tile_log2=tile_log2))
 
 
-def render_both(mesh, camera, width, height, cull="none", tile_log2=4):
+def render_both(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
     """(OpenCL frame, NumPy-twin frame) for the same input and config."""
-    return (render_cl(mesh, camera, width, height, cull, tile_log2),
-            render_ref(mesh, camera, width, height, cull, tile_log2))
+    return (render_cl(mesh, camera, width, height, cull, tile_log2, culling),
+            render_ref(mesh, camera, width, height, cull, tile_log2, culling))
 
 
 def assert_frames_equal(a, b, context: str = "", bary_atol: float = 1e-5,

@@ -34,7 +34,7 @@ def test_render_example(tmp_path, capsys, extra):
     assert np.all(depth[background] == 1.0)
     assert np.all((depth[~background] >= 0) & (depth[~background] < 1))
     out = capsys.readouterr().out
-    assert "frame time" in out and "triangles in" in out
+    assert "frame time" in out and "sent to setup" in out
 
 
 def test_tile_size_does_not_change_output(tmp_path):

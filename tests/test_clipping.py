@@ -134,7 +134,8 @@ def test_clipped_soup_matches_twin():
     for cull in ("none", "back"):
         a, b = render_both(mesh, cam, w, h, cull=cull, tile_log2=3)
         assert_frames_equal(a, b, f"cull={cull}")
-        assert a.stats.clipped > 500
+        # back faces are culled before clipping (homogeneous facing test), so fewer reach it
+        assert a.stats.clipped > (500 if cull == "none" else 250)
 
 
 # --- float32 limits of the clipper -------------------------------------------------------
@@ -162,11 +163,12 @@ GROUND_CASES = [
     pytest.param(0.1, 1e3, 1e6, id="near0.1-half1e6"),
     pytest.param(1e-3, 1e3, 1e4, id="near1e-3-half1e4"),
     pytest.param(1e-3, 1e3, 1e5, id="near1e-3-half1e5", marks=pytest.mark.xfail(
-        strict=True, reason="BUG: near-plane clipping interpolates w in float32 from "
-        "endpoints with |w| ≈ 1e5; the cancellation error (ulp ≈ 0.008) exceeds near, so "
-        "the clipped vertices get w ≤ 0 or a wrong w and the whole ground plane vanishes")),
+        strict=True, reason="LIMITATION: the clipper runs in double, but its inputs are the "
+        "vertex stage's float32 clip positions; at |w| ≈ 1e5 their rounding (≈ 4e-3) exceeds "
+        "the near distance 1e-3, so the near-plane crossing lands at w ≤ 0 and the pieces "
+        "are dropped. Needs clip positions recomputed in double for clipped triangles")),
     pytest.param(0.1, 1e3, 1e7, id="near0.1-half1e7", marks=pytest.mark.xfail(
-        strict=True, reason="BUG: same float32 cancellation in near-plane clipping")),
+        strict=True, reason="LIMITATION: same float32 input rounding (see above)")),
 ]
 
 
@@ -189,12 +191,10 @@ def test_huge_ground_plane_through_near_plane(near, far, half):
 
 @pytest.mark.parametrize("scale", [
     1e5, 1e10, 1e12,
-    pytest.param(1e15, marks=pytest.mark.xfail(
-        strict=True, reason="BUG: guard-band clipping interpolates x/y in float32 between "
-        "vertices at ±1e15; the cancellation error (ulp ≈ 7e7) exceeds the guard band "
-        "(±2**19 px), so the clipped polygon misses half of the window")),
+    1e15,  # failed while the clipper interpolated in float32 (cancellation ≈ 7e7)
     pytest.param(1e30, marks=pytest.mark.xfail(
-        strict=True, reason="BUG: same float32 cancellation in guard-band clipping")),
+        strict=True, reason="LIMITATION: at ±1e30 even double interpolation errs by ~1e14, "
+        "far beyond the guard band (±2**19 px): the clipped polygon misses the window")),
 ])
 def test_huge_finite_triangle_covers_window(scale):
     """A finite triangle around the whole window (identity clip matrix, w = 1): every pixel

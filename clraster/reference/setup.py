@@ -67,7 +67,24 @@ def plane_dist(p: int, v: np.ndarray, kx: F32, ky: F32) -> np.ndarray:
     return (z + w, w - z, x + kx * w, kx * w - x, y + ky * w, ky * w - y)[p]
 
 
-def make_pieces(wv: np.ndarray, width: int, height: int, cull: int
+def facing(c: np.ndarray, cull: int) -> np.ndarray:
+    """Facing of clip-space triangles c float32 (K, 3, 4) from det[x y w], as facing() in
+    setup.cl: ST_RASTER (keep), ST_BACKFACE or ST_DEGENERATE (det == 0) per triangle."""
+    a, b, d = c[:, 0], c[:, 1], c[:, 2]
+    with np.errstate(all="ignore"):
+        det = ((a[:, 0] * (b[:, 1] * d[:, 3] - b[:, 3] * d[:, 1])
+                - a[:, 1] * (b[:, 0] * d[:, 3] - b[:, 3] * d[:, 0]))
+               + a[:, 3] * (b[:, 0] * d[:, 1] - b[:, 1] * d[:, 0]))
+    st = np.full(c.shape[0], ST_RASTER, np.uint8)
+    if cull == CULL_MODES["back"]:
+        st[det < 0] = ST_BACKFACE
+    elif cull == CULL_MODES["front"]:
+        st[det > 0] = ST_BACKFACE
+    st[det == 0] = ST_DEGENERATE
+    return st
+
+
+def make_pieces(wv: np.ndarray, width: int, height: int
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Set up triangles from window-space vertices, as make_piece in setup.cl.
 
@@ -82,12 +99,8 @@ def make_pieces(wv: np.ndarray, width: int, height: int, cull: int
     status = np.full(k, ST_RASTER, np.uint8)
     area2 = (X[:, 1] - X[:, 0]) * (Y[:, 2] - Y[:, 0]) - (Y[:, 1] - Y[:, 0]) * (X[:, 2] - X[:, 0])
     status[area2 == 0] = ST_DEGENERATE
-    alive = status == ST_RASTER
-    # y points down in window space, so counter-clockwise in NDC is area2 < 0
-    if cull == CULL_MODES["back"]:
-        status[alive & (area2 > 0)] = ST_BACKFACE
-    elif cull == CULL_MODES["front"]:
-        status[alive & (area2 < 0)] = ST_BACKFACE
+    # y points down in window space: counter-clockwise in NDC is area2 < 0; every piece is
+    # rasterized with positive area (facing was decided before, by `facing`)
     swapped = area2 < 0
     perm = np.where(swapped[:, None], [0, 2, 1], [0, 1, 2])
     wv = wv[np.arange(k)[:, None], perm]
@@ -121,17 +134,20 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
                   ) -> tuple[np.ndarray, np.ndarray]:
     """Sutherland–Hodgman in clip space, vectorized over triangles.
 
+    In float64, as the kernel (see the comment on ClipVert in setup.cl).
+
     Args:
         c: float32 (K, 3, 4) clip-space triangles. planes: (K,) OC_* bits to clip against.
 
     Returns:
-        poly float32 (K, POLY_MAX, 7) — x, y, z, w and the parent barycentrics — and the
+        poly float64 (K, POLY_MAX, 7) — x, y, z, w and the parent barycentrics — and the
         vertex counts n int (K,).
     """
     k = c.shape[0]
-    poly = np.zeros((k, POLY_MAX, 7), F32)
+    kx, ky = np.float64(kx), np.float64(ky)
+    poly = np.zeros((k, POLY_MAX, 7), np.float64)
     poly[:, :3, :4] = c
-    poly[:, :3, 4:] = np.eye(3, dtype=F32)
+    poly[:, :3, 4:] = np.eye(3)
     n = np.full(k, 3, np.int64)
     rows = np.arange(k)
     with np.errstate(all="ignore"):
@@ -166,11 +182,28 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
     return poly, n
 
 
-def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, faces: np.ndarray,
-          width: int, height: int, cull: str, kx: F32, ky: F32) -> SetupResult:
-    """Triangle setup for faces int32 (M, 3) over the vertex stage's outputs (clip float32
-    (N, 4), outcode uint16 (N,), win WINVERT_DTYPE (N,))."""
+def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's triangle stream (mirrors triangle_of in setup.cl): per slot, the three
+    vertex-stream indices int64 (M, 3) and the triangle id int64 (M,)."""
+    d = fd.draws
+    info = pool.clusters[d["cluster"]].astype(np.int64)
+    nt = info[:, 1]
+    owner = np.repeat(np.arange(d.size), nt)
+    local = np.arange(owner.size) - np.repeat(d["tri_base"].astype(np.int64), nt)
+    t = info[owner, 0] + local
+    tri_verts = d["vert_base"][owner].astype(np.int64)[:, None] + pool.local_tris[t, :3]
+    ids = d["face_base"][owner].astype(np.int64) + pool.face_ids[t]
+    return tri_verts, ids
+
+
+def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.ndarray,
+          ids: np.ndarray, width: int, height: int, cull: str, kx: F32, ky: F32
+          ) -> SetupResult:
+    """Triangle setup over the vertex stage's outputs (clip float32 (N, 4), outcode uint16
+    (N,), win WINVERT_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
+    int (M,)."""
     cull_i = CULL_MODES[cull]
+    faces = tri_verts
     m = faces.shape[0]
     oc = outcode[faces].astype(np.uint32)  # (M, 3)
     o_or = oc[:, 0] | oc[:, 1] | oc[:, 2]
@@ -178,18 +211,21 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, faces: np.ndar
     status = np.full(m, ST_RASTER, np.uint8)
     invalid = (o_or & OC_INVALID) != 0
     reject = ~invalid & ((o_and & OC_FRUSTUM) != 0)
-    needs = ~invalid & ~reject & ((o_or & OC_NEEDS_CLIP) != 0)
-    wzero = ~invalid & ~reject & ~needs & ((o_or & OC_W_NONPOS) != 0)
-    plain = ~invalid & ~reject & ~needs & ~wzero
     status[invalid] = ST_INVALID
     status[reject] = ST_TRIVIAL_REJECT
+    rest = np.nonzero(~invalid & ~reject)[0]
+    status[rest] = facing(clip[faces[rest]], cull_i)
+    live = status == ST_RASTER
+    needs = live & ((o_or & OC_NEEDS_CLIP) != 0)
+    wzero = live & ~needs & ((o_or & OC_W_NONPOS) != 0)
+    plain = live & ~needs & ~wzero
     status[needs] = ST_CLIPPED
     status[wzero] = ST_DEGENERATE
     pieces = np.zeros(m, PIECE_DTYPE)
     idx = np.nonzero(plain)[0]
-    st, pc, _ = make_pieces(win[faces[idx]], width, height, cull_i)
+    st, pc, _ = make_pieces(win[faces[idx]], width, height)
     status[idx] = st
-    pc["id"] = idx
+    pc["id"] = ids[idx]
     ok = st == ST_RASTER
     pieces[idx[ok]] = pc[ok]
 
@@ -201,15 +237,15 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, faces: np.ndar
     owner = np.repeat(np.arange(cidx.size), nfan)
     kk = np.arange(owner.size) - np.repeat(np.cumsum(nfan) - nfan, nfan) + 1
     v0, v1, v2 = poly[owner, 0], poly[owner, kk], poly[owner, kk + 1]
-    c3 = np.stack([v0[:, :4], v1[:, :4], v2[:, :4]], axis=1)
+    c3 = np.stack([v0[:, :4], v1[:, :4], v2[:, :4]], axis=1).astype(F32)
     wpos = np.all(c3[:, :, 3] > 0, axis=1)  # pieces with a vertex at w <= 0 are dropped
     wv = np.zeros(c3.shape[:2], WINVERT_DTYPE)
     wv[wpos] = viewport(c3[wpos], width, height)
-    st, pc, sw = make_pieces(wv, width, height, cull_i)
+    st, pc, sw = make_pieces(wv, width, height)
     ok = (st == ST_RASTER) & wpos
     clip_count[cidx] = np.bincount(owner[ok], minlength=cidx.size)
     clip_pieces = pc[ok]
-    clip_pieces["id"] = cidx[owner[ok]]
+    clip_pieces["id"] = ids[cidx[owner[ok]]]
     clip_pieces["flags"] = (PF_CLIPPED | np.where(sw[ok], PF_SWAPPED, 0)
                             | (np.arange(clip_pieces.size) << PF_INDEX_SHIFT))
     b1 = np.where(sw[:, None], v2[:, 4:], v1[:, 4:])

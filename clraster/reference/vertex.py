@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import (
+    DRAW_INSIDE,
     OC_GB_X_NEG,
     OC_GB_X_POS,
     OC_GB_Y_NEG,
@@ -43,12 +44,15 @@ def viewport(c: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.float32,
-              width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Object → clip space and outcodes.
+              width: int, height: int, inside: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Object → clip space, outcodes and window positions.
 
     Args:
-        vertices: float32 (N, 3). mvp: float32 (4, 4) row-major, clip = mvp · [x y z 1]ᵀ.
-        kx, ky: guard-band factors (config.guard_band_factors).
+        vertices: float32 (N, 3). mvp: float32 row-major matrices, (16,) for all vertices or
+            (N, 16) one per vertex; clip = M · [x y z 1]ᵀ. kx, ky: guard-band factors
+            (config.guard_band_factors). inside: bool (N,) vertices of clusters inside the
+            frustum by a margin, whose outcode tests are skipped (as the kernel does).
 
     Returns:
         clip float32 (N, 4), outcode uint16 (N,) (config.OC_* bits; a vertex whose clip
@@ -56,12 +60,13 @@ def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.floa
         viewport transform of vertices that need no clipping (zeros for the others).
     """
     v = np.asarray(vertices, np.float32)
-    m = np.asarray(mvp, np.float32)
+    m = np.asarray(mvp, np.float32).reshape(-1, 16)
+    m = m[0] if m.shape[0] == 1 else m.T  # (16,) scalars, or 16 rows of per-vertex values
     x, y, z = v[:, 0], v[:, 1], v[:, 2]
     clip = np.empty((v.shape[0], 4), np.float32)
     with np.errstate(all="ignore"):
         for r in range(4):  # ((m0·x + m1·y) + m2·z) + m3, no fused multiply-add
-            clip[:, r] = ((m[r, 0] * x + m[r, 1] * y) + m[r, 2] * z) + m[r, 3]
+            clip[:, r] = ((m[4 * r] * x + m[4 * r + 1] * y) + m[4 * r + 2] * z) + m[4 * r + 3]
         cx, cy, cz, cw = clip.T
         zero = np.float32(0)
         oc = np.zeros(v.shape[0], np.uint16)
@@ -71,9 +76,32 @@ def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.floa
                        (OC_GB_Y_NEG, cy + ky * cw), (OC_GB_Y_POS, ky * cw - cy)):
             oc |= np.where(d < zero, np.uint16(bit), np.uint16(0))
         oc |= np.where(cw > zero, np.uint16(0), np.uint16(OC_W_NONPOS))
+    if inside is not None:
+        oc[inside] = 0
     bad = ~np.all(np.isfinite(clip), axis=1)
     oc[bad] = OC_INVALID
     win = np.zeros(v.shape[0], WINVERT_DTYPE)
     ok = (oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0
     win[ok] = viewport(clip[ok], width, height)
     return clip, oc, win
+
+
+def draw_vertices(pool, fd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame's vertex stream, as the kernel's work-items (draw, local vertex) see it.
+
+    Returns pool vertex index int64 (N,), instance int64 (N,) and inside bool (N,) of each
+    stream vertex, in stream order (draw.vert_base + local index).
+    """
+    d = fd.draws
+    info = pool.clusters[d["cluster"]].astype(np.int64)
+    nv = info[:, 3]
+    owner = np.repeat(np.arange(d.size), nv)
+    local = np.arange(owner.size) - np.repeat(d["vert_base"].astype(np.int64), nv)
+    pv = pool.vert_ids[info[owner, 2] + local].astype(np.int64)
+    return pv, d["instance"][owner].astype(np.int64), (d["flags"][owner] & DRAW_INSIDE) != 0
+
+
+def transform_draws(pool, fd, kx: np.float32, ky: np.float32, width: int, height: int):
+    """Vertex stage over a frame's draws (mirrors vertex_transform in kernels/vertex.cl)."""
+    pv, inst, inside = draw_vertices(pool, fd)
+    return transform(pool.positions[pv], fd.mvps[inst], kx, ky, width, height, inside)

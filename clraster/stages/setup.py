@@ -7,17 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
-import pyopencl.array as cla
-from pyopencl.scan import GenericScanKernel
 
-from ..config import CULL_MODES, PIECE_DTYPE, RasterConfig
+from ..config import CLUSTER_MAX, CULL_MODES, PIECE_DTYPE, RasterConfig
 from ..device import program
 from ._buffers import GrowBuffer
 
 
 @dataclass
 class SetupBuffers:
-    """Setup → binning boundary, M = number of triangles, P = clipped pieces.
+    """Setup → binning boundary, M = triangles in this frame's triangle stream (the draws'
+    triangles, draw after draw), P = clipped pieces.
 
     pieces: PIECE_DTYPE (M,), slot t valid iff status[t] == ST_RASTER.
     status: uint8 (M,) config.ST_* per triangle.
@@ -37,40 +36,49 @@ class SetupBuffers:
     clip_bary: GrowBuffer
 
 
+#: Ranges of the clip-count scan (one work-item each); a few per core is plenty.
+SCAN_CHUNKS = 64
+
+
 class SetupStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "setup", config.build_options())
         self.k_setup = cl.Kernel(prg, "setup_triangles")
         self.k_clipped = cl.Kernel(prg, "setup_clipped")
-        self.scan = GenericScanKernel(
-            ctx, np.int32,
-            arguments="__global const int *cnt, __global int *off, __global int *total, "
-                      "const int n",
-            input_expr="cnt[i]", scan_expr="a+b", neutral="0",
-            output_statement="off[i] = prev_item; if (i + 1 == n) total[0] = item;")
+        self.k_partials = cl.Kernel(prg, "scan_partials")
+        self.k_offsets = cl.Kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))
+        self.partial = GrowBuffer(ctx)
 
     def run(self, queue: cl.CommandQueue, clip: cl.Buffer, outcode: cl.Buffer,
-            win: cl.Buffer, faces: cl.Buffer, m: int, width: int, height: int, cull: str,
+            win: cl.Buffer, geo, n_draws: int, m: int, width: int, height: int, cull: str,
             kx: np.float32, ky: np.float32) -> tuple[int, list[cl.Event]]:
-        """Run setup for ``m`` triangles. Returns (P = clipped pieces, profiling events)."""
+        """Set up the ``m`` triangles of ``n_draws`` draws (geo: GeometryBuffers).
+        Returns (P = clipped pieces, profiling events)."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize
-        args = (clip, outcode, win, faces, np.uint32(m), np.int32(width), np.int32(height),
-                np.int32(CULL_MODES[cull]), np.float32(kx), np.float32(ky))
-        gsize = (max(m, 1),)
-        ev = [self.k_setup(queue, gsize, None, *args, b.pieces.ensure(rec * m),
-                           b.status.ensure(m), b.clip_count.ensure(4 * m))]
+        draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
+                     geo.face_ids.buf)
+        size = np.int32(width), np.int32(height)
+        gsize = (max(n_draws, 1) * CLUSTER_MAX,)
+        ev = [self.k_setup(queue, gsize, None, clip, outcode, win, *draw_args, *size,
+                           np.int32(CULL_MODES[cull]), np.float32(kx), np.float32(ky),
+                           b.pieces.ensure(rec * m, "setup buffer"), b.status.ensure(m),
+                           b.clip_count.ensure(4 * m))]
         total = np.zeros(1, np.int32)
         if m:
-            cnt = cla.Array(queue, (m,), np.int32, data=b.clip_count.buf)
-            off = cla.Array(queue, (m,), np.int32, data=b.clip_offset.ensure(4 * m))
-            tot = cla.Array(queue, (1,), np.int32, data=b.clip_total.ensure(4))
-            ev.append(self.scan(cnt, off, tot, np.int32(m), size=m, queue=queue))
+            chunks = np.uint32(min(SCAN_CHUNKS, m))
+            part = self.partial.ensure(4 * SCAN_CHUNKS)
+            ev.append(self.k_partials(queue, (int(chunks),), (1,), b.clip_count.buf,
+                                      np.uint32(m), chunks, part))
+            ev.append(self.k_offsets(queue, (int(chunks),), (1,), b.clip_count.buf,
+                                     np.uint32(m), chunks, part, b.clip_offset.ensure(4 * m),
+                                     b.clip_total.ensure(4)))
             cl.enqueue_copy(queue, total, b.clip_total.buf)
         p = int(total[0])
         if p:
-            ev.append(self.k_clipped(queue, gsize, None, *args, b.clip_count.buf,
+            ev.append(self.k_clipped(queue, gsize, None, clip, outcode, *draw_args, *size,
+                                     np.float32(kx), np.float32(ky), b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))
         else:  # the kernels still need valid buffer arguments downstream

@@ -1,20 +1,21 @@
-"""Vertex stage host side: object → clip space (float4) and outcodes (kernels/vertex.cl)."""
+"""Vertex stage host side: object → clip space (float4), outcodes and window positions of
+every vertex of this frame's draws (kernels/vertex.cl)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig
+from ..config import CLUSTER_MAX, RasterConfig
 from ..device import program
 from ._buffers import GrowBuffer
 
 
 @dataclass
 class ClipBuffers:
-    """Vertex → setup boundary, N = number of vertices.
+    """Vertex → setup boundary, N = vertices in this frame's vertex stream.
 
     clip: float32 (N, 4) clip-space positions. outcode: uint16 (N,) outcode bits
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
@@ -24,22 +25,20 @@ class ClipBuffers:
     clip: GrowBuffer
     outcode: GrowBuffer
     win: GrowBuffer
-    mvp: cl.Buffer = field(repr=False)
 
 
 class VertexStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         self.kernel = cl.Kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
-        self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx),
-                                   cl.Buffer(ctx, cl.mem_flags.READ_ONLY, 64))
+        self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx))
 
-    def run(self, queue: cl.CommandQueue, positions: cl.Buffer, n: int, mvp: np.ndarray,
+    def run(self, queue: cl.CommandQueue, geo, n_draws: int, n_verts: int,
             kx: np.float32, ky: np.float32, width: int, height: int) -> cl.Event:
-        """Transform ``n`` float32 xyz positions by the row-major float32 (4, 4) ``mvp``."""
+        """Transform the vertices of ``n_draws`` draws (geo: GeometryBuffers) into a vertex
+        stream of ``n_verts`` entries."""
         b = self.buffers
-        clip = b.clip.ensure(16 * n)
-        oc = b.outcode.ensure(2 * n)
-        cl.enqueue_copy(queue, b.mvp, np.ascontiguousarray(mvp, np.float32), is_blocking=False)
-        return self.kernel(queue, (max(n, 1),), None, positions, np.uint32(n), b.mvp,
-                           np.float32(kx), np.float32(ky), np.int32(width), np.int32(height),
-                           clip, oc, b.win.ensure(16 * n))
+        return self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), None, geo.positions.buf,
+                           geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
+                           np.uint32(n_draws), geo.mvps.buf, np.float32(kx), np.float32(ky),
+                           np.int32(width), np.int32(height), b.clip.ensure(16 * n_verts),
+                           b.outcode.ensure(2 * n_verts), b.win.ensure(16 * n_verts))

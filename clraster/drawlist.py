@@ -1,0 +1,186 @@
+"""From a scene and a cull result to the arrays the vertex and setup stages read.
+
+`GeometryPool` is built once per scene (and cached by the renderer): every unique mesh's
+vertices and clusters concatenated. `frame_draws` turns a `cull.DrawList` into `Draw`
+records with each draw's place in this frame's vertex and triangle streams. The OpenCL
+renderer uploads these arrays; the NumPy twin reads the very same ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .clusters import clusters_of
+from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
+
+
+@dataclass(frozen=True)
+class GeometryPool:
+    """All unique meshes of a scene, clustered, concatenated.
+
+    positions: float32 (V, 3) vertices of every unique mesh, mesh after mesh.
+    vert_ids: int32 (sum of cluster vertex counts,) pool vertex index of each cluster-local
+        vertex. local_tris: uint8 (T, 4) local vertex indices of each clustered triangle
+        (4th byte padding). face_ids: int32 (T,) the triangle's face index in its mesh.
+    clusters: int32 (C, 4) per global cluster (tri_offset, n_tris, vert_offset, n_verts)
+        into local_tris/face_ids and vert_ids.
+    mesh_cluster_base: int64 (number of unique meshes,) global index of each mesh's cluster 0.
+    instance_mesh: int64 (I,) unique-mesh index of each instance.
+    """
+
+    positions: np.ndarray
+    vert_ids: np.ndarray
+    local_tris: np.ndarray
+    face_ids: np.ndarray
+    clusters: np.ndarray
+    mesh_cluster_base: np.ndarray
+    instance_mesh: np.ndarray
+
+    @classmethod
+    def build(cls, scene) -> GeometryPool:
+        meshes: list = []
+        index: dict[int, int] = {}
+        inst_mesh = []
+        for inst in scene.instances:
+            k = index.setdefault(id(inst.mesh), len(meshes))
+            if k == len(meshes):
+                meshes.append(inst.mesh)
+            inst_mesh.append(k)
+        pos, vids, ltris, fids, cl, cbase = [], [], [], [], [], []
+        v0 = t0 = vv0 = c0 = 0
+        for mesh in meshes:
+            cm = clusters_of(mesh)
+            pos.append(np.asarray(mesh.vertices, np.float32))
+            vids.append(cm.vert_ids.astype(np.int64) + v0)
+            lt = np.zeros((cm.local_tris.shape[0], 4), np.uint8)
+            lt[:, :3] = cm.local_tris
+            ltris.append(lt)
+            fids.append(cm.face_ids)
+            c = np.empty((cm.n_clusters, 4), np.int64)
+            c[:, 0] = cm.tri_offset[:-1] + t0
+            c[:, 1] = np.diff(cm.tri_offset)
+            c[:, 2] = cm.vert_offset[:-1] + vv0
+            c[:, 3] = np.diff(cm.vert_offset)
+            cl.append(c)
+            cbase.append(c0)
+            v0 += mesh.vertices.shape[0]
+            t0 += cm.local_tris.shape[0]
+            vv0 += cm.vert_ids.shape[0]
+            c0 += cm.n_clusters
+        for total, what in ((v0, "vertices"), (t0, "triangles"), (vv0, "cluster vertices")):
+            if total >= 2**31:
+                raise ValueError(f"the scene's unique meshes hold {total:,} {what}; at most "
+                                 "2**31 - 1 are supported")
+        if c0 and int(np.concatenate(cl)[:, [1, 3]].max()) > CLUSTER_MAX:
+            raise ValueError(f"clusters must have at most {CLUSTER_MAX} triangles and vertices")
+
+        def cat(parts, dtype, shape):
+            return (np.ascontiguousarray(np.concatenate(parts), dtype) if parts
+                    else np.zeros(shape, dtype))
+
+        return cls(cat(pos, np.float32, (0, 3)), cat(vids, np.int32, (0,)),
+                   cat(ltris, np.uint8, (0, 4)), cat(fids, np.int32, (0,)),
+                   cat(cl, np.int32, (0, 4)), np.asarray(cbase, np.int64),
+                   np.asarray(inst_mesh, np.int64))
+
+
+@dataclass(frozen=True)
+class FrameDraws:
+    """This frame's draws. draws: DRAW_DTYPE (D,). n_verts / n_tris: sizes of the vertex and
+    triangle streams. mvps: float32 (I, 16) row-major view-projection · model per instance."""
+
+    draws: np.ndarray
+    n_verts: int
+    n_tris: int
+    mvps: np.ndarray
+
+
+def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> FrameDraws:
+    """Lay out ``draw_list`` (instance, cluster, inside) as `Draw` records.
+
+    view_proj: float64 (4, 4). Each instance's matrix is formed in float64 and rounded to
+    float32 once, for both the device and the twin.
+    """
+    inst = np.asarray(draw_list.instance, np.int64)
+    gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(draw_list.cluster,
+                                                                         np.int64)
+    info = pool.clusters[gcl]
+    d = np.zeros(inst.size, DRAW_DTYPE)
+    d["cluster"] = gcl
+    d["instance"] = inst
+    nv, nt = info[:, 3].astype(np.int64), info[:, 1].astype(np.int64)
+    d["vert_base"] = np.cumsum(nv) - nv
+    d["tri_base"] = np.cumsum(nt) - nt
+    d["face_base"] = np.asarray(scene.face_base, np.int64)[inst] if inst.size else 0
+    d["flags"] = np.where(np.asarray(draw_list.inside, bool), DRAW_INSIDE, 0)
+    n_verts, n_tris = int(nv.sum()), int(nt.sum())
+    if n_verts >= 2**31 or n_tris >= 2**31:
+        raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
+    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances]) \
+        if scene.instances else np.zeros((0, 4, 4))
+    mvps = np.matmul(np.asarray(view_proj, np.float64), mats).astype(np.float32)
+    if not np.all(np.isfinite(mvps)):
+        raise ValueError("an instance's view-projection · model matrix is not finite in "
+                         "float32")
+    return FrameDraws(d, n_verts, n_tris, np.ascontiguousarray(mvps.reshape(-1, 16)))
+
+
+def view_projection(camera, width: int, height: int) -> np.ndarray:
+    """float64 (4, 4) view-projection of ``camera`` for this image size, validated."""
+    try:
+        m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
+    except AttributeError:
+        raise ValueError(f"expected a clraster.Camera, got {type(camera).__name__}") from None
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError("camera.view_projection() must return a finite (4, 4) matrix")
+    return m
+
+
+@dataclass
+class FramePlan:
+    """Everything both renderers need before the vertex stage: the scene, its pool, the cull
+    result and the draw records."""
+
+    scene: object
+    pool: GeometryPool
+    draw_list: object
+    frame: FrameDraws
+
+
+class PlanCache:
+    """Keeps the scene (made from a bare Mesh when needed) and geometry pool of the last
+    target, so repeated frames of the same mesh or scene reuse them."""
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._value: tuple | None = None
+
+    def scene_and_pool(self, target) -> tuple[object, GeometryPool]:
+        from .mesh import Mesh
+        from .scene import Scene
+
+        if isinstance(target, Mesh):
+            key = ("mesh", id(target))
+        elif isinstance(target, Scene):
+            key = ("scene", id(target), target.version)
+        else:
+            raise ValueError(f"expected a clraster.Mesh or clraster.Scene, got "
+                             f"{type(target).__name__}")
+        if self._key != key or self._value is None or self._value[0] is not target:
+            scene = Scene.from_mesh(target) if isinstance(target, Mesh) else target
+            self._value = (target, scene, GeometryPool.build(scene))
+            self._key = key
+        return self._value[1], self._value[2]
+
+
+def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
+               cones: bool, cache: PlanCache) -> FramePlan:
+    """Cull ``target`` (Mesh or Scene) for ``camera`` and lay out this frame's draws."""
+    from .cull import build_draw_list
+
+    vp = view_projection(camera, width, height)
+    scene, pool = cache.scene_and_pool(target)
+    dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull)
+    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp))

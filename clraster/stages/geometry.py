@@ -1,0 +1,54 @@
+"""Device copies of the geometry pool (per scene) and of the per-frame draw records."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from ..drawlist import FrameDraws, GeometryPool
+from ._buffers import GrowBuffer
+
+
+@dataclass
+class GeometryBuffers:
+    """Scene → vertex/setup boundary (see drawlist.GeometryPool for shapes and dtypes).
+
+    positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
+    draws: DRAW_DTYPE (D,) and mvps: float32 (I, 16), uploaded every frame.
+    """
+
+    positions: GrowBuffer
+    vert_ids: GrowBuffer
+    clusters: GrowBuffer
+    local_tris: GrowBuffer
+    face_ids: GrowBuffer
+    draws: GrowBuffer
+    mvps: GrowBuffer
+
+
+class GeometryStage:
+    def __init__(self, ctx: cl.Context) -> None:
+        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(7)))
+        self._pool: GeometryPool | None = None
+
+    def upload_pool(self, queue: cl.CommandQueue, pool: GeometryPool) -> None:
+        if pool is self._pool:
+            return
+        b = self.buffers
+        for gb, arr in ((b.positions, pool.positions), (b.vert_ids, pool.vert_ids),
+                        (b.clusters, pool.clusters), (b.local_tris, pool.local_tris),
+                        (b.face_ids, pool.face_ids)):
+            buf = gb.ensure(arr.nbytes, "geometry buffer")
+            if arr.nbytes:
+                cl.enqueue_copy(queue, buf, np.ascontiguousarray(arr), is_blocking=False)
+        queue.finish()
+        self._pool = pool
+
+    def upload_frame(self, queue: cl.CommandQueue, fd: FrameDraws) -> None:
+        b = self.buffers
+        for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps)):
+            buf = gb.ensure(arr.nbytes)
+            if arr.nbytes:
+                cl.enqueue_copy(queue, buf, arr, is_blocking=True)
