@@ -1,10 +1,24 @@
 """Object culling on the host: frustum planes, bounding-volume tests, draw lists.
 
 Step 1 of the pipeline (DESIGN.md): instances and clusters are classified against the six
-frustum planes of the view-projection matrix through two levels of BVH (instances in world
-space, then each surviving instance's clusters in its object space), and clusters that face
-away are removed with their normal cones. The result is a :class:`DrawList` of (instance,
-cluster) pairs for the renderer.
+frustum planes of the view-projection matrix, and clusters that face away are removed with
+their normal cones. The result is a :class:`DrawList` of (instance, cluster) pairs for the
+renderer.
+
+Frustum culling has two levels. Top: a BVH over the instances' world boxes; an instance
+OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE with no
+further test, one INTERSECTING passes on the planes it still crosses (its plane mask).
+Below, an intersecting instance's clusters are tested against those planes only, by one of
+three equivalent-in-spirit, all-conservative paths chosen by mesh size:
+
+* big meshes (> `DENSE_PAIRS` instance × cluster pairs): the mesh's cluster BVH (built once
+  per mesh, object space), traversed for all of the mesh's intersecting instances at once
+  with each instance's planes moved to object space;
+* medium meshes: every cluster box against each instance's object-space planes (three
+  matrix products, no traversal);
+* small meshes (<= `FLAT_CLUSTERS` clusters, the many-instances case): every (instance,
+  cluster) box precomputed once in world space (the exact box around the transformed
+  cluster box) and tested against the world planes, all instances at once.
 
 Frustum planes (Gribb & Hartmann, "Fast extraction of viewing frustum planes from the
 world-view-projection matrix", 2001): with rows r0..r3 of VP, a point p is inside iff
@@ -413,7 +427,7 @@ def _prepare(scene: Scene, max_triangles: int, max_vertices: int) -> _SceneCull:
 
 
 #: Clusters per leaf of a mesh's cluster BVH.
-CLUSTER_LEAF_SIZE = 4
+CLUSTER_LEAF_SIZE = 32
 #: Instances of meshes with at most this many clusters take the flat path: their
 #: (instance, cluster) boxes are precomputed in world space and tested all at once.
 FLAT_CLUSTERS = 64
@@ -424,7 +438,7 @@ FLAT_MAX_PAIRS = 1 << 22
 #: their BVH: for small meshes with many instances that is several times faster.
 DENSE_CLUSTERS = 64
 #: ... and so are meshes whose (instances × clusters) grid is at most this large.
-DENSE_PAIRS = 4096
+DENSE_PAIRS = 16384
 _DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
 
 
@@ -509,8 +523,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             cached (per mesh, and per scene version).
         view_proj: (4, 4) world → clip matrix (OpenGL conventions, see `frustum_planes`).
         frustum: cull instances and clusters outside the view frustum (top-level BVH over
-            instance world boxes, then each instance's cluster BVH in object space,
-            starting from the planes its instance still crosses).
+            instance world boxes, then each intersecting instance's clusters against the
+            planes it still crosses; see the module docstring).
         cones: cull clusters that face away, with their normal cones (only when `cull` is
             "back" or "front", and never for a mirroring projection). The test is
             conservative: a culled cluster's non-degenerate triangles are all seen from

@@ -491,19 +491,19 @@ def test_nonfinite_and_empty_instances():
     assert not dl.inside.any()
 
 
-@pytest.mark.parametrize("path", ["dense", "bvh"])
+@pytest.mark.parametrize("path", ["flat", "dense", "bvh"])
 def test_instances_of_one_mesh_many_and_few(path, monkeypatch):
     # 40 × 40 instances of a small mesh and a few rotated, non-uniformly scaled instances of
-    # a bigger one, through both cluster paths (dense matrix test / batched BVH traversal):
+    # a bigger one, through each cluster path (world boxes of every (instance, cluster)
+    # pair / object-space planes against every cluster box / batched BVH traversal):
     # a pair is culled only if the exact object-space box test says OUTSIDE, and every pair
     # clearly outside (by 1e-3 relative) is culled.
     import clraster.cull as cull_mod
 
-    if path == "bvh":
-        monkeypatch.setattr(cull_mod, "DENSE_CLUSTERS", 0)
-        monkeypatch.setattr(cull_mod, "DENSE_PAIRS", 0)
-    else:
-        monkeypatch.setattr(cull_mod, "DENSE_CLUSTERS", 10**9)
+    flat, dense = {"flat": (10**9, 0), "dense": (0, 10**9), "bvh": (0, 0)}[path]
+    monkeypatch.setattr(cull_mod, "FLAT_CLUSTERS", flat)
+    monkeypatch.setattr(cull_mod, "DENSE_CLUSTERS", dense)
+    monkeypatch.setattr(cull_mod, "DENSE_PAIRS", dense)
     rng = np.random.default_rng(3)
     small = cube_mesh()
     big = Mesh(rng.uniform(-1, 1, (3 * 4000, 3)), np.arange(3 * 4000).reshape(-1, 3))
@@ -536,19 +536,28 @@ def test_instances_of_one_mesh_many_and_few(path, monkeypatch):
         assert not d[clear == OUT].any(), i
 
 
-def shared_mesh(name: str) -> Mesh:
-    path = MESHES / name
+@pytest.fixture(scope="module")
+def bunny() -> Mesh:
+    path = MESHES / "stanford_bunny.ply"
     if not path.is_file():
-        pytest.skip(f"shared mesh {name} not found in {MESHES}")
+        pytest.skip(f"shared mesh stanford_bunny.ply not found in {MESHES} (the shared mesh "
+                    f"folder next to the repository is absent)")
     return Mesh.load(path)
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_draw_list_is_conservative_on_the_bunny(seed):
+@pytest.mark.parametrize("seed, path", [(0, "dense"), (1, "dense"), (2, "dense"),
+                                        (3, "bvh"), (4, "bvh"), (5, "flat"), (6, "flat")])
+def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
     # Random views and transforms: every culled cluster is really culled (all vertices
-    # outside one plane, or every usable triangle clockwise in NDC) and every INSIDE cluster
-    # is inside in float32, as the renderer computes clip coordinates.
-    mesh = shared_mesh("stanford_bunny.ply")
+    # outside one plane, or every usable triangle showing its culled side, also in NDC) and
+    # every INSIDE cluster is inside in float32, as the renderer computes clip coordinates.
+    import clraster.cull as cull_mod
+
+    if path == "bvh":
+        monkeypatch.setattr(cull_mod, "DENSE_PAIRS", 0)
+    elif path == "flat":
+        monkeypatch.setattr(cull_mod, "FLAT_CLUSTERS", 10**9)
+    mesh = bunny
     rng = np.random.default_rng(seed)
     t = np.eye(4)
     t[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0] * rng.uniform(5, 15, 3)
