@@ -390,24 +390,25 @@ class _SceneCull:
         self.flat_start = np.cumsum(fc) - fc
         self.flat_count = fc
         pi = np.repeat(self.flat_ids, fc)
-        pos = _ranges(self.flat_start, fc)
-        pc = pos - np.repeat(self.flat_start, fc)
-        self.flat_inst = pi
-        self.flat_cl = pc
-        self.flat_g = self.mesh_base[self.inst_umesh[pi]] + pc
+        pc = _ranges(self.flat_start, fc) - np.repeat(self.flat_start, fc)
+        self.flat_inst = pi.astype(np.int32)
+        self.flat_cl = pc.astype(np.int32)
+        self.flat_g = (self.mesh_base[self.inst_umesh[pi]] + pc).astype(np.int32)
+        self.flat_boxes = np.empty((9, pi.size))
         lo_c = np.concatenate([mc.cm.aabb_min for mc in umesh]).astype(np.float64) if umesh \
             else np.zeros((0, 3))
         hi_c = np.concatenate([mc.cm.aabb_max for mc in umesh]).astype(np.float64) if umesh \
             else np.zeros((0, 3))
-        centre = (lo_c[self.flat_g] + hi_c[self.flat_g]) * 0.5
-        half = (hi_c[self.flat_g] - lo_c[self.flat_g]) * 0.5
-        mt = self.m[pi]
-        cw = np.einsum("pij,pj->pi", mt[:, :3, :3], centre) + mt[:, :3, 3]
-        hw = np.einsum("pij,pj->pi", self.abs_m[pi][:, :3, :3], half)
-        omag = box_magnitudes(lo_c[self.flat_g], hi_c[self.flat_g])
-        magw = np.einsum("pij,pj->pi", self.abs_m[pi][:, :3, :3], omag) \
-            + self.abs_m[pi][:, :3, 3]
-        self.flat_boxes = np.ascontiguousarray(np.vstack([(cw - hw).T, (cw + hw).T, magw.T]))
+        for p0 in range(0, pi.size, 1 << 16):  # bounded temporaries
+            sl = slice(p0, p0 + (1 << 16))
+            g, lin, am = self.flat_g[sl], self.m[pi[sl]], self.abs_m[pi[sl]]
+            centre = (lo_c[g] + hi_c[g]) * 0.5
+            half = (hi_c[g] - lo_c[g]) * 0.5
+            cw = np.einsum("pij,pj->pi", lin[:, :3, :3], centre) + lin[:, :3, 3]
+            hw = np.einsum("pij,pj->pi", am[:, :3, :3], half)
+            magw = np.einsum("pij,pj->pi", am[:, :3, :3], box_magnitudes(lo_c[g], hi_c[g])) \
+                + am[:, :3, 3]
+            self.flat_boxes[:, sl] = np.vstack([(cw - hw).T, (cw + hw).T, magw.T])
         # Other instances (big meshes, NaN/Inf vertices) are grouped by mesh, in scene order,
         # and go through their mesh's object-space cluster BVH.
         groups: dict[int, list[int]] = {}
@@ -431,8 +432,8 @@ CLUSTER_LEAF_SIZE = 32
 #: Instances of meshes with at most this many clusters take the flat path: their
 #: (instance, cluster) boxes are precomputed in world space and tested all at once.
 FLAT_CLUSTERS = 64
-#: ... unless the scene has more such pairs than this (memory: 9 float64 + 3 int64 each).
-FLAT_MAX_PAIRS = 1 << 22
+#: ... unless the scene has more such pairs than this (84 bytes each, kept with the scene).
+FLAT_MAX_PAIRS = 1 << 21
 #: Meshes with at most this many (bounded) clusters are tested densely, every cluster
 #: against every intersecting instance's planes (three matrix products), not through
 #: their BVH: for small meshes with many instances that is several times faster.
@@ -489,8 +490,12 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
             cst = np.zeros(0, np.uint8)
         pos = np.concatenate([pos_in, pos_t])
         ins = np.concatenate([np.ones(pos_in.size, bool), cst == INSIDE])
+        if pos_in.size and pos_t.size:  # merge the two sorted runs
+            order = _sort_keys(pos, prep.flat_inst.size)
+            pos, ins = pos[order], ins[order]
     g = prep.flat_g[pos]
-    return prep.flat_inst[pos], prep.flat_cl[pos], ins, prep.g_tri[g], g
+    return (prep.flat_inst[pos].astype(np.int64), prep.flat_cl[pos].astype(np.int64), ins,
+            prep.g_tri[g], g)
 
 
 def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndarray,
@@ -637,6 +642,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         out_inst.append(inst)
         out_cl.append(cl)
         out_in.append(ins)
+    in_order = True  # the flat path emits pairs in (instance, cluster) order; groups do not
 
     for mc, members in prep.groups:
         t0 = time.perf_counter()
@@ -674,6 +680,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     pi_list.append(np.repeat(tested, mc.unbounded.size))
                     pc_list.append(np.tile(mc.unbounded.astype(np.int64), tested.size))
                     pin_list.append(np.zeros(tested.size * mc.unbounded.size, bool))
+        in_order = False
         inst = np.concatenate(pi_list)
         cl = np.concatenate(pc_list)
         ins = np.concatenate(pin_list)
@@ -695,7 +702,9 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         out_in.append(ins)
 
     t_order = time.perf_counter()
-    if out_inst:
+    if len(out_inst) == 1 and in_order:  # only flat-path pairs: already in draw order
+        inst, cl, ins = out_inst[0], out_cl[0], out_in[0]
+    elif out_inst:
         inst = np.concatenate(out_inst)
         cl = np.concatenate(out_cl)
         ins = np.concatenate(out_in)

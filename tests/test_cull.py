@@ -621,6 +621,39 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
         assert (np.abs(q[:, :3]) < q[:, 3:4]).all()
 
 
+def test_draw_order_is_fixed():
+    # A mixed scene (small meshes on the flat path, a bigger one through its BVH, a NaN
+    # instance, an empty one): with nothing culled the list enumerates every (instance,
+    # cluster) in scene order then cluster order; culled lists keep that order, and two
+    # calls give identical lists.
+    rng = np.random.default_rng(11)
+    big = Mesh(rng.uniform(-1, 1, (3 * 9000, 3)), np.arange(3 * 9000).reshape(-1, 3))
+    v = np.array(cube_mesh().vertices)
+    v[3] = np.inf
+    scene = Scene()
+    scene.add(cube_mesh(), translation(0, 0, -5))
+    scene.add(big, translation(3, 0, -6))
+    scene.add(Mesh(v, cube_mesh().faces), translation(-3, 0, -5))
+    scene.add(Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int32)))
+    scene.add(quad_mesh("+y"), translation(0, -2, -4))
+    scene.add(big, translation(-40, 0, -6))
+    n_c = [clusters_of(i.mesh).n_clusters if i.mesh.n_faces else 0 for i in scene.instances]
+    full = [(i, c) for i in range(scene.n_instances) for c in range(n_c[i])]
+    dl = build_draw_list(scene, P90, frustum=False, cones=False)
+    assert list(zip(dl.instance.tolist(), dl.cluster.tolist(), strict=True)) == full
+    for kw in ({}, {"cull": "front"}, {"cones": False}):
+        a = build_draw_list(scene, P90, **kw)
+        b = build_draw_list(scene, P90, **kw)
+        check_counts(a, scene)
+        np.testing.assert_array_equal(a.instance, b.instance)
+        np.testing.assert_array_equal(a.cluster, b.cluster)
+        np.testing.assert_array_equal(a.inside, b.inside)
+        pairs = list(zip(a.instance.tolist(), a.cluster.tolist(), strict=True))
+        assert pairs == [p for p in full if p in set(pairs)]
+        assert 5 not in a.instance  # far to the left: culled
+        assert 2 in a.instance  # the NaN instance is never culled as a whole
+
+
 def test_draw_list_validation_and_timings():
     scene = cube_grid_scene(2)
     with pytest.raises(ValueError, match="view_proj"):
