@@ -77,8 +77,9 @@ class Instance:
 
     Attributes:
         mesh: the `Mesh` (shared, not copied).
-        transform: float64 (4, 4), read-only: object → world for column vectors, affine,
-            invertible (condition number of its 3×3 part <= `MAX_TRANSFORM_COND`).
+        transform: float64 (4, 4), read-only (a validated copy of what was given; None
+            means identity): object → world for column vectors, affine, invertible
+            (condition number of its 3×3 part <= `MAX_TRANSFORM_COND`).
 
     Raises:
         ValueError: `mesh` is not a `Mesh`, or the transform is invalid (wrong shape,
@@ -86,17 +87,13 @@ class Instance:
     """
 
     mesh: Mesh
-    transform: np.ndarray
+    transform: np.ndarray  # None (identity) or array-like is accepted and converted
 
     def __post_init__(self) -> None:
         if not isinstance(self.mesh, Mesh):
-            raise ValueError(f"Instance.mesh must be a clraster.Mesh, got "
-                             f"{type(self.mesh).__name__}; build one with clraster.Mesh(...)")
-        t = self.transform
-        if not (isinstance(t, np.ndarray) and t.dtype == np.float64 and not t.flags.writeable
-                and t.shape == (4, 4)):
-            t = _check_transform(t, "Instance transform")
-        object.__setattr__(self, "transform", t)
+            raise ValueError(f"mesh must be a clraster.Mesh, got {type(self.mesh).__name__}; "
+                             f"build one with clraster.Mesh(vertices, faces)")
+        object.__setattr__(self, "transform", _check_transform(self.transform, "transform"))
 
 
 class _MeshInfo:
@@ -166,11 +163,11 @@ class Scene:
                 the instance); or the scene would reach 2**31 faces.
         """
         index = len(self._instances)
-        if not isinstance(mesh, Mesh):
-            raise ValueError(f"instance {index}: mesh must be a clraster.Mesh, got "
-                             f"{type(mesh).__name__}")
-        t = _check_transform(transform, f"instance {index} transform")
-        return self._append(Instance(mesh, t))
+        try:
+            inst = Instance(mesh, transform)
+        except ValueError as exc:
+            raise ValueError(f"instance {index}: {exc}") from None
+        return self._append(inst)
 
     def _append(self, inst: Instance) -> int:
         index = len(self._instances)

@@ -273,6 +273,24 @@ def test_shared_meshes(name, limits):
     assert cm.n_clusters >= m.n_faces / limits[0]
 
 
+@settings(max_examples=40, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n_faces=st.integers(1, 700),
+       n_verts=st.sampled_from([3, 10, 100, 2000]), max_triangles=st.integers(1, 130),
+       max_vertices=st.integers(3, 130), nan_share=st.sampled_from([0.0, 0.0, 0.05, 1.0]))
+def test_clusterize_invariants_on_random_meshes(seed, n_faces, n_verts, max_triangles,
+                                                max_vertices, nan_share):
+    # Random index soups over small or large vertex pools (so faces share vertices a lot or
+    # not at all, and repeat indices), with NaN vertices sprinkled in.
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n_verts, 3))
+    v[rng.random(n_verts) < nan_share] = np.nan
+    f = rng.integers(0, n_verts, (n_faces, 3))
+    m = Mesh(v, f)
+    cm = clusterize(m, max_triangles, max_vertices)
+    check_clustered(m, cm, max_triangles, max_vertices)
+
+
 # -- cone conservativeness (property) ------------------------------------------------------
 
 @st.composite

@@ -108,6 +108,12 @@ def test_transform_is_stored_read_only_and_copied():
     assert stored[0, 3] == 1.0 and stored.dtype == np.float64 and not stored.flags.writeable
     # Mirroring (negative determinant) is a valid transform.
     Scene.from_mesh(TRI, np.diag([-1.0, 1.0, 1.0, 1.0]))
+    # Instances validate on their own too, even from a read-only float64 array.
+    bad = np.full((4, 4), np.nan)
+    bad.flags.writeable = False
+    with pytest.raises(ValueError, match="NaN"):
+        Instance(TRI, bad)
+    assert (Instance(TRI, None).transform == np.eye(4)).all()
 
 
 def test_face_limit(monkeypatch):
