@@ -161,12 +161,12 @@ def _check_limits(max_triangles: int, max_vertices: int) -> tuple[int, int]:
 
 
 def _spread10(x: np.ndarray) -> np.ndarray:
-    """Spread the low 10 bits of uint64 `x` to every third bit (Morton interleave)."""
-    x = x & np.uint64(0x3FF)
-    x = (x | (x << np.uint64(16))) & np.uint64(0x30000FF)
-    x = (x | (x << np.uint64(8))) & np.uint64(0x300F00F)
-    x = (x | (x << np.uint64(4))) & np.uint64(0x30C30C3)
-    x = (x | (x << np.uint64(2))) & np.uint64(0x9249249)
+    """Spread the low 10 bits of uint32 `x` to every third bit (Morton interleave)."""
+    x = x & np.uint32(0x3FF)
+    x = (x | (x << np.uint32(16))) & np.uint32(0x30000FF)
+    x = (x | (x << np.uint32(8))) & np.uint32(0x300F00F)
+    x = (x | (x << np.uint32(4))) & np.uint32(0x30C30C3)
+    x = (x | (x << np.uint32(2))) & np.uint32(0x9249249)
     return x
 
 
@@ -178,10 +178,11 @@ def _morton_order(centroids: list[np.ndarray], ids: np.ndarray) -> np.ndarray:
     lo = [float(c.min()) for c in centroids]
     extent = max(float(c.max()) - m for c, m in zip(centroids, lo, strict=True))
     scale = 1023.999 / extent if extent > 0 else 0.0
-    code = np.zeros(ids.size, dtype=np.uint64)
+    code = np.zeros(ids.size, dtype=np.uint32)
     for k, (c, m) in enumerate(zip(centroids, lo, strict=True)):
-        code |= _spread10(((c - m) * scale).astype(np.uint64)) << np.uint64(k)
-    key = (code << np.uint64(33)) | ids.astype(np.uint64)  # ids < 2**31: unique keys
+        q = np.clip((c.astype(np.float64) - m) * scale, 0.0, 1023.0).astype(np.uint32)
+        code |= _spread10(q) << np.uint32(k)
+    key = (code.astype(np.uint64) << np.uint64(33)) | ids.astype(np.uint64)  # unique keys
     return (np.sort(key) & np.uint64((1 << 33) - 1)).astype(np.int32)
 
 
@@ -298,8 +299,13 @@ def clusterize(mesh: Mesh, max_triangles: int = 128, max_vertices: int = 128) ->
     good = np.flatnonzero(finite_f).astype(np.int32)
     bad = np.flatnonzero(~finite_f).astype(np.int32)
     g = fcols if bad.size == 0 else [f[good] for f in fcols]
-    centroid_sums = [c[g[0]] + c[g[1]] + c[g[2]] for c in cols]  # 3 × the centroid
-    del g
+    # 3 × the centroid, in float32 (only quantized to 10 bits per axis).
+    v32 = [np.ascontiguousarray(verts[:, k]) for k in range(3)]
+    with np.errstate(over="ignore"):
+        centroid_sums = [c[g[0]] + c[g[1]] + c[g[2]] for c in v32]
+    if not all(np.isfinite(c).all() for c in centroid_sums):  # float32 overflow: redo
+        centroid_sums = [c[g[0]] + c[g[1]] + c[g[2]] for c in cols]
+    del g, v32
     face_seq = np.concatenate([_morton_order(centroid_sums, good), bad])
     del centroid_sums, fcols, finite_v, finite_f
 
@@ -313,14 +319,20 @@ def clusterize(mesh: Mesh, max_triangles: int = 128, max_vertices: int = 128) ->
     # mesh of <= max_triangles faces is then drawn exactly in index order, and bigger ones
     # in index order within each cluster. (Ties never depend on it — the depth test breaks
     # them by triangle id — but per-fragment statistics such as depth-test passes do.)
-    face_seq = face_seq[np.lexsort((face_seq, np.repeat(np.arange(starts.size), n_tri)))]
-
-    # Padded (chunk, 3·max_triangles) matrix of vertex ids, processed in batches of chunks.
-    sentinel = np.int64(verts.shape[0])
+    # (Sorted row by row in the padded (chunk, slot) grid; the padding sorts last.)
     n_chunks = starts.size
     chunk_of_face = np.repeat(np.arange(n_chunks), n_tri)
     slot = np.arange(n_faces) - starts[chunk_of_face]
     dest_face = chunk_of_face * t + slot  # face position in the padded (chunk, slot) grid
+    pad = np.iinfo(np.int32).max
+    grid = np.full(n_chunks * t, pad, np.int32)
+    grid[dest_face] = face_seq
+    grid = np.sort(grid.reshape(n_chunks, t), axis=1).ravel()
+    face_seq = grid[grid != pad]
+    del grid
+
+    # Padded (chunk, 3·max_triangles) matrix of vertex ids, processed in batches of chunks.
+    sentinel = np.int64(verts.shape[0])
     seq_verts = faces[face_seq]
     seg_len_all, local_all, first_all, vid_all = [], [], [], []
     for r0 in range(0, n_chunks, _CHUNK_ROWS):
@@ -386,8 +398,9 @@ def _frozen(cm: ClusteredMesh) -> ClusteredMesh:
 
 
 def _round_up32(x: np.ndarray) -> np.ndarray:
-    """float64 → float32, rounded towards +inf."""
-    y = x.astype(np.float32)
+    """float64 → float32, rounded towards +inf (beyond float32 range: +inf)."""
+    with np.errstate(over="ignore"):
+        y = x.astype(np.float32)
     low = y.astype(np.float64) < x
     y[low] = np.nextafter(y[low], np.float32(np.inf))
     return y
