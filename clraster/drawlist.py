@@ -28,6 +28,10 @@ class GeometryPool:
         into local_tris/face_ids and vert_ids.
     mesh_cluster_base: int64 (number of unique meshes,) global index of each mesh's cluster 0.
     instance_mesh: int64 (I,) unique-mesh index of each instance.
+    aabb_min, aabb_max: float64 (C, 3) object-space cluster bounds; bounded: bool (C,) False
+        for clusters with non-finite vertices (never occlusion-tested: always drawn).
+    instance_key_base: int64 (I + 1,): (instance i, cluster c of its mesh) has the key
+        instance_key_base[i] + c, unique over the scene (visibility history).
     """
 
     positions: np.ndarray
@@ -37,6 +41,10 @@ class GeometryPool:
     clusters: np.ndarray
     mesh_cluster_base: np.ndarray
     instance_mesh: np.ndarray
+    aabb_min: np.ndarray
+    aabb_max: np.ndarray
+    bounded: np.ndarray
+    instance_key_base: np.ndarray
 
     @classmethod
     def build(cls, scene) -> GeometryPool:
@@ -48,7 +56,7 @@ class GeometryPool:
             if k == len(meshes):
                 meshes.append(inst.mesh)
             inst_mesh.append(k)
-        pos, vids, ltris, fids, cl, cbase = [], [], [], [], [], []
+        pos, vids, ltris, fids, cl, cbase, lo, hi, bnd = [], [], [], [], [], [], [], [], []
         v0 = t0 = vv0 = c0 = 0
         for mesh in meshes:
             cm = clusters_of(mesh)
@@ -65,6 +73,9 @@ class GeometryPool:
             c[:, 3] = np.diff(cm.vert_offset)
             cl.append(c)
             cbase.append(c0)
+            lo.append(np.asarray(cm.aabb_min, np.float64))
+            hi.append(np.asarray(cm.aabb_max, np.float64))
+            bnd.append(np.asarray(cm.bounded, bool))
             v0 += mesh.vertices.shape[0]
             t0 += cm.local_tris.shape[0]
             vv0 += cm.vert_ids.shape[0]
@@ -80,10 +91,15 @@ class GeometryPool:
             return (np.ascontiguousarray(np.concatenate(parts), dtype) if parts
                     else np.zeros(shape, dtype))
 
+        inst_mesh_a = np.asarray(inst_mesh, np.int64)
+        n_cl = np.array([clusters_of(m).n_clusters for m in meshes], np.int64)
+        key_base = np.zeros(len(inst_mesh) + 1, np.int64)
+        np.cumsum(n_cl[inst_mesh_a] if inst_mesh else [], out=key_base[1:])
         return cls(cat(pos, np.float32, (0, 3)), cat(vids, np.int32, (0,)),
                    cat(ltris, np.uint8, (0, 4)), cat(fids, np.int32, (0,)),
-                   cat(cl, np.int32, (0, 4)), np.asarray(cbase, np.int64),
-                   np.asarray(inst_mesh, np.int64))
+                   cat(cl, np.int32, (0, 4)), np.asarray(cbase, np.int64), inst_mesh_a,
+                   cat(lo, np.float64, (0, 3)), cat(hi, np.float64, (0, 3)),
+                   cat(bnd, bool, (0,)), key_base)
 
 
 @dataclass(frozen=True)
@@ -127,6 +143,32 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> 
     return FrameDraws(d, n_verts, n_tris, np.ascontiguousarray(mvps.reshape(-1, 16)))
 
 
+def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
+    """The draws of ``fd`` where ``mask`` (bool (D,)) is set, in the same order, with their
+    places in the vertex and triangle streams recomputed."""
+    d = fd.draws[mask].copy()
+    info = pool.clusters[d["cluster"]].astype(np.int64)
+    nv, nt = info[:, 3], info[:, 1]
+    d["vert_base"] = np.cumsum(nv) - nv
+    d["tri_base"] = np.cumsum(nt) - nt
+    return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps)
+
+
+def world_boxes(pool: GeometryPool, scene, fd: FrameDraws) -> tuple[np.ndarray, np.ndarray,
+                                                                     np.ndarray]:
+    """World-space AABBs (float64 (D, 3) ×2) of each draw's cluster, from its object-space
+    box's 8 corners through the instance transform, and bool (D,) bounded."""
+    d = fd.draws
+    gcl = d["cluster"].astype(np.int64)
+    lo, hi = pool.aabb_min[gcl], pool.aabb_max[gcl]
+    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances])[
+        d["instance"]]
+    corners = np.stack([np.where(np.array(bits)[None, :] != 0, hi, lo)
+                        for bits in np.ndindex(2, 2, 2)], axis=1)  # (D, 8, 3)
+    w = np.einsum("dij,dkj->dki", mats[:, :3, :3], corners) + mats[:, None, :3, 3]
+    return w.min(axis=1), w.max(axis=1), pool.bounded[gcl]
+
+
 def view_projection(camera, width: int, height: int) -> np.ndarray:
     """float64 (4, 4) view-projection of ``camera`` for this image size, validated."""
     try:
@@ -147,6 +189,7 @@ class FramePlan:
     pool: GeometryPool
     draw_list: object
     frame: FrameDraws
+    view_proj: np.ndarray
 
 
 class PlanCache:
@@ -183,4 +226,4 @@ def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: b
     vp = view_projection(camera, width, height)
     scene, pool = cache.scene_and_pool(target)
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull)
-    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp))
+    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp), vp)

@@ -57,6 +57,10 @@ class FrameStats:
     triangles_total: int = 0
     triangles_frustum_culled: int = 0
     triangles_cone_culled: int = 0
+    clusters_occlusion_culled: int = 0
+    triangles_occlusion_culled: int = 0
+    clusters_phase1: int = 0
+    clusters_phase2: int = 0
     triangles_in: int = 0
     invalid: int = 0
     trivially_rejected: int = 0
@@ -80,7 +84,8 @@ class FrameStats:
             "instances_total", "instances_frustum_culled", "instances_empty",
             "clusters_total", "clusters_frustum_culled", "clusters_cone_culled",
             "clusters_drawn", "triangles_total", "triangles_frustum_culled",
-            "triangles_cone_culled")}
+            "triangles_cone_culled", "clusters_occlusion_culled", "triangles_occlusion_culled",
+            "clusters_phase1", "clusters_phase2")}
         s = cls(**obj, triangles_in=int(status.size), invalid=int(c[ST_INVALID]),
                 trivially_rejected=int(c[ST_TRIVIAL_REJECT]),
                 backface_culled=int(c[ST_BACKFACE]), degenerate=int(c[ST_DEGENERATE]),
@@ -101,7 +106,10 @@ class FrameStats:
                 ("frustum culled", g["instances_frustum_culled"], g["clusters_frustum_culled"],
                  g["triangles_frustum_culled"]),
                 ("cone culled", "", g["clusters_cone_culled"], g["triangles_cone_culled"]),
-                ("sent to setup", "", g["clusters_drawn"], g["triangles_in"])]
+                ("occlusion culled", "", g["clusters_occlusion_culled"],
+                 g["triangles_occlusion_culled"]),
+                ("sent to setup", "", g["clusters_drawn"] - g["clusters_occlusion_culled"],
+                 g["triangles_in"])]
         for k in ("invalid", "trivially_rejected", "backface_culled", "degenerate",
                   "no_sample", "clipped", "clip_pieces", "rasterized", "binned_entries",
                   "fragments_tested", "fragments_passed"):
@@ -126,12 +134,15 @@ class Frame:
             relative to the visible face's three vertices (in the face's own vertex order,
             also for clipped triangles); zeros for background.
         stats: counts per stage (`FrameStats`).
+        overdraw: (H, W) int32 fragments tested per pixel (depth complexity), when asked for
+            (``render(..., overdraw=True)``); else None.
     """
 
     depth: np.ndarray
     triangle_id: np.ndarray
     barycentrics: np.ndarray
     stats: FrameStats
+    overdraw: np.ndarray | None = None
 
     @classmethod
     def empty(cls, width: int, height: int, stats: FrameStats | None = None) -> Frame:

@@ -8,15 +8,34 @@ import numpy as np
 import pyopencl as cl
 
 from .config import RasterConfig, guard_band_factors
+from .cull import eye_from_view_proj
 from .device import default_context
-from .drawlist import PlanCache, plan_frame
+from .drawlist import PlanCache, plan_frame, subset, world_boxes
 from .frame import Frame, FrameStats
 from .inputs import check_cull, check_size
+from .occlusion import Occlusion
 from .stages.bin import BinStage
 from .stages.geometry import GeometryStage
+from .stages.pyramid import PyramidStage
 from .stages.raster import RasterStage
 from .stages.setup import SetupStage
 from .stages.vertex import VertexStage
+
+#: First frame of occlusion culling: at least this many of the nearest clusters (or 1/8 of
+#: those that survive frustum culling, if more) are drawn before the first pyramid.
+OCCLUSION_FIRST_CLUSTERS = 256
+
+
+def eye_position(view_proj: np.ndarray) -> np.ndarray | None:
+    """World eye point of a perspective view-projection, None for an orthographic one."""
+    e = eye_from_view_proj(view_proj)
+    return None if abs(e[3]) < 1e-300 else e[:3] / e[3]
+
+
+def view_direction(view_proj: np.ndarray) -> np.ndarray:
+    """World direction the view looks along (normal of the near plane), unit length."""
+    n = view_proj[3, :3] + view_proj[2, :3]
+    return n / np.linalg.norm(n)
 
 
 class Renderer:
@@ -50,10 +69,13 @@ class Renderer:
         self.binning = BinStage(self.context, self.config)
         self.raster = RasterStage(self.context, self.config)
         self.geometry = GeometryStage(self.context)
+        self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
+        self._visible: np.ndarray | None = None   # occlusion: visible keys of last frame
+        self._visible_key: tuple | None = None
 
     def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
-               cones: bool = True) -> Frame:
+               cones: bool = True, occlusion: bool = False, overdraw: bool = False) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) seen by ``camera``.
 
         Args:
@@ -63,6 +85,12 @@ class Renderer:
                 BVHs first. Conservative: it never changes the image, only the work.
             cones: cull clusters whose normal cone faces away (with cull "back"/"front").
                 Conservative too.
+            occlusion: two-phase occlusion culling with a hierarchical depth pyramid: draw
+                the clusters that were visible in this renderer's previous frame of the
+                same scene (on a first frame: the nearest ones), build the pyramid, test
+                every other cluster's box against it, draw those not occluded, and keep
+                the visible set for the next frame. Conservative: same image.
+            overdraw: also return ``frame.overdraw``, fragments tested per pixel.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -75,17 +103,44 @@ class Renderer:
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
                           cache=self._plans)
-        fd = plan.frame
         t_cull = (time.perf_counter() - t0) * 1e3
-        n_draws, m = fd.draws.shape[0], fd.n_tris
-        counts = plan.draw_list.counts
-        if m == 0:
-            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
-        kx, ky = guard_band_factors(w, h)
+        counts = dict(plan.draw_list.counts)
+        fd = plan.frame
+        if fd.n_tris == 0:
+            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
+            if overdraw:
+                fr.overdraw = np.zeros((h, w), np.int32)
+            return fr
+        self.geometry.upload_pool(self.queue, plan.pool)
+        timings = {"cull (host)": t_cull}
+        if not occlusion:
+            out, acc = self._pass(fd, cull, None, overdraw, timings)
+        else:
+            out, acc = self._two_phase(plan, cull, overdraw, timings, counts)
+        stats = FrameStats.from_counts(counts, np.concatenate(acc["status"]),
+                                       clip_pieces=acc["clip_pieces"],
+                                       binned_entries=acc["binned_entries"],
+                                       fragments_tested=acc["tested"],
+                                       fragments_passed=acc["passed"])
+        stats.timings_ms = timings
+        return Frame(out.depth, out.ids, out.bary, stats, overdraw=out.overdraw)
+
+    def _pass(self, fd, cull: str, into, overdraw: bool, timings: dict, acc: dict | None = None
+              ):
+        """Run vertex → setup → bin → raster over the draws ``fd``; accumulate counts and
+        device times into ``acc`` / ``timings``."""
+        w, h = self.width, self.height
+        acc = acc if acc is not None else {"status": [], "clip_pieces": 0,
+                                           "binned_entries": 0, "tested": 0, "passed": 0}
+        if fd.n_tris == 0:
+            if into is None:
+                raise AssertionError("a first pass always has triangles")
+            return into, acc
         q = self.queue
-        self.geometry.upload_pool(q, plan.pool)
+        kx, ky = guard_band_factors(w, h)
         self.geometry.upload_frame(q, fd)
         geo = self.geometry.buffers
+        n_draws, m = fd.draws.shape[0], fd.n_tris
         ev_v = self.vertex.run(q, geo, n_draws, fd.n_verts, kx, ky, w, h)
         cb = self.vertex.buffers
         p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, cb.win.buf, geo, n_draws, m,
@@ -94,16 +149,75 @@ class Renderer:
         e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
                                    sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
         bb = self.binning.buffers
-        depth, ids, bary, tstats, ev_r = self.raster.run(
-            q, sb.clip_bary.buf, bb.tile_start.buf, bb.entries.buf, w, h)
+        out, tstats, ev_r = self.raster.run(q, sb.clip_bary.buf, bb.tile_start.buf,
+                                            bb.entries.buf, w, h, into=into,
+                                            overdraw=overdraw)
         status = np.empty(m, np.uint8)
         cl.enqueue_copy(q, status, sb.status.buf, is_blocking=True)
-        stats = FrameStats.from_counts(
-            counts, status, clip_pieces=p, binned_entries=e,
-            fragments_tested=int(tstats[:, 0].sum()), fragments_passed=int(tstats[:, 1].sum()))
-        stats.timings_ms = {"cull (host)": t_cull, "vertex": _ms([ev_v]), "setup": _ms(ev_s),
-                            "bin": _ms(ev_b), "raster": _ms([ev_r])}
-        return Frame(depth, ids, bary, stats)
+        acc["status"].append(status)
+        acc["clip_pieces"] += p
+        acc["binned_entries"] += e
+        acc["tested"] += int(tstats[:, 0].sum())
+        acc["passed"] += int(tstats[:, 1].sum())
+        for k, evs in (("vertex", [ev_v]), ("setup", ev_s), ("bin", ev_b), ("raster", [ev_r])):
+            timings[k] = timings.get(k, 0.0) + _ms(evs)
+        return out, acc
+
+    def _two_phase(self, plan, cull: str, overdraw: bool, timings: dict, counts: dict):
+        """Two-phase occlusion culling (see `render`); returns (outputs, accumulated counts)
+        and adds the occlusion rows to ``counts``."""
+        w, h = self.width, self.height
+        pool, fd, scene = plan.pool, plan.frame, plan.scene
+        d = fd.draws
+        info = pool.clusters[d["cluster"]].astype(np.int64)
+        keys = pool.instance_key_base[d["instance"]] + (
+            d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
+        lo, hi, bounded = world_boxes(pool, scene, fd)
+        state_key = (id(scene), getattr(scene, "version", 0))
+        hist = self._visible if self._visible_key == state_key else None
+        if hist is not None:
+            first = hist[keys]
+        else:   # first frame: the nearest clusters, front to back, up to a budget
+            vp_inv_eye = eye_position(plan.view_proj)
+            centre = 0.5 * (lo + hi)
+            dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
+                else -centre @ view_direction(plan.view_proj)
+            budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)
+            first = np.zeros(d.size, bool)
+            first[np.argsort(dist, kind="stable")[:budget]] = True
+        first |= ~bounded
+        out, acc = self._pass(subset(pool, fd, first), cull, None, overdraw, timings)
+        rest = ~first
+        t0 = time.perf_counter()
+        verdict = np.zeros(d.size, np.uint8)
+        if rest.any():
+            pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
+            verdict[rest], ev = self.pyramid.enqueue_test(
+                self.queue, pyr, lo[rest], hi[rest], plan.view_proj.astype(np.float32), w, h)
+            timings["pyramid+test"] = _ms([*pyr.events, ev] if ev else pyr.events)
+        second = rest & (verdict == Occlusion.VISIBLE)
+        occluded = rest & ~second
+        out, acc = self._pass(subset(pool, fd, second), cull, out, overdraw, timings, acc)
+        # visibility for the next frame: everything drawn whose box is not hidden in the
+        # final depth buffer
+        drawn = first | second
+        pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
+        vis = np.zeros(d.size, bool)
+        if drawn.any():
+            v2, _ = self.pyramid.enqueue_test(self.queue, pyr, lo[drawn], hi[drawn],
+                                              plan.view_proj.astype(np.float32), w, h)
+            vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
+        total_keys = int(pool.instance_key_base[-1])
+        self._visible = np.zeros(total_keys, bool)
+        self._visible[keys[vis]] = True
+        self._visible_key = state_key
+        timings["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 - timings.get(
+            "pyramid+test", 0.0)
+        counts["clusters_occlusion_culled"] = int(occluded.sum())
+        counts["triangles_occlusion_culled"] = int(info[occluded, 1].sum())
+        counts["clusters_phase1"] = int(first.sum())
+        counts["clusters_phase2"] = int(second.sum())
+        return out, acc
 
 
 def _ms(events: list[cl.Event]) -> float:

@@ -11,6 +11,8 @@
  * Copying whole 64-byte records (not indices) makes the raster read its tile's list
  * sequentially: with indices it chased one random cache line per entry, and on the dragon at
  * 1080p that pointer chase was most of the raster time.
+ * A piece goes to the tiles of its pixel box that its edges can reach (rect_outside):
+ * a thin diagonal triangle's box crosses many tiles it never touches.
  * Chunks are ordered and each writes its pieces in order, so every tile list is in
  * submission order with no atomics: deterministic, and nothing can overflow.
  *
@@ -25,6 +27,17 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
     *ty0 = bb_y(bb_min) >> TILE_LOG2;
     *tx1 = bb_x(bb_max) >> TILE_LOG2;
     *ty1 = bb_y(bb_max) >> TILE_LOG2;
+}
+
+/* Tile (tx, ty) ∩ the piece's pixel box holds no pixel centre the piece covers. */
+inline bool tile_misses(__global const Piece *pc, int tx, int ty)
+{
+    int x0 = max(bb_x(pc->bb_min), tx << TILE_LOG2);
+    int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
+    int x1 = min(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
+    int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
+    return rect_outside(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
+                        x0, y0, x1, y1);
 }
 
 /* Visit every (piece, tile) pair of the chunk's slots in submission order. BODY sees `piece`
@@ -43,8 +56,10 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
                                                       : &clip_pieces[piece - (int)m];      \
             int tx0, ty0, tx1, ty1;                                                       \
             tile_rect(pc->bb_min, pc->bb_max, &tx0, &ty0, &tx1, &ty1);                    \
+            bool single = tx0 == tx1 && ty0 == ty1;                                       \
             for (int ty = ty0; ty <= ty1; ++ty)                                           \
                 for (int tx = tx0; tx <= tx1; ++tx) {                                     \
+                    if (!single && tile_misses(pc, tx, ty)) continue;                    \
                     int tile = ty * tiles_x + tx;                                         \
                     BODY                                                                  \
                 }                                                                         \

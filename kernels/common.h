@@ -126,3 +126,26 @@ inline long edge_bias(int ax, int ay, int bx, int by)
 
 inline int bb_x(int packed) { return packed & 0xFFFF; }
 inline int bb_y(int packed) { return packed >> 16; }
+
+/* Can edge a->b (with its top-left bias) be satisfied by some pixel centre of the pixel
+ * rectangle [x0, x1] × [y0, y1]? The edge function is linear, so its maximum over the
+ * rectangle is at the corner its gradient points to. */
+inline bool edge_reaches(int ax, int ay, int bx, int by, int x0, int y0, int x1, int y1)
+{
+    int dx = bx - ax, dy = by - ay;          /* E = dx·(py − ay) − dy·(px − ax) */
+    int px = ((dy < 0 ? x1 : x0) << SUBPIXEL_BITS) + SUB_HALF;
+    int py = ((dx > 0 ? y1 : y0) << SUBPIXEL_BITS) + SUB_HALF;
+    return edge_fn(ax, ay, bx, by, px, py) >= edge_bias(ax, ay, bx, by);
+}
+
+/* Does the piece cover no pixel centre of the rectangle for sure? (Exact test per edge,
+ * conservative overall: a rectangle that passes all three may still be empty.) Binning
+ * uses it to keep a thin diagonal triangle out of the tiles its box crosses but it does
+ * not touch; the raster uses it per span. */
+inline bool rect_outside(int X0, int Y0, int X1, int Y1, int X2, int Y2,
+                         int x0, int y0, int x1, int y1)
+{
+    return !edge_reaches(X1, Y1, X2, Y2, x0, y0, x1, y1)
+        || !edge_reaches(X2, Y2, X0, Y0, x0, y0, x1, y1)
+        || !edge_reaches(X0, Y0, X1, Y1, x0, y0, x1, y1);
+}

@@ -18,7 +18,9 @@ __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
                            __global float *depth_out, __global int *id_out,
-                           __global float *bary_out, __global long *tile_stats)
+                           __global float *bary_out, __global long *tile_stats,
+                           const int load, const int want_overdraw,
+                           __global int *overdraw)
 {
     int tile = get_global_id(0);
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
@@ -27,12 +29,20 @@ __kernel void raster_tiles(__global const float *clip_bary,
     int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
 
     int e0 = tile_start[tile], e1 = tile_start[tile + 1];
+    if (e0 == e1 && load) {
+        /* a later pass with nothing here: the earlier pass's pixels stay as they are */
+        tile_stats[2 * tile] = 0;
+        tile_stats[2 * tile + 1] = 0;
+        return;
+    }
     if (e0 == e1) {
         /* empty tile (most of a typical frame): clear values, in plain loops that vectorize */
         for (int y = ty0; y <= ty1; ++y) {
             size_t o = (size_t)y * width;
             for (int x = tx0; x <= tx1; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
             for (int x = 3 * tx0; x < 3 * (tx1 + 1); ++x) bary_out[3 * o + x] = 0.0f;
+            if (want_overdraw)
+                for (int x = tx0; x <= tx1; ++x) overdraw[o + x] = 0;
         }
         tile_stats[2 * tile] = 0;
         tile_stats[2 * tile + 1] = 0;
@@ -42,7 +52,23 @@ __kernel void raster_tiles(__global const float *clip_bary,
     float zbuf[TILE_PIXELS];
     int win[TILE_PIXELS];   /* winning entry index, -1 = background */
     int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
-    for (int i = 0; i < TILE_PIXELS; ++i) { zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; }
+    int odc[TILE_PIXELS];   /* fragments tested per pixel (depth complexity) */
+    for (int i = 0; i < TILE_PIXELS; ++i) {
+        zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; odc[i] = 0;
+    }
+    if (load) {
+        /* continue from an earlier pass over the same image (two-phase occlusion culling):
+         * its depth and ids take part in the test exactly as if drawn in this pass */
+        for (int y = ty0; y <= ty1; ++y)
+            for (int x = tx0; x <= tx1; ++x) {
+                int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
+                size_t o = (size_t)y * width + x;
+                zbuf[i] = depth_out[o];
+                int id0 = id_out[o];
+                wid[i] = id0 < 0 ? INT_MAX : id0;
+                if (want_overdraw) odc[i] = overdraw[o];
+            }
+    }
     long tested = 0, passed = 0;
 
     for (int k = e0; k < e1; ++k) {
@@ -73,7 +99,11 @@ __kernel void raster_tiles(__global const float *clip_bary,
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
             int t_row = 0, p_row = 0;
-            for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN)
+            for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN) {
+            /* skip spans no edge combination can reach (exact per edge) */
+            if (rect_outside(X0, Y0, X1, Y1, X2, Y2, tx0 + max(cx, lx0), y,
+                             tx0 + min(cx + SPAN - 1, lx1), y))
+                continue;
             for (int j = 0; j < SPAN; ++j) {
                 int lx = cx + j;
                 long e0 = r0 + lx * sx0, e1 = r1 + lx * sx1, e2 = r2 + lx * sx2;
@@ -91,8 +121,10 @@ __kernel void raster_tiles(__global const float *clip_bary,
                 zbuf[i] = pass ? z : zb;
                 wid[i] = pass ? id : wd;
                 win[i] = pass ? k : win[i];
+                odc[i] += in;
                 t_row += in;
                 p_row += pass;
+            }
             }
             tested += t_row;
             passed += p_row;
@@ -105,8 +137,10 @@ __kernel void raster_tiles(__global const float *clip_bary,
         for (int x = tx0; x <= tx1; ++x) {
             int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
             size_t o = (size_t)y * width + x;
-            depth_out[o] = zbuf[i];
+            if (want_overdraw) overdraw[o] = odc[i];
             int e = win[i];
+            if (e < 0 && load) continue;   /* the earlier pass's winner stays */
+            depth_out[o] = zbuf[i];
             float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
             int id = -1;
             if (e >= 0) {

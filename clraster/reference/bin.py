@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import ST_CLIPPED, ST_RASTER, RasterConfig
+from ..config import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
 
 
 def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.ndarray
@@ -23,6 +23,26 @@ def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.nd
     piece = np.concatenate([raster, cpiece]).astype(np.int64)
     order = np.lexsort((sub_all, tri))
     return piece[order]
+
+
+def _edge_reaches(ax, ay, bx, by, x0, y0, x1, y1) -> np.ndarray:
+    """edge_reaches in kernels/common.h, vectorized (int64)."""
+    dx, dy = bx - ax, by - ay
+    px = (np.where(dy < 0, x1, x0).astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+    py = (np.where(dx > 0, y1, y0).astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+    e = dx * (py - ay) - dy * (px - ax)
+    bias = np.where((dy < 0) | ((dy == 0) & (dx > 0)), 0, 1)
+    return e >= bias
+
+
+def rect_outside(X: np.ndarray, Y: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
+    """rect_outside in kernels/common.h: X, Y int (K, 3) fixed-point vertices, pixel
+    rectangles [x0, x1] × [y0, y1] (K,)."""
+    X, Y = X.astype(np.int64), Y.astype(np.int64)
+    out = np.zeros(X.shape[0], bool)
+    for a, b in ((1, 2), (2, 0), (0, 1)):
+        out |= ~_edge_reaches(X[:, a], Y[:, a], X[:, b], Y[:, b], x0, y0, x1, y1)
+    return out
 
 
 def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
@@ -49,6 +69,18 @@ def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
     local = np.arange(owner.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     # per piece, tiles are visited row by row (ty outer, tx inner) as in the kernel
     tile = (ty0[owner] + local // nx[owner]) * tiles_x + tx0[owner] + local % nx[owner]
+    # keep only tiles whose (tile ∩ box) pixel centres the edges can reach (rect_outside in
+    # kernels/common.h); single-tile pieces are kept as they are, as in the kernel
+    single = (nx * ny == 1)[owner]
+    tx = tile % tiles_x
+    ty = tile // tiles_x
+    x0 = np.maximum(bb_min[owner] & 0xFFFF, tx << s)
+    y0 = np.maximum(bb_min[owner] >> 16, ty << s)
+    x1 = np.minimum(bb_max[owner] & 0xFFFF, ((tx + 1) << s) - 1)
+    y1 = np.minimum(bb_max[owner] >> 16, ((ty + 1) << s) - 1)
+    keep = single | ~rect_outside(pieces["x"][order][owner], pieces["y"][order][owner],
+                                  x0, y0, x1, y1)
+    owner, tile = owner[keep], tile[keep]
     srt = np.argsort(tile, kind="stable")
     entries = pieces[order[owner[srt]]]
     counts = np.bincount(tile, minlength=n_tiles)

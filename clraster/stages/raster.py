@@ -41,26 +41,68 @@ class RasterStage:
         self.ctx = ctx
 
     def run(self, queue: cl.CommandQueue, clip_bary: cl.Buffer, tile_start: cl.Buffer,
-            entries: cl.Buffer, width: int, height: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, cl.Event]:
-        """Rasterize; returns depth (H, W) f32, ids (H, W) i32, bary (H, W, 3) f32,
-        tile stats (T, 2) i64 — all complete and readable on return — and the event."""
+            entries: cl.Buffer, width: int, height: int, *, into: RasterOutput | None = None,
+            overdraw: bool = False) -> tuple[RasterOutput, np.ndarray, cl.Event]:
+        """Rasterize the binned pieces.
+
+        Args:
+            into: outputs of an earlier pass over the same image to continue from (its
+                depth and ids take part in the depth test; pixels nobody beats keep their
+                values) — used by two-phase occlusion culling. None: start from clear.
+            overdraw: also count fragments tested per pixel (depth complexity).
+
+        Returns:
+            the outputs (complete and readable on return), tile stats (T, 2) int64
+            (fragments tested / passed per tile) and the profiling event.
+        """
         tiles_x, tiles_y = self.config.tiles(width, height)
         n_tiles = tiles_x * tiles_y
-        outs = (host_array((height, width), np.float32), host_array((height, width), np.int32),
-                host_array((height, width, 3), np.float32))
-        flags = cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR
-        bufs = [cl.Buffer(self.ctx, flags, hostbuf=a) for a in outs]
+        load = into is not None
+        if into is None:
+            into = RasterOutput.allocate(self.ctx, width, height, overdraw)
+        elif overdraw and into.overdraw is None:
+            raise ValueError("overdraw was not counted in the earlier pass")
+        want = into.overdraw is not None
         ev = self.kernel(queue, (n_tiles,), (1,), clip_bary, tile_start, entries,
-                         np.int32(width), np.int32(height), np.int32(tiles_x), *bufs,
-                         self.buffers.tile_stats.ensure(16 * n_tiles))
+                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
+                         self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
+                         np.int32(want), into.bufs[3] if want else into.bufs[1])
         tstats = np.empty((n_tiles, 2), np.int64)
         cl.enqueue_copy(queue, tstats, self.buffers.tile_stats.buf, is_blocking=False)
-        # map/unmap: the OpenCL way to make USE_HOST_PTR contents visible to the host (on a
-        # CPU device the mapping is the array itself, so nothing is copied)
-        for a, b in zip(outs, bufs, strict=True):
+        into.sync(queue)
+        return into, tstats, ev
+
+
+@dataclass
+class RasterOutput:
+    """The image outputs as the caller's NumPy arrays and the CL_MEM_USE_HOST_PTR buffers
+    over them. depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3), overdraw
+    int32 (H, W) or None."""
+
+    depth: np.ndarray
+    ids: np.ndarray
+    bary: np.ndarray
+    overdraw: np.ndarray | None
+    bufs: list[cl.Buffer]
+
+    @classmethod
+    def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool
+                 ) -> RasterOutput:
+        arrs = [host_array((height, width), np.float32), host_array((height, width), np.int32),
+                host_array((height, width, 3), np.float32)]
+        if overdraw:
+            arrs.append(host_array((height, width), np.int32))
+        flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
+        bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in arrs]
+        return cls(arrs[0], arrs[1], arrs[2], arrs[3] if overdraw else None, bufs)
+
+    def sync(self, queue: cl.CommandQueue) -> None:
+        """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for
+        USE_HOST_PTR buffers; on a CPU device the mapping is the array itself (no copy)."""
+        arrs = [self.depth, self.ids, self.bary] + ([self.overdraw] if self.overdraw is not None
+                                                    else [])
+        for a, b in zip(arrs, self.bufs, strict=True):
             mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype,
                                               is_blocking=True)
             mapped.base.release(queue)
         queue.finish()
-        return (*outs, tstats, ev)

@@ -1,0 +1,106 @@
+/* Exact occlusion queries ("samples passed", as GL_SAMPLES_PASSED with GL_LESS, but each pixel
+ * counted at most once per box): per box, the number of pixels at which some fragment of the
+ * box's 12 triangles would pass the depth test LESS against a given depth buffer, which is
+ * only read.
+ *
+ * The boxes went through the renderer's own vertex, setup (cull "none", clipping at near) and
+ * binning stages, so coverage follows the same rules as a rendered frame: 8 sub-pixel bits,
+ * top-left rule, exact 64-bit edge functions, and the depth of a fragment is the very float32
+ * value kernels/raster.cl would compute. Box b is faces 12b .. 12b+11 and the boxes were
+ * submitted in order, so within a tile list the entries of one box are contiguous and box
+ * numbers never decrease (clipped pieces keep their parent's place); a tile keeps one private
+ * byte per pixel ("the current box passed here") and, when the next box starts, adds their
+ * count over the run's pixel rectangle to the box's global counter and clears them. The
+ * counter sum is order-independent, so the result is deterministic. A decreasing box number
+ * (a broken ordering assumption) sets order_error instead of silently double-counting.
+ *
+ * clraster/reference/query.py is the NumPy twin.
+ */
+#include "common.h"
+
+#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
+#define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
+#define BOX_TRIS 12
+
+__kernel void query_tiles(__global const int *tile_start, __global const Piece *entries,
+                          const int width, const int height, const int tiles_x,
+                          __global const float *depth, __global uint *samples,
+                          __global int *order_error)
+{
+    int tile = get_global_id(0);
+    int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
+    if (tile >= tiles_x * tiles_y) return;
+    int e0 = tile_start[tile], e1 = tile_start[tile + 1];
+    if (e0 == e1) return;
+    int tx0 = (tile % tiles_x) << TILE_LOG2, ty0 = (tile / tiles_x) << TILE_LOG2;
+    int tw = min(TILE_SIZE, width - tx0), th = min(TILE_SIZE, height - ty0);
+
+    /* the tile's depth (0 outside the image: masked lanes may read it, never use it) and
+     * a byte per pixel: "the current box passed here" */
+    float zt[TILE_PIXELS];
+    uchar hit[TILE_PIXELS];
+    for (int ly = 0; ly < TILE_SIZE; ++ly)
+        for (int lx = 0; lx < TILE_SIZE; ++lx) {
+            int i = (ly << TILE_LOG2) + lx;
+            zt[i] = (lx < tw && ly < th) ? depth[(size_t)(ty0 + ly) * width + tx0 + lx] : 0.0f;
+            hit[i] = 0;
+        }
+
+    int run = -1;                                   /* box whose entries are being walked */
+    int rx0 = TILE_SIZE, rx1 = -1, ry0 = TILE_SIZE, ry1 = -1;   /* its pixels so far */
+    for (int k = e0; k <= e1; ++k) {
+        int box = k < e1 ? entries[k].id / BOX_TRIS : -2;
+        if (box != run) {
+            /* the run ends: count its pixels once, clear them, add to the box's total */
+            uint count = 0;
+            for (int ly = ry0; ly <= ry1; ++ly)
+                for (int lx = rx0; lx <= rx1; ++lx) {
+                    int i = (ly << TILE_LOG2) + lx;
+                    count += hit[i];
+                    hit[i] = 0;
+                }
+            if (count) atomic_add(&samples[run], count);
+            if (box < run && box != -2) order_error[0] = 1;
+            run = box;
+            rx0 = ry0 = TILE_SIZE;
+            rx1 = ry1 = -1;
+        }
+        if (k == e1) break;
+        __global const Piece *pc = &entries[k];
+        int lx0 = max(bb_x(pc->bb_min) - tx0, 0), lx1 = min(bb_x(pc->bb_max) - tx0, tw - 1);
+        int ly0 = max(bb_y(pc->bb_min) - ty0, 0), ly1 = min(bb_y(pc->bb_max) - ty0, th - 1);
+        if (lx0 > lx1 || ly0 > ly1) continue;
+        rx0 = min(rx0, lx0); rx1 = max(rx1, lx1);
+        ry0 = min(ry0, ly0); ry1 = max(ry1, ly1);
+        /* coverage and depth exactly as raster_tiles (kernels/raster.cl): the same exact
+         * edge values at each pixel centre and the same float32 depth expression; walked in
+         * branch-free spans of SPAN columns, lanes outside [lx0, lx1] masked */
+        int X0 = pc->x[0], X1 = pc->x[1], X2 = pc->x[2];
+        int Y0 = pc->y[0], Y1 = pc->y[1], Y2 = pc->y[2];
+        long b0 = edge_bias(X1, Y1, X2, Y2), b1 = edge_bias(X2, Y2, X0, Y0);
+        long b2 = edge_bias(X0, Y0, X1, Y1);
+        int px = (tx0 << SUBPIXEL_BITS) + SUB_HALF, py = ((ty0 + ly0) << SUBPIXEL_BITS) + SUB_HALF;
+        long r0 = edge_fn(X1, Y1, X2, Y2, px, py);
+        long r1 = edge_fn(X2, Y2, X0, Y0, px, py);
+        long r2 = edge_fn(X0, Y0, X1, Y1, px, py);
+        long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
+        long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
+        long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
+        float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
+        for (int ly = ly0; ly <= ly1; ++ly) {
+            int row = ly << TILE_LOG2;
+            for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN)
+            for (int j = 0; j < SPAN; ++j) {
+                int lx = cx + j;
+                long w0 = r0 + lx * sx0, w1 = r1 + lx * sx1, w2 = r2 + lx * sx2;
+                bool in = lx >= lx0 && lx <= lx1 && w0 >= b0 && w1 >= b1 && w2 >= b2;
+                float l1 = (float)w1 * inv_area;
+                float l2 = (float)w2 * inv_area;
+                float z = (z0 + l1 * dz10) + l2 * dz20;
+                int i = row + lx;
+                hit[i] |= (uchar)(in && z < zt[i]);   /* LESS: equal depth does not pass */
+            }
+            r0 += sy0; r1 += sy1; r2 += sy2;
+        }
+    }
+}
