@@ -1,0 +1,213 @@
+"""Depth pyramid (Hi-Z) and the conservative box occlusion test, host side (kernels/pyramid.cl).
+
+Level 0 is the W × H depth buffer; level k+1 is ceil(w_k/2) × ceil(h_k/2), each texel the
+farthest (max) depth of the ≤ 2×2 level-k texels it covers (indices clamped at the last
+row/column), down to 1 × 1. Texel (i, j) of level L therefore covers exactly the level-0
+pixels [i·2^L, min((i+1)·2^L, W)) × [j·2^L, min((j+1)·2^L, H)) and bounds the farthest
+depth under them; pixel (x, y) sits under texel (x >> L, y >> L) at every level.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from ..config import RasterConfig
+from ..device import program
+from ._buffers import GrowBuffer
+
+#: Levels made per launch of pyramid_reduce (kernels/pyramid.cl PYR_LOG2).
+PYR_LOG2 = 6
+#: Boxes per test call: the kernel indexes its (6, K) box array with int32.
+MAX_TEST_BOXES = 1 << 28
+#: Work-group size of the box test (one work-item per 8 boxes).
+TEST_LOCAL = 16
+
+
+def level_shapes(width: int, height: int) -> list[tuple[int, int]]:
+    """(height, width) of every pyramid level, level 0 first, down to (1, 1)."""
+    w, h = int(width), int(height)
+    shapes = [(h, w)]
+    while w > 1 or h > 1:
+        w, h = (w + 1) // 2, (h + 1) // 2
+        shapes.append((h, w))
+    return shapes
+
+
+def level_table(width: int, height: int) -> np.ndarray:
+    """int32 (n_levels, 4) rows (offset in floats, width, height, 0): the kernels' table."""
+    shapes = level_shapes(width, height)
+    t = np.zeros((len(shapes), 4), np.int32)
+    off = 0
+    for k, (h, w) in enumerate(shapes):
+        t[k] = (off, w, h, 0)
+        off += w * h
+    return t
+
+
+@dataclass
+class Pyramid:
+    """A built depth pyramid on the device.
+
+    buffer: float32, every level row-major, concatenated; level k starts at
+        ``offsets[k]`` floats and has shape ``shapes[k]`` = (h_k, w_k). Level 0 is a copy of
+        the depth buffer it was built from.
+    table: int32 (n_levels, 4) device copy of `level_table` (what the test kernel reads).
+    width, height: level-0 size. events: the build's profiling events.
+
+    The buffer belongs to the `PyramidStage` that built it and is overwritten by its next
+    `build`; read or test before building again.
+    """
+
+    buffer: cl.Buffer
+    table: cl.Buffer
+    width: int
+    height: int
+    shapes: tuple[tuple[int, int], ...]
+    offsets: tuple[int, ...]
+    events: list[cl.Event] = field(default_factory=list)
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.shapes)
+
+    def read(self, queue: cl.CommandQueue) -> list[np.ndarray]:
+        """All levels as float32 arrays, level 0 (H, W) first, down to (1, 1)."""
+        total = self.offsets[-1] + self.shapes[-1][0] * self.shapes[-1][1]
+        flat = np.empty(total, np.float32)
+        cl.enqueue_copy(queue, flat, self.buffer, is_blocking=True)
+        return [flat[o:o + h * w].reshape(h, w).copy()
+                for o, (h, w) in zip(self.offsets, self.shapes, strict=True)]
+
+
+@dataclass
+class PyramidBuffers:
+    """Buffers of the pyramid and of the box test, reused between calls.
+
+    levels: float32 (sum of level sizes,) the pyramid. table: int32 (n_levels, 4).
+    boxes: float32 (6, K8) rows min.x, min.y, min.z, max.x, max.y, max.z, K8 = K rounded
+    up to a multiple of 8 (the test kernel does 8 boxes per work-item in float8 lanes).
+    view_proj: float32 (16,). result: uint8 (K8,).
+    """
+
+    levels: GrowBuffer
+    table: GrowBuffer
+    boxes: GrowBuffer
+    view_proj: GrowBuffer
+    result: GrowBuffer
+
+
+class PyramidStage:
+    """Builds depth pyramids and tests boxes against them (kernels/pyramid.cl)."""
+
+    def __init__(self, ctx: cl.Context, config: RasterConfig | None = None) -> None:
+        prg = program(ctx, "pyramid", (config or RasterConfig()).build_options())
+        self.k_reduce = cl.Kernel(prg, "pyramid_reduce")
+        self.k_test = cl.Kernel(prg, "hiz_test_boxes")
+        self.buffers = PyramidBuffers(*(GrowBuffer(ctx) for _ in range(5)))
+        self._table_key: tuple[int, int] | None = None
+        self._table_buf: cl.Buffer | None = None
+
+    def build(self, queue: cl.CommandQueue, depth_buf: cl.Buffer, width: int,
+              height: int) -> Pyramid:
+        """Build the pyramid of the float32 (H, W) row-major depth buffer ``depth_buf``.
+
+        Enqueues ceil((n_levels − 1) / 6) launches (2 at 1920×1080) and returns without
+        waiting; the returned `Pyramid` is complete once its events are (anything enqueued
+        after it on ``queue`` sees it complete: the queue is in order).
+        """
+        table = level_table(width, height)
+        b = self.buffers
+        total = int(table[-1, 0]) + int(table[-1, 1]) * int(table[-1, 2])
+        pyr = b.levels.ensure(4 * total, "depth pyramid")
+        tbuf = b.table.ensure(table.nbytes)
+        if self._table_key != (width, height) or b.table.buf is not self._table_buf:
+            cl.enqueue_copy(queue, tbuf, table, is_blocking=True)
+            self._table_key = (width, height)
+            self._table_buf = b.table.buf
+        events = []
+        n_levels = table.shape[0]
+        src = 0
+        if n_levels == 1:   # 1 × 1: level 0 only, still copied into the pyramid
+            events.append(cl.enqueue_copy(queue, pyr, depth_buf, byte_count=4))
+        while src < n_levels - 1:
+            n_make = min(PYR_LOG2, n_levels - 1 - src)
+            nb = 1 << n_make
+            ws, hs = int(table[src, 1]), int(table[src, 2])
+            bx, by = -(-ws // nb), -(-hs // nb)
+            events.append(self.k_reduce(queue, (bx * by,), (1,), depth_buf, pyr, tbuf,
+                                        np.int32(src), np.int32(n_make), np.int32(bx),
+                                        np.int32(bx * by)))
+            src += n_make
+        shapes = tuple((int(h), int(w)) for _, w, h, _ in table)
+        return Pyramid(pyr, tbuf, int(width), int(height), shapes,
+                       tuple(int(o) for o in table[:, 0]), events)
+
+    def test_boxes(self, queue: cl.CommandQueue, pyramid: Pyramid, mins: np.ndarray,
+                   maxs: np.ndarray, view_proj: np.ndarray, width: int, height: int
+                   ) -> np.ndarray:
+        """Classify world-space boxes against ``pyramid``; blocking.
+
+        Args:
+            mins, maxs: (K, 3) box corners (converted to float32; any order per axis works,
+                the 8 corners are the same).
+            view_proj: (4, 4) or (16,) row-major world → clip matrix (converted to float32),
+                clip = VP · [p, 1]; the one the depth buffer was rendered with for the test
+                to mean anything.
+            width, height: image size; must be the pyramid's.
+
+        Returns:
+            uint8 (K,) `clraster.occlusion.Occlusion` codes: VISIBLE 0, OCCLUDED 1 (no sample
+            of anything inside the box can pass LESS against the depth buffer, or the box
+            covers no pixel centre), VIEW_CULLED 2 (outside one frustum plane). Boxes
+            crossing the near plane, or with non-finite corners, are VISIBLE.
+        """
+        res, _ev = self.enqueue_test(queue, pyramid, mins, maxs, view_proj, width, height)
+        return res
+
+    def enqueue_test(self, queue: cl.CommandQueue, pyramid: Pyramid, mins: np.ndarray,
+                     maxs: np.ndarray, view_proj: np.ndarray, width: int, height: int
+                     ) -> tuple[np.ndarray, cl.Event | None]:
+        """`test_boxes`, also returning the kernel's profiling event (None when K = 0)."""
+        if (int(width), int(height)) != (pyramid.width, pyramid.height):
+            raise ValueError(f"the pyramid is {pyramid.width}x{pyramid.height}, not "
+                             f"{width}x{height}")
+        lo, hi, vp = check_boxes(mins, maxs, view_proj)
+        k = lo.shape[0]
+        if k == 0:
+            return np.empty(0, np.uint8), None
+        if k > MAX_TEST_BOXES:
+            raise ValueError(f"{k:,} boxes in one call; at most {MAX_TEST_BOXES:,} (split "
+                             "the list)")
+        b = self.buffers
+        n_pad = -(-k // 8) * 8
+        soa = np.zeros((6, n_pad), np.float32)   # rows min.xyz, max.xyz (kernel layout)
+        soa[:3, :k] = lo.T
+        soa[3:, :k] = hi.T
+        bbox = b.boxes.ensure(soa.nbytes, "box buffer")
+        bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
+        cl.enqueue_copy(queue, bbox, soa, is_blocking=False)
+        cl.enqueue_copy(queue, bvp, vp, is_blocking=False)
+        n_wi = n_pad // 8
+        gsize = -(-n_wi // TEST_LOCAL) * TEST_LOCAL
+        ev = self.k_test(queue, (gsize,), (TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
+                         np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
+                         np.int32(pyramid.n_levels), bres)
+        res = np.empty(n_pad, np.uint8)
+        cl.enqueue_copy(queue, res, bres, is_blocking=True)
+        return res[:k], ev
+
+
+def check_boxes(mins, maxs, view_proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validated contiguous float32 (K, 3), (K, 3) and (16,) copies of the test inputs."""
+    lo = np.ascontiguousarray(np.asarray(mins, np.float32))
+    hi = np.ascontiguousarray(np.asarray(maxs, np.float32))
+    if lo.ndim != 2 or lo.shape[1] != 3 or lo.shape != hi.shape:
+        raise ValueError(f"box mins and maxs must both be (K, 3), got {lo.shape} and "
+                         f"{hi.shape}")
+    vp = np.ascontiguousarray(np.asarray(view_proj, np.float32).reshape(-1))
+    if vp.shape != (16,):
+        raise ValueError(f"view_proj must be a (4, 4) matrix, got {vp.size} values")
+    return lo, hi, vp
