@@ -105,16 +105,17 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
 
 /* Error model. What the renderer draws for a box is some content inside it (or, for the
  * exact query, the box's own triangles): vertices whose float32 clip positions are the exact
- * ones up to rounding. Per corner p we bound that rounding by HIZ_EPS · A, with
- * A_r = |m_r0||p_x| + |m_r1||p_y| + |m_r2||p_z| + |m_r3| per matrix row r: a float32 dot
- * product of 4 terms is off by <= 4u·A (u = 2^-24), the renderer's rounded
- * float32(VP · model) adds about u·A more, and our own corner evaluation another 4u·A —
- * ~9u in all; HIZ_EPS = 64u leaves 7× headroom (and covers a model matrix that doubles
- * term magnitudes). A content point is a convex combination of the corners and A is convex
- * in p, so its float clip position lies in the convex hull of the corners' error boxes
- * [c − e, c + e], e = HIZ_EPS · A: every x/w, y/w, z/w it can have is bounded by the values
- * at the corners of those boxes (x/w is monotone in x and in w on w > 0), which is what
- * the bounds below take. */
+ * ones up to rounding. We bound that rounding, per box, by e_r = HIZ_EPS · A_r with
+ * A_r = |m_r0|·a_x + |m_r1|·a_y + |m_r2|·a_z + |m_r3| per matrix row r, a_c = max(|min_c|,
+ * |max_c|) (so A_r >= Σ|m_rc·p_c| at every point p of the box). A float32 dot product of 4
+ * terms is off by <= 4u·A (u = 2^-24), the renderer's rounded float32(VP · model) adds about
+ * u·A, our own corner evaluation another 4u·A: ~9u in all. HIZ_EPS = 64u leaves 7× headroom,
+ * which also covers instance matrices whose terms are up to a few times the world ones (an
+ * instance transform that cancels much larger model coordinates is not covered).
+ * Since clip = VP · [p, 1] is affine, a content point's float clip position lies in the
+ * convex hull of the corners' error boxes [c − e, c + e]; x/w, y/w and z/w are monotone in
+ * each of x, y, z and w on w > 0, so their extremes over that hull are at error-box corners,
+ * which is what the bounds below take. */
 #define HIZ_EPS 3.814697265625e-06f           /* 2^-18 = 64u */
 /* Window depth of a drawn fragment is a convex combination of its piece's vertex depths
  * (barycentrics of a covered pixel are >= 0) up to float rounding: the viewport transform
