@@ -154,19 +154,27 @@ def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
     return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps)
 
 
-def world_boxes(pool: GeometryPool, scene, fd: FrameDraws) -> tuple[np.ndarray, np.ndarray,
-                                                                     np.ndarray]:
-    """World-space AABBs (float64 (D, 3) ×2) of each draw's cluster, from its object-space
-    box's 8 corners through the instance transform, and bool (D,) bounded."""
-    d = fd.draws
-    gcl = d["cluster"].astype(np.int64)
+def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World-space AABBs of every (instance, cluster) pair, indexed by key
+    (pool.instance_key_base[instance] + cluster): float64 (K, 3) mins and maxs, from each
+    cluster's object-space box's 8 corners through its instance transform, and bool (K,)
+    bounded. Depends only on the scene: computed once per scene version."""
+    n_keys = np.diff(pool.instance_key_base)
+    inst = np.repeat(np.arange(n_keys.size), n_keys)
+    local = np.arange(inst.size) - np.repeat(pool.instance_key_base[:-1], n_keys)
+    gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + local
     lo, hi = pool.aabb_min[gcl], pool.aabb_max[gcl]
-    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances])[
-        d["instance"]]
-    corners = np.stack([np.where(np.array(bits)[None, :] != 0, hi, lo)
-                        for bits in np.ndindex(2, 2, 2)], axis=1)  # (D, 8, 3)
-    w = np.einsum("dij,dkj->dki", mats[:, :3, :3], corners) + mats[:, None, :3, 3]
-    return w.min(axis=1), w.max(axis=1), pool.bounded[gcl]
+    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances]) if \
+        scene.instances else np.zeros((0, 4, 4))
+    wlo = np.full(lo.shape, np.inf)
+    whi = np.full(lo.shape, -np.inf)
+    for bits in np.ndindex(2, 2, 2):   # the 8 corners, each through its instance matrix
+        c = np.where(np.array(bits)[None, :] != 0, hi, lo)
+        m = mats[inst]
+        wc = np.einsum("kij,kj->ki", m[:, :3, :3], c) + m[:, :3, 3]
+        np.minimum(wlo, wc, out=wlo)
+        np.maximum(whi, wc, out=whi)
+    return wlo, whi, pool.bounded[gcl]
 
 
 def view_projection(camera, width: int, height: int) -> np.ndarray:

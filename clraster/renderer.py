@@ -10,7 +10,7 @@ import pyopencl as cl
 from .config import RasterConfig, guard_band_factors
 from .cull import eye_from_view_proj
 from .device import default_context
-from .drawlist import PlanCache, plan_frame, subset, world_boxes
+from .drawlist import PlanCache, key_boxes, plan_frame, subset
 from .frame import Frame, FrameStats
 from .inputs import check_cull, check_size
 from .occlusion import Occlusion
@@ -73,6 +73,8 @@ class Renderer:
         self._plans = PlanCache()
         self._visible: np.ndarray | None = None   # occlusion: visible keys of last frame
         self._visible_key: tuple | None = None
+        self._boxes: tuple | None = None   # occlusion: world boxes of every key
+        self._boxes_key: tuple | None = None
 
     def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
                cones: bool = True, occlusion: bool = False, overdraw: bool = False) -> Frame:
@@ -172,8 +174,11 @@ class Renderer:
         info = pool.clusters[d["cluster"]].astype(np.int64)
         keys = pool.instance_key_base[d["instance"]] + (
             d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
-        lo, hi, bounded = world_boxes(pool, scene, fd)
         state_key = (id(scene), getattr(scene, "version", 0))
+        if self._boxes_key != state_key:
+            self._boxes = key_boxes(pool, scene)
+            self._boxes_key = state_key
+        lo, hi, bounded = (a[keys] for a in self._boxes)
         hist = self._visible if self._visible_key == state_key else None
         if hist is not None:
             first = hist[keys]
