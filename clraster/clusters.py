@@ -73,7 +73,8 @@ DEGENERATE_SIN = 1e-8
 _ANGLE_SLACK = 2e-7
 
 _MAX_LIMIT = 256  # local vertex indices are uint8
-_CHUNK_ROWS = 1 << 12  # chunks processed per batch (bounds temporary memory)
+#: Chunks per batch in clusterize: temporaries stay cache-sized (4096 was 1.5x slower).
+_CHUNK_ROWS = 1 << 9
 
 
 @dataclass(frozen=True)
@@ -406,7 +407,7 @@ def _round_up32(x: np.ndarray) -> np.ndarray:
     return y
 
 
-_BATCH_TRIANGLES = 1 << 19  # triangles per batch in _geometry (keeps temporaries in cache)
+_BATCH_TRIANGLES = 1 << 16  # triangles per batch in _geometry (keeps temporaries in cache)
 
 
 def _geometry(cols: list[np.ndarray], faces: np.ndarray, face_seq: np.ndarray,
