@@ -38,7 +38,7 @@ vertex shared by k clusters is transformed k times.) Smaller clusters let the co
 more back faces (+6 points at 64) but cost more vertex work (+13 % at 64, +35 % at 32) and
 more host time per frame; 128/128 keeps duplication and host cost lowest and fills a
 128-wide work-group per cluster, so it is the default. (At 32 triangles the 32-vertex limit
-binds first: 24.7 triangles per cluster.) A 10M-triangle mesh clusterizes in about 5 s.
+binds first: 24.7 triangles per cluster.) A 10M-triangle mesh clusterizes in about 4.5 s.
 
 Normal cones (after the idea of meshoptimizer's ``meshopt_computeClusterBounds``; the
 formulas and the conservative test below are derived here). See :func:`cone_backfacing`.
@@ -275,7 +275,7 @@ def clusterize(mesh: Mesh, max_triangles: int = 128, max_vertices: int = 128) ->
     unique vertices, with bounds and normal cones. See the module docstring for the method.
 
     Deterministic (no randomness; ties broken by face index). About 0.4 s for 871K
-    triangles and 5 s for 10M on a 2-core host.
+    triangles and 4.5 s for 10M on a 2-core host.
 
     Args:
         mesh: a `clraster.Mesh`; M = 0 gives a ClusteredMesh with no cluster.
