@@ -98,7 +98,7 @@ class Mesh:
             indices negative, ``>= N`` or beyond int32.
     """
 
-    __slots__ = ("_vertices", "_faces", "_face_normals")
+    __slots__ = ("_vertices", "_faces", "_face_normals", "__weakref__")
 
     def __init__(self, vertices: npt.ArrayLike, faces: npt.ArrayLike) -> None:
         self._vertices = _check_vertices(vertices)
