@@ -57,12 +57,20 @@ inline bool tile_misses(__global const Piece *pc, int tx, int ty)
             int tx0, ty0, tx1, ty1;                                                       \
             tile_rect(pc->bb_min, pc->bb_max, &tx0, &ty0, &tx1, &ty1);                    \
             bool single = tx0 == tx1 && ty0 == ty1;                                       \
-            for (int ty = ty0; ty <= ty1; ++ty)                                           \
-                for (int tx = tx0; tx <= tx1; ++tx) {                                     \
-                    if (!single && tile_misses(pc, tx, ty)) continue;                    \
+            for (int ty = ty0; ty <= ty1; ++ty) {                                         \
+                /* the tiles of a row that the edges reach are contiguous (each edge's      \
+                 * test is monotone along the row), so find the two ends and take all      \
+                 * tiles between them: two tests per row instead of one per tile */        \
+                int lo = tx0, hi = tx1;                                                   \
+                if (!single) {                                                            \
+                    while (lo <= tx1 && tile_misses(pc, lo, ty)) ++lo;                    \
+                    while (hi > lo && tile_misses(pc, hi, ty)) --hi;                      \
+                }                                                                         \
+                for (int tx = lo; tx <= hi; ++tx) {                                       \
                     int tile = ty * tiles_x + tx;                                         \
                     BODY                                                                  \
                 }                                                                         \
+            }                                                                             \
         }                                                                                 \
     }
 
