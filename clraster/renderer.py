@@ -174,12 +174,17 @@ class Renderer:
         info = pool.clusters[d["cluster"]].astype(np.int64)
         keys = pool.instance_key_base[d["instance"]] + (
             d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
-        state_key = (id(scene), getattr(scene, "version", 0))
-        if self._boxes_key != state_key:
+        # the scene object itself is kept and compared with `is` (not its id(), which a
+        # new scene can reuse once the old one is freed), with its version
+        version = getattr(scene, "version", 0)
+        if self._boxes_key is None or not (self._boxes_key[0] is scene
+                                           and self._boxes_key[1] == version):
             self._boxes = key_boxes(pool, scene)
-            self._boxes_key = state_key
+            self._boxes_key = (scene, version)
         lo, hi, bounded = (a[keys] for a in self._boxes)
-        hist = self._visible if self._visible_key == state_key else None
+        hist = self._visible if (self._visible_key is not None
+                                 and self._visible_key[0] is scene
+                                 and self._visible_key[1] == version) else None
         if hist is not None:
             first = hist[keys]
         else:   # first frame: the nearest clusters, front to back, up to a budget
@@ -215,7 +220,7 @@ class Renderer:
         total_keys = int(pool.instance_key_base[-1])
         self._visible = np.zeros(total_keys, bool)
         self._visible[keys[vis]] = True
-        self._visible_key = state_key
+        self._visible_key = (scene, version)
         timings["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 - timings.get(
             "pyramid+test", 0.0)
         counts["clusters_occlusion_culled"] = int(occluded.sum())

@@ -35,11 +35,8 @@ Efficiency (printed with ``-s``): on plant(100_000) seen from the corridor, the 
 truly invisible clusters of the draw list that a second frame culls
 (bench/occlusion_efficiency.py computes and prints the same figure).
 
-A known bug is kept as a strict xfail: the renderer keys its occlusion state (world boxes of
-the clusters, last visible set) by ``(id(scene), scene.version)``, so a new scene that gets
-the address of a freed one (same instance count) is culled with the old scene's boxes.
-The same can happen to the one-instance scene the renderer wraps a bare Mesh in (rarer:
-about 1 in 200 in a loop of occlusion / plain / occlusion renders of different meshes).
+A regression test pins a fixed bug: the occlusion state (world boxes of the clusters, last
+visible set) must follow the scene object, not its id(), which a new scene can reuse.
 """
 
 from __future__ import annotations
@@ -645,15 +642,9 @@ def test_occlusion_off_frames_in_between():
     check_path(a, [side, WALL_CAM, side], renderer=r, context="after an off frame")
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "BUG (clraster/renderer.py Renderer._two_phase): the occlusion state (world boxes of "
-    "every (instance, cluster) and the last visible set) is keyed by (id(scene), "
-    "scene.version) and holds no reference to the scene. Once a scene is freed, a new scene "
-    "with the same number of instances (same version) that CPython allocates at the same "
-    "address is culled with the old scene's cluster boxes: here B's boxes in front of the "
-    "wall get A's boxes behind it, test OCCLUDED, and vanish from the image. "
-    "(drawlist.PlanCache guards the same key with an identity check; the occlusion state "
-    "does not.)"))
+# Was a bug: the occlusion state was keyed by (id(scene), version) with no reference to the
+# scene, so a new scene at a freed one's address inherited its boxes and history. The
+# renderer now keeps the scene and compares it with `is`.
 def test_freed_scene_id_reuse_does_not_leak_history():
     """Exact repro: render A = Scene(wall + 4 boxes behind it) with occlusion; render
     another scene without occlusion (the renderer's plan cache lets A go); ``del a``;
