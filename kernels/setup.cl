@@ -160,15 +160,16 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
     return count;
 }
 
-/* Which triangle work-item g sets up: local triangle g & (CLUSTER_MAX - 1) of draw
- * g >> CLUSTER_LOG2. Gives its slot in the frame's triangle stream, its three vertices in
- * the frame's vertex stream, and its id. Returns 0 for idle work-items. */
-inline int triangle_of(uint g, uint n_draws, __global const Draw *draws,
+/* Which triangle this work-item sets up: local triangle get_local_id of draw get_group_id
+ * (work-groups of CLUSTER_MAX; the draw is uniform over the group). Gives its slot in the
+ * frame's triangle stream, its three vertices in the frame's vertex stream, and its id.
+ * Returns 0 for idle work-items. */
+inline int triangle_of(uint n_draws, __global const Draw *draws,
                        __global const int4 *clusters, __global const uchar4 *local_tris,
                        __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
                        int *id)
 {
-    uint d = g >> CLUSTER_LOG2, lt = g & (CLUSTER_MAX - 1);
+    uint d = get_group_id(0), lt = get_local_id(0);
     if (d >= n_draws) return 0;
     Draw dr = draws[d];
     int4 ci = clusters[dr.cluster];
@@ -194,7 +195,7 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
                               __global int *clip_count)
 {
     int t, i0, i1, i2, id;
-    if (!triangle_of(get_global_id(0), n_draws, draws, clusters, local_tris, face_ids, &t,
+    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
                      &i0, &i1, &i2, &id))
         return;
     uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
@@ -236,7 +237,7 @@ __kernel void setup_clipped(__global const float4 *clip, __global const ushort *
                             __global Piece *clip_pieces, __global float *clip_bary)
 {
     int t, i0, i1, i2, id;
-    if (!triangle_of(get_global_id(0), n_draws, draws, clusters, local_tris, face_ids, &t,
+    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
                      &i0, &i1, &i2, &id) || clip_count[t] == 0)
         return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];

@@ -16,8 +16,9 @@ __kernel void vertex_transform(__global const float *pos, __global const int *ve
                                __global float4 *clip, __global ushort *outcode,
                                __global WinVert *win)
 {
-    uint g = get_global_id(0);
-    uint d = g >> CLUSTER_LOG2, lv = g & (CLUSTER_MAX - 1);
+    /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
+     * per draw (record, cluster, matrix) is uniform over the group and PoCL hoists it */
+    uint d = get_group_id(0), lv = get_local_id(0);
     if (d >= n_draws) return;
     Draw dr = draws[d];
     int4 ci = clusters[dr.cluster];   /* tri_offset, n_tris, vert_offset, n_verts */

@@ -61,7 +61,8 @@ class SetupStage:
                      geo.face_ids.buf)
         size = np.int32(width), np.int32(height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
-        ev = [self.k_setup(queue, gsize, None, clip, outcode, win, *draw_args, *size,
+        lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
+        ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
                            np.int32(CULL_MODES[cull]), np.float32(kx), np.float32(ky),
                            b.pieces.ensure(rec * m, "setup buffer"), b.status.ensure(m),
                            b.clip_count.ensure(4 * m))]
@@ -77,7 +78,7 @@ class SetupStage:
             cl.enqueue_copy(queue, total, b.clip_total.buf)
         p = int(total[0])
         if p:
-            ev.append(self.k_clipped(queue, gsize, None, clip, outcode, *draw_args, *size,
+            ev.append(self.k_clipped(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                      np.float32(kx), np.float32(ky), b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))

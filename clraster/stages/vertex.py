@@ -37,7 +37,8 @@ class VertexStage:
         """Transform the vertices of ``n_draws`` draws (geo: GeometryBuffers) into a vertex
         stream of ``n_verts`` entries."""
         b = self.buffers
-        return self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), None, geo.positions.buf,
+        return self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,),
+                           geo.positions.buf,
                            geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
                            np.uint32(n_draws), geo.mvps.buf, np.float32(kx), np.float32(ky),
                            np.int32(width), np.int32(height), b.clip.ensure(16 * n_verts),
