@@ -14,6 +14,7 @@ import numpy as np
 
 from .clusters import clusters_of
 from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
+from .inputs import view_projection
 
 
 @dataclass(frozen=True)
@@ -175,17 +176,6 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
         np.minimum(wlo, wc, out=wlo)
         np.maximum(whi, wc, out=whi)
     return wlo, whi, pool.bounded[gcl]
-
-
-def view_projection(camera, width: int, height: int) -> np.ndarray:
-    """float64 (4, 4) view-projection of ``camera`` for this image size, validated."""
-    try:
-        m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
-    except AttributeError:
-        raise ValueError(f"expected a clraster.Camera, got {type(camera).__name__}") from None
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise ValueError("camera.view_projection() must return a finite (4, 4) matrix")
-    return m
 
 
 @dataclass
