@@ -29,15 +29,47 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
     *ty1 = bb_y(bb_max) >> TILE_LOG2;
 }
 
-/* Tile (tx, ty) ∩ the piece's pixel box holds no pixel centre the piece covers. */
-inline bool tile_misses(__global const Piece *pc, int tx, int ty)
+/* Can edge a->b reach a pixel centre of tile column tx (∩ the piece's box) in tile row ty? */
+inline bool edge_reaches_tile(__global const Piece *pc, int a, int b, int tx, int ty)
 {
     int x0 = max(bb_x(pc->bb_min), tx << TILE_LOG2);
     int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
     int x1 = min(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
     int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
-    return rect_outside(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
-                        x0, y0, x1, y1);
+    return edge_reaches(pc->x[a], pc->y[a], pc->x[b], pc->y[b], x0, y0, x1, y1);
+}
+
+/* The tile columns [*lo, *hi] of row ty that all three edges reach — exactly the columns
+ * where rect_outside(tile ∩ box) is false. Along a row, the corner edge_reaches tests moves right with
+ * the column, so each edge's test is monotone: true on a suffix of the columns when its
+ * function grows with x (dy < 0), on a prefix when it shrinks (dy > 0), everywhere or
+ * nowhere when dy = 0. A binary search per edge finds each bound: O(log columns) tests per
+ * row where a scan cost O(columns) for a long thin diagonal triangle. */
+inline void row_span(__global const Piece *pc, int ty, int tx0, int tx1, int *lo, int *hi)
+{
+    *lo = tx0;
+    *hi = tx1;
+    for (int e = 0; e < 3 && *lo <= *hi; ++e) {
+        int a = e == 0 ? 1 : (e == 1 ? 2 : 0), b = e == 0 ? 2 : (e == 1 ? 0 : 1);
+        int dy = pc->y[b] - pc->y[a];
+        if (dy == 0) {
+            if (!edge_reaches_tile(pc, a, b, *lo, ty)) *hi = *lo - 1;
+        } else if (dy < 0) {            /* suffix: first column that reaches */
+            int l = *lo, r = *hi + 1;   /* answer in [l, r]; r = none */
+            while (l < r) {
+                int mid = (l + r) >> 1;
+                if (edge_reaches_tile(pc, a, b, mid, ty)) r = mid; else l = mid + 1;
+            }
+            *lo = l;
+        } else {                        /* prefix: last column that reaches */
+            int l = *lo - 1, r = *hi;   /* answer in [l, r]; l = none */
+            while (l < r) {
+                int mid = (l + r + 1) >> 1;
+                if (edge_reaches_tile(pc, a, b, mid, ty)) l = mid; else r = mid - 1;
+            }
+            *hi = l;
+        }
+    }
 }
 
 /* Visit every (piece, tile) pair of the chunk's slots in submission order. BODY sees `piece`
@@ -58,14 +90,8 @@ inline bool tile_misses(__global const Piece *pc, int tx, int ty)
             tile_rect(pc->bb_min, pc->bb_max, &tx0, &ty0, &tx1, &ty1);                    \
             bool single = tx0 == tx1 && ty0 == ty1;                                       \
             for (int ty = ty0; ty <= ty1; ++ty) {                                         \
-                /* the tiles of a row that the edges reach are contiguous (each edge's      \
-                 * test is monotone along the row), so find the two ends and take all      \
-                 * tiles between them: two tests per row instead of one per tile */        \
                 int lo = tx0, hi = tx1;                                                   \
-                if (!single) {                                                            \
-                    while (lo <= tx1 && tile_misses(pc, lo, ty)) ++lo;                    \
-                    while (hi > lo && tile_misses(pc, hi, ty)) --hi;                      \
-                }                                                                         \
+                if (!single) row_span(pc, ty, tx0, tx1, &lo, &hi);                       \
                 for (int tx = lo; tx <= hi; ++tx) {                                       \
                     int tile = ty * tiles_x + tx;                                         \
                     BODY                                                                  \
