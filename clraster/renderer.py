@@ -191,7 +191,7 @@ class Renderer:
             vp_inv_eye = eye_position(plan.view_proj)
             centre = 0.5 * (lo + hi)
             dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
-                else -centre @ view_direction(plan.view_proj)
+                else centre @ view_direction(plan.view_proj)
             budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)
             first = np.zeros(d.size, bool)
             first[np.argsort(dist, kind="stable")[:budget]] = True
