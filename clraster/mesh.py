@@ -2,9 +2,10 @@
 
 A :class:`Mesh` is immutable: ``vertices`` (N, 3) float32 and ``faces`` (M, 3) int32, both
 C-contiguous and read-only, exactly as the kernels consume them. Face ``i`` is triangle id
-``i`` in every output buffer. Faces are drawn in index order (it decides depth ties: the
-first drawn wins), and their winding is kept as given: counter-clockwise as seen from the
-front, as OpenGL assumes for back-face culling.
+``i`` in every output buffer. On equal depth the lower face index wins (what drawing in
+index order with "first drawn wins" gives, whatever order the clusters are actually drawn
+in), and the winding is kept as given: counter-clockwise as seen from the front, as OpenGL
+assumes for back-face culling.
 
 Vertices may be NaN or ±Inf: the renderer drops the triangles that use such a vertex and
 counts them in its stats; :meth:`Mesh.bounds` ignores them.

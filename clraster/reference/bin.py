@@ -1,4 +1,4 @@
-"""NumPy twin of kernels/bin.cl: per-tile lists of piece indices in submission order."""
+"""NumPy twin of kernels/bin.cl: per-tile lists of setup records in submission order."""
 
 from __future__ import annotations
 
