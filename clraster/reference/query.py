@@ -16,8 +16,6 @@ import numpy as np
 from ..config import (
     CLUSTER_MAX,
     DRAW_DTYPE,
-    SUBPIXEL_BITS,
-    SUBPIXEL_ONE,
     RasterConfig,
     guard_band_factors,
 )
@@ -25,7 +23,7 @@ from ..drawlist import FrameDraws
 from . import bin as bin_
 from . import setup as setup_
 from . import vertex as vertex_
-from .raster import edges_at
+from .raster import covered_fragments
 
 F32 = np.float32
 #: Triangles per box: box b is faces 12b .. 12b+11 (triangle id // 12 is the box).
@@ -41,7 +39,6 @@ BOX_FACES = np.array([[0, 2, 1], [1, 2, 3],     # −z
                       [0, 1, 4], [1, 5, 4],     # −y
                       [2, 6, 3], [3, 6, 7]],    # +y
                      np.int64)
-_BATCH = 1 << 22  # candidate pixels per batch (memory bound, not a semantic limit)
 
 
 def box_corners(mins: np.ndarray, maxs: np.ndarray) -> np.ndarray:
@@ -107,19 +104,12 @@ def box_geometry(mins: np.ndarray, maxs: np.ndarray, view_proj: np.ndarray
     return pool, FrameDraws(draws, int(v.shape[0]), n_boxes * BOX_TRIS, mvp)
 
 
-def _bias(ax, ay, bx, by):
-    dx, dy = bx - ax, by - ay
-    return np.where((dy < 0) | ((dy == 0) & (dx > 0)), 0, 1)
-
-
 def count_samples(tile_start: np.ndarray, entries: np.ndarray, depth: np.ndarray,
                   n_boxes: int, config: RasterConfig) -> np.ndarray:
     """Twin of query_tiles: int64 (n_boxes,) pixels at which some entry of box b (entry id
     // 12) covers the pixel centre with depth < depth[pixel]."""
     height, width = depth.shape
     npx = width * height
-    s = config.tile_log2
-    tiles_x, _ = config.tiles(width, height)
     tile_of = np.repeat(np.arange(tile_start.size - 1), np.diff(tile_start))
     box_of = entries["id"].astype(np.int64) // BOX_TRIS
     # the kernel's ordering check: box numbers never decrease along a tile list
@@ -127,43 +117,11 @@ def count_samples(tile_start: np.ndarray, entries: np.ndarray, depth: np.ndarray
         same_tile = tile_of[1:] == tile_of[:-1]
         if np.any(same_tile & (box_of[1:] < box_of[:-1])):
             raise RuntimeError("query: box entries are not in box order within a tile")
-    tx0 = (tile_of % tiles_x) << s
-    ty0 = (tile_of // tiles_x) << s
-    x0 = np.maximum(entries["bb_min"] & 0xFFFF, tx0)
-    y0 = np.maximum(entries["bb_min"] >> 16, ty0)
-    x1 = np.minimum(np.minimum(entries["bb_max"] & 0xFFFF, tx0 + (1 << s) - 1), width - 1)
-    y1 = np.minimum(np.minimum(entries["bb_max"] >> 16, ty0 + (1 << s) - 1), height - 1)
-    nx = np.maximum(x1 - x0 + 1, 0).astype(np.int64)
-    ny = np.maximum(y1 - y0 + 1, 0).astype(np.int64)
-    cnt = np.where((nx > 0) & (ny > 0), nx * ny, 0)
-    csum = np.cumsum(cnt)
     dflat = depth.reshape(-1)
     keys = []
-    start = 0
-    while start < entries.size:
-        base = csum[start - 1] if start else 0
-        stop = max(int(np.searchsorted(csum, base + _BATCH, side="right")), start + 1)
-        c = cnt[start:stop]
-        owner = np.repeat(np.arange(start, stop), c)
-        local = np.arange(owner.size) - np.repeat(np.cumsum(c) - c, c)
-        px_i = x0[owner] + local % nx[owner]
-        py_i = y0[owner] + local // nx[owner]
-        pc = entries[owner]
-        fx = (px_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        fy = (py_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        e0, e1, e2 = edges_at(pc, fx, fy)
-        X, Y = pc["x"].astype(np.int64), pc["y"].astype(np.int64)
-        cov = ((e0 >= _bias(X[:, 1], Y[:, 1], X[:, 2], Y[:, 2]))
-               & (e1 >= _bias(X[:, 2], Y[:, 2], X[:, 0], Y[:, 0]))
-               & (e2 >= _bias(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1])))
-        pc = pc[cov]
-        pix = py_i[cov].astype(np.int64) * width + px_i[cov]
-        l1 = e1[cov].astype(F32) * pc["inv_area"]
-        l2 = e2[cov].astype(F32) * pc["inv_area"]
-        z = (pc["z0"] + l1 * pc["dz10"]) + l2 * pc["dz20"]
+    for owner, pix, z, _pc in covered_fragments(tile_start, entries, width, height, config):
         ok = z < dflat[pix]
-        keys.append(np.unique(box_of[owner[cov][ok]] * npx + pix[ok]))
-        start = stop
+        keys.append(np.unique(box_of[owner[ok]] * npx + pix[ok]))
     if not keys:
         return np.zeros(n_boxes, np.int64)
     uniq = np.unique(np.concatenate(keys))

@@ -54,6 +54,57 @@ def edges_at(pc: np.ndarray, px: np.ndarray, py: np.ndarray):
     return e0, e1, e2
 
 
+def covered_fragments(tile_start: np.ndarray, entries: np.ndarray, width: int, height: int,
+                      config: RasterConfig):
+    """Every covered pixel centre of the binned entries, batch by batch in entry order.
+
+    Each (entry, pixel) candidate of the entry's box ∩ its tile is tested with the kernels'
+    exact edge functions and top-left rule; depth is the kernels' float32 expression.
+
+    Yields:
+        (entry index int64 (F,), pixel index y·W + x int64 (F,), depth float32 (F,),
+        records PIECE_DTYPE (F,)) for the covered fragments of a batch of entries.
+    """
+    s = config.tile_log2
+    tiles_x, _ = config.tiles(width, height)
+    tile_of = np.repeat(np.arange(tile_start.size - 1), np.diff(tile_start))
+    tx0 = (tile_of % tiles_x) << s
+    ty0 = (tile_of // tiles_x) << s
+    x0 = np.maximum(entries["bb_min"] & 0xFFFF, tx0)
+    y0 = np.maximum(entries["bb_min"] >> 16, ty0)
+    x1 = np.minimum(np.minimum(entries["bb_max"] & 0xFFFF, tx0 + (1 << s) - 1), width - 1)
+    y1 = np.minimum(np.minimum(entries["bb_max"] >> 16, ty0 + (1 << s) - 1), height - 1)
+    nx = np.maximum(x1 - x0 + 1, 0).astype(np.int64)
+    ny = np.maximum(y1 - y0 + 1, 0).astype(np.int64)
+    cnt = np.where((nx > 0) & (ny > 0), nx * ny, 0)
+    csum = np.cumsum(cnt)
+    start = 0
+    while start < entries.size:
+        # entries [start, stop) hold at most _BATCH candidates (at least one entry)
+        base = csum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(csum, base + _BATCH, side="right")), start + 1)
+        c = cnt[start:stop]
+        owner = np.repeat(np.arange(start, stop), c)
+        local = np.arange(owner.size) - np.repeat(np.cumsum(c) - c, c)
+        px_i = x0[owner] + local % nx[owner]
+        py_i = y0[owner] + local // nx[owner]
+        pc = entries[owner]
+        fx = (px_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        fy = (py_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
+        e0, e1, e2 = edges_at(pc, fx, fy)
+        X, Y = pc["x"].astype(np.int64), pc["y"].astype(np.int64)
+        cov = ((e0 >= _bias(X[:, 1], Y[:, 1], X[:, 2], Y[:, 2]))
+               & (e1 >= _bias(X[:, 2], Y[:, 2], X[:, 0], Y[:, 0]))
+               & (e2 >= _bias(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1])))
+        owner, pc = owner[cov], pc[cov]
+        pix = py_i[cov].astype(np.int64) * width + px_i[cov]
+        l1 = e1[cov].astype(F32) * pc["inv_area"]
+        l2 = e2[cov].astype(F32) * pc["inv_area"]
+        z = (pc["z0"] + l1 * pc["dz10"]) + l2 * pc["dz20"]
+        yield owner, pix, z, pc
+        start = stop
+
+
 def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, width: int,
            height: int, config: RasterConfig):
     """Rasterize binned pieces.
@@ -66,51 +117,13 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3),
         fragments tested, fragments passed.
     """
-    s = config.tile_log2
-    tiles_x, _ = config.tiles(width, height)
     npx = width * height
     zbuf = np.ones(npx, F32)
     win = np.full(npx, -1, np.int64)
     wid = np.full(npx, -1, np.int64)  # winning id (−1: clear value)
     tested = passed = 0
 
-    n_ent = entries.size
-    tile_of = np.repeat(np.arange(tile_start.size - 1), np.diff(tile_start))
-    pc_all = entries
-    tx0 = (tile_of % tiles_x) << s
-    ty0 = (tile_of // tiles_x) << s
-    x0 = np.maximum(pc_all["bb_min"] & 0xFFFF, tx0)
-    y0 = np.maximum(pc_all["bb_min"] >> 16, ty0)
-    x1 = np.minimum(np.minimum(pc_all["bb_max"] & 0xFFFF, tx0 + (1 << s) - 1), width - 1)
-    y1 = np.minimum(np.minimum(pc_all["bb_max"] >> 16, ty0 + (1 << s) - 1), height - 1)
-    nx = np.maximum(x1 - x0 + 1, 0).astype(np.int64)
-    ny = np.maximum(y1 - y0 + 1, 0).astype(np.int64)
-    cnt = np.where((nx > 0) & (ny > 0), nx * ny, 0)
-    csum = np.cumsum(cnt)
-    start = 0
-    while start < n_ent:
-        # entries [start, stop) hold at most _BATCH candidates (at least one entry)
-        base = csum[start - 1] if start else 0
-        stop = max(int(np.searchsorted(csum, base + _BATCH, side="right")), start + 1)
-        sl = slice(start, stop)
-        c = cnt[sl]
-        owner = np.repeat(np.arange(start, stop), c)
-        local = np.arange(owner.size) - np.repeat(np.cumsum(c) - c, c)
-        px_i = x0[owner] + local % nx[owner]
-        py_i = y0[owner] + local // nx[owner]
-        pc = pc_all[owner]
-        fx = (px_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        fy = (py_i.astype(np.int64) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        e0, e1, e2 = edges_at(pc, fx, fy)
-        X, Y = pc["x"].astype(np.int64), pc["y"].astype(np.int64)
-        cov = ((e0 >= _bias(X[:, 1], Y[:, 1], X[:, 2], Y[:, 2]))
-               & (e1 >= _bias(X[:, 2], Y[:, 2], X[:, 0], Y[:, 0]))
-               & (e2 >= _bias(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1])))
-        owner, pc = owner[cov], pc[cov]
-        pix = (py_i[cov].astype(np.int64) * width + px_i[cov])
-        l1 = e1[cov].astype(F32) * pc["inv_area"]
-        l2 = e2[cov].astype(F32) * pc["inv_area"]
-        z = (pc["z0"] + l1 * pc["dz10"]) + l2 * pc["dz20"]
+    for owner, pix, z, pc in covered_fragments(tile_start, entries, width, height, config):
         tested += z.size
         # sequential LESS in list order == segmented running min over (pixel, entry index)
         srt = np.lexsort((owner, pix))
@@ -138,7 +151,6 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         zbuf[pix_ok[last]] = z_ok[last]
         win[pix_ok[last]] = own_ok[last]
         wid[pix_ok[last]] = id_ok[last]
-        start = stop
 
     ids = np.full(npx, -1, np.int32)
     bary = np.zeros((npx, 3), F32)
