@@ -1,4 +1,10 @@
-"""Command-line interface: ``clraster render MESH --size WxH --out image.png``.
+"""Command-line interface.
+
+- ``clraster render MESH --size WxH --out image.png``: render one mesh (this module).
+- ``clraster demo ...``: the built-in plant demo with the culling inspector
+  (`clraster.demo.main`).
+- ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`, the repository's
+  ``bench/`` folder, installed as ``clraster.bench``).
 
 Exit codes: 0 success; 1 the mesh, camera or output could not be used (one line on stderr,
 no traceback); 2 bad command-line arguments (argparse's usage message).
@@ -69,6 +75,9 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="clraster", description="Tile-based software rasterizer on CPU OpenCL (PoCL).")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (_module, text) in DELEGATED.items():
+        # listed for --help only: main() hands these to their modules before parsing
+        sub.add_parser(name, help=text, add_help=False)
     r = sub.add_parser(
         "render", help="render a mesh to a shaded PNG (and optionally depth / ids)",
         description="Render MESH and write a flat-shaded image. Without --eye/--target the "
@@ -198,8 +207,28 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Subcommands that own their arguments: ``clraster NAME ARGS...`` calls ``main(ARGS)`` of
+#: the module (each parses its own options and returns an exit code).
+DELEGATED = {
+    "demo": ("clraster.demo", "render the built-in plant: shaded, depth, overdraw and a "
+                              "culling inspector"),
+    "bench": ("clraster.bench.harness", "benchmark harness: OpenCL vs the NumPy twin and "
+                                        "Mesa llvmpipe"),
+}
+
+
+def _delegate(name: str, argv: list[str]) -> int:
+    import importlib
+
+    module = importlib.import_module(DELEGATED[name][0])
+    return int(module.main(argv) or 0)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with `argv` (default ``sys.argv[1:]``); returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in DELEGATED:
+        return _delegate(argv[0], argv[1:])
     parser = _parser()
     try:
         args = parser.parse_args(argv)

@@ -1,0 +1,1 @@
+"""Benchmark harness of clraster (installed as ``clraster.bench``; see bench/README.md)."""
