@@ -100,10 +100,10 @@ inline void row_span(__global const Piece *pc, int ty, int tx0, int tx1, int *lo
         }                                                                                 \
     }
 
-__kernel void bin_count(__global const uchar *status, __global const int *clip_count,
-                        __global const int *clip_offset, __global const Piece *pieces,
-                        __global const Piece *clip_pieces, const uint m, const uint chunks,
-                        const int tiles_x, const int n_tiles, __global int *counts)
+__kernel void bin_count(__global const uchar *restrict status, __global const int *restrict clip_count,
+                        __global const int *restrict clip_offset, __global const Piece *restrict pieces,
+                        __global const Piece *restrict clip_pieces, const uint m, const uint chunks,
+                        const int tiles_x, const int n_tiles, __global int *restrict counts)
 {
     uint chunk = get_global_id(0);
     if (chunk >= chunks) return;
@@ -112,8 +112,8 @@ __kernel void bin_count(__global const uchar *status, __global const int *clip_c
     FOR_EACH_CHUNK_ENTRY(row[tile] += 1;)
 }
 
-__kernel void bin_offsets(const uint chunks, const int n_tiles, __global int *counts,
-                          __global int *tile_count)
+__kernel void bin_offsets(const uint chunks, const int n_tiles, __global int *restrict counts,
+                          __global int *restrict tile_count)
 {
     int tile = get_global_id(0);
     if (tile >= n_tiles) return;
@@ -129,8 +129,8 @@ __kernel void bin_offsets(const uint chunks, const int n_tiles, __global int *co
 
 /* tile_start has n_tiles + 1 entries; tile_start[n_tiles] is the total. If the total does
  * not fit an int, overflow[0] is set and the host refuses the frame with an error. */
-__kernel void bin_scan_tiles(const int n_tiles, __global const int *tile_count,
-                             __global int *tile_start, __global int *overflow)
+__kernel void bin_scan_tiles(const int n_tiles, __global const int *restrict tile_count,
+                             __global int *restrict tile_start, __global int *restrict overflow)
 {
     if (get_global_id(0) != 0) return;
     long s = 0;
@@ -142,11 +142,11 @@ __kernel void bin_scan_tiles(const int n_tiles, __global const int *tile_count,
     overflow[0] = s > (long)INT_MAX;
 }
 
-__kernel void bin_scatter(__global const uchar *status, __global const int *clip_count,
-                          __global const int *clip_offset, __global const Piece *pieces,
-                          __global const Piece *clip_pieces, const uint m, const uint chunks,
-                          const int tiles_x, const int n_tiles, __global int *counts,
-                          __global const int *tile_start, __global Piece *entries)
+__kernel void bin_scatter(__global const uchar *restrict status, __global const int *restrict clip_count,
+                          __global const int *restrict clip_offset, __global const Piece *restrict pieces,
+                          __global const Piece *restrict clip_pieces, const uint m, const uint chunks,
+                          const int tiles_x, const int n_tiles, __global int *restrict counts,
+                          __global const int *restrict tile_start, __global Piece *restrict entries)
 {
     uint chunk = get_global_id(0);
     if (chunk >= chunks) return;

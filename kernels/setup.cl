@@ -184,15 +184,15 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
 }
 
 #define DRAW_ARGS                                                                          \
-    __global const Draw *draws, const uint n_draws, __global const int4 *clusters,         \
-    __global const uchar4 *local_tris, __global const int *face_ids
+    __global const Draw *restrict draws, const uint n_draws, __global const int4 *restrict clusters,         \
+    __global const uchar4 *restrict local_tris, __global const int *restrict face_ids
 
-__kernel void setup_triangles(__global const float4 *clip, __global const ushort *outcode,
-                              __global const WinVert *win, DRAW_ARGS,
+__kernel void setup_triangles(__global const float4 *restrict clip, __global const ushort *restrict outcode,
+                              __global const WinVert *restrict win, DRAW_ARGS,
                               const int width, const int height, const int cull,
                               const float kx, const float ky,
-                              __global Piece *pieces, __global uchar *status,
-                              __global int *clip_count)
+                              __global Piece *restrict pieces, __global uchar *restrict status,
+                              __global int *restrict clip_count)
 {
     int t, i0, i1, i2, id;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
@@ -230,11 +230,11 @@ __kernel void setup_triangles(__global const float4 *clip, __global const ushort
     clip_count[t] = nclip;
 }
 
-__kernel void setup_clipped(__global const float4 *clip, __global const ushort *outcode,
+__kernel void setup_clipped(__global const float4 *restrict clip, __global const ushort *restrict outcode,
                             DRAW_ARGS, const int width, const int height,
                             const float kx, const float ky,
-                            __global const int *clip_count, __global const int *clip_offset,
-                            __global Piece *clip_pieces, __global float *clip_bary)
+                            __global const int *restrict clip_count, __global const int *restrict clip_offset,
+                            __global Piece *restrict clip_pieces, __global float *restrict clip_bary)
 {
     int t, i0, i1, i2, id;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
@@ -250,8 +250,8 @@ __kernel void setup_clipped(__global const float4 *clip, __global const ushort *
  * the ranges before it and writes the prefix. One work-item per range, no barriers or local
  * memory (pyopencl's GenericScanKernel has a benign but real data race that Oclgrind
  * reports, and is slower on PoCL for these sizes). */
-__kernel void scan_partials(__global const int *cnt, const uint m, const uint chunks,
-                            __global int *partial)
+__kernel void scan_partials(__global const int *restrict cnt, const uint m, const uint chunks,
+                            __global int *restrict partial)
 {
     uint c = get_global_id(0);
     if (c >= chunks) return;
@@ -261,9 +261,9 @@ __kernel void scan_partials(__global const int *cnt, const uint m, const uint ch
     partial[c] = s;
 }
 
-__kernel void scan_offsets(__global const int *cnt, const uint m, const uint chunks,
-                           __global const int *partial, __global int *off,
-                           __global int *total)
+__kernel void scan_offsets(__global const int *restrict cnt, const uint m, const uint chunks,
+                           __global const int *restrict partial, __global int *restrict off,
+                           __global int *restrict total)
 {
     uint c = get_global_id(0);
     if (c >= chunks) return;

@@ -8,13 +8,13 @@
  * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
 #include "common.h"
 
-__kernel void vertex_transform(__global const float *pos, __global const int *vert_ids,
-                               __global const int4 *clusters, __global const Draw *draws,
-                               const uint n_draws, __global const float *mvps,
+__kernel void vertex_transform(__global const float *restrict pos, __global const int *restrict vert_ids,
+                               __global const int4 *restrict clusters, __global const Draw *restrict draws,
+                               const uint n_draws, __global const float *restrict mvps,
                                const float kx, const float ky,
                                const int width, const int height,
-                               __global float4 *clip, __global ushort *outcode,
-                               __global WinVert *win)
+                               __global float4 *restrict clip, __global ushort *restrict outcode,
+                               __global WinVert *restrict win)
 {
     /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
      * per draw (record, cluster, matrix) is uniform over the group and PoCL hoists it */
