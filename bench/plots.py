@@ -1,0 +1,194 @@
+"""PNG plots of a harness run (results.json as a dict): matplotlib, imported lazily.
+
+`make_all(results, out)` writes time_vs_triangles.png, time_vs_pixels.png, stages.png and
+funnel.png (each only when the run has the data) and returns (file names, message); without
+matplotlib it writes nothing and says how to install it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+__all__ = ["make_all"]
+
+SKIPPED = "plots skipped: pip install 'clraster[bench]'"
+
+_C = {"opencl": "#1f77b4", "twin": "#ff7f0e", "peer": "#2ca02c"}
+_STAGE_COLORS = ["#9467bd", "#1f77b4", "#17becf", "#2ca02c", "#bcbd22", "#ff7f0e",
+                 "#d62728", "#e377c2", "#8c564b", "#7f7f7f"]
+
+
+def make_all(res: dict[str, Any], out: Path) -> tuple[list[str], str | None]:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return [], SKIPPED
+    out = Path(out)
+    written = []
+    for name, fn in (("time_vs_triangles.png", _vs_triangles), ("time_vs_pixels.png",
+                                                               _vs_pixels),
+                     ("stages.png", _stages), ("funnel.png", _funnel)):
+        fig = fn(res, plt)
+        if fig is None:
+            continue
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
+        written.append(name)
+    return written, None
+
+
+def _title(res: dict, text: str) -> str:
+    m = res.get("machine") or {}
+    cpu = (m.get("cpu") or "").replace("(R)", "").replace("(TM)", "")
+    return f"{text}\n{cpu}, {m.get('cores_usable')} cores"
+
+
+_LABELS = {"opencl": "clraster OpenCL (PoCL)", "twin": "NumPy twin",
+           "peer": "Mesa llvmpipe (draws all)"}
+_MARK = {"mesh": ("o", "mesh"), "example": ("o", "mesh"), "grid": ("s", "instance grid"),
+         "plant": ("^", "plant")}
+
+
+def _value(c: dict, k: str) -> float | None:
+    return (c["opencl"] if k == "opencl" else c["twin"] if k == "twin" else c["peer"]
+            ).get("median_ms")
+
+
+def _line_plot(res, plt, configs, xkey, xlabel, title, label_of):
+    """Medians vs `xkey`: colour = renderer, marker = scene kind; lines join the points
+    of one renderer and one scene kind only (different scenes are not a curve)."""
+    if not configs:
+        return None
+    from matplotlib.lines import Line2D
+
+    configs = sorted(configs, key=lambda c: c[xkey])
+    fig, ax = plt.subplots(figsize=(9, 5.5))
+    kinds = list(dict.fromkeys(_MARK[c["scene"]["kind"]][1] for c in configs))
+    used = []
+    for k in ("twin", "peer", "opencl"):
+        for kind in kinds:
+            pts = [(c[xkey], _value(c, k)) for c in configs
+                   if _MARK[c["scene"]["kind"]][1] == kind and _value(c, k)]
+            if not pts:
+                continue
+            marker = next(m for m, n in _MARK.values() if n == kind)
+            ax.plot(*zip(*pts, strict=True), marker=marker, ls="-", color=_C[k], lw=1.8,
+                    ms=7, alpha=0.9)
+            if k not in used:
+                used.append(k)
+    for c in configs:
+        v = _value(c, "opencl")
+        if v:
+            ax.annotate(label_of(c), (c[xkey], v), textcoords="offset points", xytext=(5, -13),
+                        fontsize=7.5, color="#333")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("frame time, ms (median, log)")
+    ax.set_title(_title(res, title), fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    handles = [Line2D([], [], color=_C[k], lw=2, label=_LABELS[k]) for k in used]
+    if len(kinds) > 1:
+        handles += [Line2D([], [], color="#555", ls="", marker=next(
+            m for m, n in _MARK.values() if n == kind), label=kind) for kind in kinds]
+    ax.legend(handles=handles, loc="upper left", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def _vs_triangles(res, plt):
+    cs = [c for c in res["configs"] if "triangles" in c["sweeps"]]
+    size = f"{cs[0]['size'][0]}×{cs[0]['size'][1]}" if cs else ""
+    return _line_plot(res, plt, cs, "triangles", "input triangles (log)",
+                      f"Frame time vs triangles at {size}", lambda c: c["scene"]["name"])
+
+
+def _vs_pixels(res, plt):
+    cs = [c for c in res["configs"] if "pixels" in c["sweeps"]]
+    name = cs[0]["scene"]["name"] if cs else ""
+    return _line_plot(res, plt, cs, "pixels", "pixels per frame (log)",
+                      f"Frame time vs pixels: {name}",
+                      lambda c: f"{c['size'][0]}×{c['size'][1]}")
+
+
+def _stages(res, plt):
+    cs = [c for c in res["configs"] if c["opencl"].get("stages_median_ms")]
+    if not cs:
+        return None
+    stages: list[str] = []
+    for c in cs:
+        stages += [k for k in c["opencl"]["stages_median_ms"] if k not in stages]
+    fig, ax = plt.subplots(figsize=(10, 0.42 * len(cs) + 2.2))
+    labels = [c["id"] for c in cs]
+    left = [0.0] * len(cs)
+    for i, s in enumerate(stages):
+        vals = [c["opencl"]["stages_median_ms"].get(s, 0.0) for c in cs]
+        ax.barh(labels, vals, left=left, color=_STAGE_COLORS[i % len(_STAGE_COLORS)], label=s)
+        left = [a + b for a, b in zip(left, vals, strict=True)]
+    frame = [c["opencl"].get("median_ms") or 0.0 for c in cs]
+    ax.scatter(frame, labels, marker="|", s=200, color="k", zorder=3,
+               label="frame (wall, render())")
+    ax.invert_yaxis()
+    ax.set_xlabel("ms (median per stage; device times from profiling events, host culling "
+                  "wall time)")
+    ax.set_title(_title(res, "OpenCL per-stage times"), fontsize=10)
+    ax.tick_params(axis="y", labelsize=7.5)
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    return fig
+
+
+_FUNNEL = [("in scene", "triangles_total", None),
+           ("after frustum", None, ("triangles_frustum_culled",)),
+           ("after cones", None, ("triangles_frustum_culled", "triangles_cone_culled")),
+           ("after occlusion", None, ("triangles_frustum_culled", "triangles_cone_culled",
+                                      "triangles_occlusion_culled")),
+           ("sent to setup", "triangles_in", None),
+           ("rasterized", "rasterized", None)]
+
+
+def _funnel(res, plt):
+    cs = [c for c in res["configs"] if "culling" in c["sweeps"]]
+    if not cs:
+        return None
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(10, 5.5))
+    n = len(cs)
+    width = 0.8 / n
+    x = np.arange(len(_FUNNEL))
+    colors = {"off": "#7f7f7f", "frustum": "#1f77b4", "occlusion": "#2ca02c"}
+    all_vals: list[int] = []
+    for j, c in enumerate(cs):
+        k = c["opencl"]["counts"]
+        vals = []
+        for _, key, minus in _FUNNEL:
+            vals.append(k[key] if key else k["triangles_total"] - sum(k[m] for m in minus))
+        all_vals += vals
+        ms = c["opencl"].get("median_ms")
+        bars = ax.bar(x + (j - (n - 1) / 2) * width, vals, width,
+                      color=colors.get(c["mode"], None),
+                      label=f"{c['mode']} ({ms:.1f} ms/frame)" if ms else c["mode"])
+        for b, v in zip(bars, vals, strict=True):
+            ax.annotate(f"{v / 1e6:.2f}M" if v >= 1e5 else f"{v:,}",
+                        (b.get_x() + b.get_width() / 2, max(v, 1)), ha="center",
+                        va="bottom", fontsize=6.5, rotation=90, xytext=(0, 2),
+                        textcoords="offset points")
+    ax.set_yscale("log")
+    lo = min(max(v, 1) for v in all_vals)
+    ax.set_ylim(lo / 4, max(all_vals) * 12)
+    ax.set_xticks(x, [f[0] for f in _FUNNEL])
+    ax.set_ylabel("triangles (log)")
+    c0 = cs[0]
+    ax.set_title(_title(res, f"Culling funnel: {c0['scene']['name']} "
+                             f"({c0['triangles']:,} triangles), {c0['size'][0]}×"
+                             f"{c0['size'][1]}"), fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=9, loc="upper right")
+    fig.tight_layout()
+    return fig
