@@ -109,6 +109,12 @@ class SceneSpec:
     grid: tuple[int, int, int] = (1, 1, 1)
     view: str = "framing"         # framing | grid | inside | overview
 
+    @property
+    def geometry(self) -> tuple:
+        """What is loaded or built (the view aside): specs with the same geometry share one
+        loaded scene, so its clusters and BVHs are built once."""
+        return (self.kind, self.mesh, self.count, self.grid)
+
     @staticmethod
     def parse(text: str) -> SceneSpec:
         t = text.strip()
@@ -172,11 +178,12 @@ class LoadedScene:
     build_s: float
     source: str
 
-    def camera(self, width: int, height: int):
+    def camera(self, width: int, height: int, view: str | None = None):
+        """The camera of `view` (default the loading spec's view)."""
         from clraster import Camera
         from clraster import scenes as sc
 
-        v = self.spec.view
+        v = view or self.spec.view
         if v == "inside":
             return sc.plant_inside_camera(self.target, width, height)
         if v == "overview":
@@ -186,8 +193,9 @@ class LoadedScene:
         lo, hi = self.target.bounds()   # as bench/frame_time.py frames a mesh
         return Camera.framing(lo, hi, aspect=width / height)
 
-    def describe(self) -> dict[str, Any]:
-        return {"name": self.spec.text, "kind": self.spec.kind, "view": self.spec.view,
+    def describe(self, spec: SceneSpec | None = None) -> dict[str, Any]:
+        spec = spec or self.spec
+        return {"name": spec.text, "kind": spec.kind, "view": spec.view,
                 "source": self.source, "triangles": self.triangles,
                 "instances": self.instances, "build_s": round(self.build_s, 4)}
 
@@ -279,12 +287,12 @@ def build_matrix(a: argparse.Namespace) -> list[Config]:
     if "culling" in a.sweeps:
         for m in a.modes:
             add(a.culling_scene, a.size, m, "culling")
-    order: dict[str, int] = {}
+    order: dict[tuple, int] = {}
     for c in out.values():
-        order.setdefault(c.scene.text, len(order))
+        order.setdefault(c.scene.geometry, len(order))
     mode_rank = {m: i for i, m in enumerate(MODES)}
-    return sorted(out.values(), key=lambda c: (order[c.scene.text], c.width * c.height,
-                                               mode_rank[c.mode]))
+    return sorted(out.values(), key=lambda c: (order[c.scene.geometry], c.scene.view,
+                                               c.width * c.height, mode_rank[c.mode]))
 
 
 # =======================================================================================
@@ -368,12 +376,12 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     import clraster
 
     w, h = cfg.width, cfg.height
-    cam = sc.camera(w, h)
+    cam = sc.camera(w, h, cfg.scene.view)
     kw = MODES[cfg.mode]
     twin_mode = TWIN_MODE[cfg.mode]
     twin_kw = {k: v for k, v in MODES[twin_mode].items() if k != "occlusion"}
     rec: dict[str, Any] = {
-        "id": cfg.id, "sweeps": list(cfg.sweeps), "scene": sc.describe(),
+        "id": cfg.id, "sweeps": list(cfg.sweeps), "scene": sc.describe(cfg.scene),
         "triangles": sc.triangles, "size": [w, h], "pixels": w * h, "mode": cfg.mode,
         "render_args": {"cull": a.cull, **kw},
     }
@@ -498,7 +506,7 @@ class PeerRunner:
     def measure(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a, cl_med) -> dict:
         if not self.ok:
             return {"skipped": self.reason}
-        key = (sc.spec.text, cfg.width, cfg.height, a.cull)
+        key = (cfg.scene.text, cfg.width, cfg.height, a.cull)
         if key not in self.cache:
             self.cache[key] = self._run(cfg, sc, cam, cl_depth, a)
         rec = dict(self.cache[key])
@@ -616,11 +624,17 @@ def _probe(task: dict) -> dict:
                 "scene_load_s": t4 - t3, "first_frame_s": t5 - t4,
                 "first_occlusion_frame_s": t6 - t5, "next_frame_s": t7 - t6,
                 "to_first_frame_s": (t3 - t0) + (t5 - t4), "triangles": sc.triangles}
-    # memory
-    import numpy as np  # noqa: F401
-
+    # memory: the path's modules (and, for OpenCL, the context) before the baseline, so
+    # that "rendering adds" is the rendering itself
     import clraster
 
+    if task["path"] == "opencl":
+        from clraster.device import default_context
+        from clraster.renderer import Renderer
+
+        default_context()
+    else:
+        from clraster import reference  # noqa: F401
     base = _status_mib("VmRSS")
     sc = load_scene(spec, meshes)
     cam = sc.camera(w, h)
@@ -629,7 +643,7 @@ def _probe(task: dict) -> dict:
     reset = _reset_peak()
     kw = MODES[task["mode"]]
     if task["path"] == "opencl":
-        r = clraster.Renderer(w, h)
+        r = Renderer(w, h)
         for _ in range(2 if kw.get("occlusion") else 1):
             r.render(sc.target, cam, cull=task["cull"], **kw)
     else:
@@ -861,21 +875,24 @@ def markdown(res: dict) -> str:
     mem = res.get("memory")
     if mem:
         L += ["", "## Peak host memory (MiB)", "",
-              "| scene | size | path | after imports | scene loaded | peak RSS | "
+              "| scene | size, mode | path | after imports | scene loaded | peak RSS | "
               "rendering adds |", "|---|---|---|---:|---:|---:|---:|"]
         for m in mem:
+            where = f"{m['scene']} | {m['size'][0]}×{m['size'][1]} {m['mode']}"
             for path in ("opencl", "twin"):
                 x = m[path]
                 if "peak_rss_mib" not in x:
                     why = x.get("error") or x.get("skipped")
-                    L.append(f"| {m['scene']} | {m['size'][0]}×{m['size'][1]} | {path} | "
+                    L.append(f"| {where} | {path} | "
                              f"{why} ||||")
                     continue
-                L.append(f"| {m['scene']} | {m['size'][0]}×{m['size'][1]} | {path} | "
+                L.append(f"| {where} | {path} | "
                          f"{_f(x['baseline_rss_mib'], '.0f')} | {_f(x['scene_rss_mib'], '.0f')} "
                          f"| {_f(x['peak_rss_mib'], '.0f')} | "
                          f"{_f(x.get('render_extra_mib'), '.0f')} |")
         L += ["", res["memory_method"]]
+    if res.get("errors"):
+        L += ["", "## Errors", ""] + [f"- {s}" for s in res["errors"]]
     if res["skipped"]:
         L += ["", "## Skipped", ""] + [f"- {s}" for s in res["skipped"]]
     if res.get("plots"):
@@ -1027,37 +1044,52 @@ def main(argv: list[str] | None = None) -> int:
             runnable.append(c)
     weights = [estimated_triangles(c.scene, a.meshes) * (1 + (0 if a.no_twin else 12))
                + c.width * c.height * 20 + 2e6 for c in runnable]
-    scene_texts = list(dict.fromkeys(c.scene.text for c in runnable))
-    mem_jobs = [] if a.no_memory else scene_texts
+    # peak memory: one probe pair per geometry, on its heaviest configuration (most pixels,
+    # frustum mode, a view that sees it all rather than the inside one)
+    mem_jobs: list[Config] = []
+    if not a.no_memory:
+        for geo in dict.fromkeys(c.scene.geometry for c in runnable):
+            cs = [c for c in runnable if c.scene.geometry == geo]
+            mem_jobs.append(max(cs, key=lambda c: (c.width * c.height, c.mode == "frustum",
+                                                   c.scene.view != "inside")))
     avg = sum(weights) / len(weights) if weights else 1.0
     steps = weights + [avg * 0.5] * len(mem_jobs) + ([] if a.no_startup else [avg])
     prog = Progress(steps)
 
     records: list[dict] = []
+    errors: list[str] = []
     loaded: LoadedScene | None = None
     for c in runnable:
         prog.start(c.id)
         try:
-            if loaded is None or loaded.spec.text != c.scene.text:
+            if loaded is None or loaded.spec.geometry != c.scene.geometry:
                 loaded = None   # free the previous scene first (10M triangles are large)
                 loaded = load_scene(c.scene, a.meshes)
             records.append(_jsonable(run_config(c, loaded, a, peer, prog.log)))
         except SceneMissing as exc:
             skipped.append(f"{c.id}: {exc}")
             prog.log(f"skipped {c.id}: {exc}")
+        except Exception as exc:  # keep the other configurations of a long run
+            import traceback
+
+            errors.append(f"{c.id}: {type(exc).__name__}: {exc}")
+            prog.log(f"ERROR {c.id}: {type(exc).__name__}: {exc}\n"
+                     + traceback.format_exc(limit=4))
         prog.finish_step()
+        # checkpoint: a long run that dies later still leaves its measurements
+        (out / "results.partial.json").write_text(json.dumps(
+            {"schema": SCHEMA, "command": ["clraster", "bench", *argv], "configs": records,
+             "errors": errors, "skipped": skipped}, indent=1) + "\n")
     loaded = None
 
     memory = []
-    for s in mem_jobs:
-        prog.start(f"peak memory {s}")
-        cs = [c for c in runnable if c.scene.text == s]
-        big = max(cs, key=lambda c: (c.width * c.height, c.mode == "frustum"))
-        mode = "frustum" if any(c.mode == "frustum" for c in cs) else big.mode
-        tri = next((r["triangles"] for r in records if r["scene"]["name"] == s), 0)
+    for c in mem_jobs:
+        prog.start(f"peak memory {c.id}")
+        tri = next((r["triangles"] for r in records if r["scene"]["name"] == c.scene.text),
+                   0)
         twin_ok = not a.no_twin and (a.twin_max_triangles is None
                                      or tri <= a.twin_max_triangles)
-        memory.append(measure_memory(s, (big.width, big.height), mode, a, twin_ok))
+        memory.append(measure_memory(c.scene.text, (c.width, c.height), c.mode, a, twin_ok))
         prog.finish_step()
     startup = None
     if not a.no_startup:
@@ -1087,11 +1119,13 @@ def main(argv: list[str] | None = None) -> int:
                          "peak_rss_mib: the process's peak resident set (VmHWM; ru_maxrss "
                          "is not used because Linux carries it over exec from the parent); "
                          "the PoCL device is the CPU, so device buffers are host memory and "
-                         "are included. baseline_rss_mib: RSS after the imports; "
+                         "are included. baseline_rss_mib: RSS after the imports (and the "
+                         "OpenCL context, on the OpenCL path); "
                          "scene_rss_mib: RSS with the scene loaded; render_extra_mib: the "
                          "peak during rendering above that (VmHWM reset through "
                          "/proc/self/clear_refs after loading).",
         "skipped": skipped,
+        "errors": errors,
     }
     res["elapsed_s"] = time.perf_counter() - t_start
     plots: list[str] = []
@@ -1106,8 +1140,13 @@ def main(argv: list[str] | None = None) -> int:
     (out / "results.json").write_text(json.dumps(res, indent=1) + "\n")
     (out / "results.md").write_text(markdown(res))
     print(_summary_lines(res))
+    (out / "results.partial.json").unlink(missing_ok=True)
     print(f"wrote {out / 'results.json'}, {out / 'results.md'}"
           + (f" and {len(plots)} plots" if plots else ""))
+    if errors:
+        print(f"clraster bench: {len(errors)} configuration(s) failed:\n  "
+              + "\n  ".join(errors), file=sys.stderr)
+        return 1
     return 0
 
 

@@ -42,9 +42,9 @@ def test_json_schema(quick):
     _, out = quick
     res = json.loads((out / "results.json").read_text())
     assert res["schema"] == "clraster-bench/1"
-    assert res["quick"] is True
+    assert res["quick"] is True and res["errors"] == []
     for key in ("created", "command", "settings", "machine", "peer", "configs", "targets",
-                "startup", "memory", "skipped", "elapsed_s", "plots"):
+                "startup", "memory", "skipped", "errors", "elapsed_s", "plots"):
         assert key in res, key
     m = res["machine"]
     assert isinstance(m["cpu"], str) and m["cores_logical"] >= 1
