@@ -302,6 +302,9 @@ class DrawList:
             (triangles_total = scene.n_faces), counted exactly by cluster sizes.
         timings_ms: host time per step: "prepare" (clusterizing / BVH builds done by this
             call; 0 when cached), "instances", "clusters", "cones", "order", "total".
+        cone_culled: int32 (P, 2) (instance, cluster) pairs removed by the normal-cone test,
+            in no particular order, when asked for (``keep_cone_culled=True``); else None.
+            The frustum-culled pairs are the rest: neither drawn nor cone-culled.
     """
 
     instance: np.ndarray
@@ -309,6 +312,7 @@ class DrawList:
     inside: np.ndarray
     counts: dict[str, int] = field(default_factory=dict)
     timings_ms: dict[str, float] = field(default_factory=dict)
+    cone_culled: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.instance.size)
@@ -520,7 +524,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     cones: bool = True, cull: str = "back", max_triangles: int = 128,
                     max_vertices: int = 128, inside_margin: float = DEFAULT_MARGIN,
                     outside_margin: float = DEFAULT_MARGIN,
-                    cone_margin: float = DEFAULT_CONE_MARGIN) -> DrawList:
+                    cone_margin: float = DEFAULT_CONE_MARGIN,
+                    keep_cone_culled: bool = False) -> DrawList:
     """The (instance, cluster) pairs of `scene` to draw for one view.
 
     Args:
@@ -541,6 +546,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         max_triangles, max_vertices: cluster limits (see `clusterize`).
         inside_margin, outside_margin: relative frustum margins (module docstring).
         cone_margin: radians, >= 0.
+        keep_cone_culled: also return the cone-culled pairs (``DrawList.cone_culled``).
 
     Returns:
         A `DrawList`.
@@ -613,6 +619,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     clusters_after_frustum = 0
     n_cone_cl = 0
     n_cone_tri = 0
+    cone_pairs: list[tuple[np.ndarray, np.ndarray]] = []  # with keep_cone_culled
     t_clusters = 0.0
     t_cones = 0.0
     t0 = time.perf_counter()
@@ -636,6 +643,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     back[sel[back_sel]] = True
                     n_cone_cl += int(back_sel.sum())
                     n_cone_tri += int(tri[back].sum())
+                    if keep_cone_culled:
+                        cone_pairs.append((inst[back], cl[back]))
                     keep = ~back
                     inst, cl, ins = inst[keep], cl[keep], ins[keep]
             t_cones += time.perf_counter() - t1
@@ -695,6 +704,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                 keep = ~back
                 n_cone_cl += int(back.sum())
                 n_cone_tri += int(tri[back].sum())
+                if keep_cone_culled:
+                    cone_pairs.append((inst[back], cl[back]))
                 inst, cl, ins = inst[keep], cl[keep], ins[keep]
             t_cones += time.perf_counter() - t1
         out_inst.append(inst)
@@ -731,6 +742,12 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         "triangles_cone_culled": n_cone_tri,
         "triangles_drawn": tri_frustum - n_cone_tri,
     }
+    cone_culled = None
+    if keep_cone_culled:
+        cone_culled = np.zeros((0, 2), np.int32) if not cone_pairs else np.stack(
+            [np.concatenate([a for a, _ in cone_pairs]),
+             np.concatenate([b for _, b in cone_pairs])], axis=1).astype(np.int32)
     return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
-                    inside=ins.astype(bool), counts=counts, timings_ms=timings)
+                    inside=ins.astype(bool), counts=counts, timings_ms=timings,
+                    cone_culled=cone_culled)
 

@@ -217,11 +217,13 @@ class PlanCache:
 
 
 def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
-               cones: bool, cache: PlanCache) -> FramePlan:
-    """Cull ``target`` (Mesh or Scene) for ``camera`` and lay out this frame's draws."""
+               cones: bool, cache: PlanCache, keep_cone_culled: bool = False) -> FramePlan:
+    """Cull ``target`` (Mesh or Scene) for ``camera`` and lay out this frame's draws
+    (``keep_cone_culled``: see `cull.build_draw_list`)."""
     from .cull import build_draw_list
 
     vp = view_projection(camera, width, height)
     scene, pool = cache.scene_and_pool(target)
-    dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull)
+    dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
+                         keep_cone_culled=keep_cone_culled)
     return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp), vp)

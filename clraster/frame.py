@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,6 +16,9 @@ from .config import (
     ST_RASTER,
     ST_TRIVIAL_REJECT,
 )
+
+if TYPE_CHECKING:
+    from .fates import ClusterFates
 
 
 @dataclass
@@ -136,6 +140,8 @@ class Frame:
         stats: counts per stage (`FrameStats`).
         overdraw: (H, W) int32 fragments tested per pixel (depth complexity), when asked for
             (``render(..., overdraw=True)``); else None.
+        fates: the fate of every cluster of the scene (`clraster.fates.ClusterFates`),
+            when asked for (``render(..., fates=True)``); else None.
     """
 
     depth: np.ndarray
@@ -143,6 +149,7 @@ class Frame:
     barycentrics: np.ndarray
     stats: FrameStats
     overdraw: np.ndarray | None = None
+    fates: ClusterFates | None = None
 
     @classmethod
     def empty(cls, width: int, height: int, stats: FrameStats | None = None) -> Frame:

@@ -11,6 +11,7 @@ from .config import RasterConfig, guard_band_factors
 from .cull import eye_from_view_proj
 from .device import default_context
 from .drawlist import PlanCache, key_boxes, plan_frame, subset
+from .fates import ClusterFates
 from .frame import Frame, FrameStats
 from .inputs import check_cull, check_size
 from .occlusion import Occlusion
@@ -77,7 +78,8 @@ class Renderer:
         self._boxes_key: tuple | None = None
 
     def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
-               cones: bool = True, occlusion: bool = False, overdraw: bool = False) -> Frame:
+               cones: bool = True, occlusion: bool = False, overdraw: bool = False,
+               fates: bool = False) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) seen by ``camera``.
 
         Args:
@@ -93,6 +95,9 @@ class Renderer:
                 every other cluster's box against it, draw those not occluded, and keep
                 the visible set for the next frame. Conservative: same image.
             overdraw: also return ``frame.overdraw``, fragments tested per pixel.
+            fates: also return ``frame.fates``, a `clraster.fates.ClusterFates`: the fate
+                of every cluster of every instance (drawn, frustum-, cone- or
+                occlusion-culled); its counts equal the stats' culling funnel.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -104,7 +109,7 @@ class Renderer:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans)
+                          cache=self._plans, keep_cone_culled=fates)
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
         fd = plan.frame
@@ -112,6 +117,8 @@ class Renderer:
             fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
             if overdraw:
                 fr.overdraw = np.zeros((h, w), np.int32)
+            if fates:
+                fr.fates = ClusterFates.from_plan(plan)
             return fr
         self.geometry.upload_pool(self.queue, plan.pool)
         timings = {"cull (host)": t_cull}
@@ -125,7 +132,8 @@ class Renderer:
                                        fragments_tested=acc["tested"],
                                        fragments_passed=acc["passed"])
         stats.timings_ms = timings
-        return Frame(out.depth, out.ids, out.bary, stats, overdraw=out.overdraw)
+        return Frame(out.depth, out.ids, out.bary, stats, overdraw=out.overdraw,
+                     fates=ClusterFates.from_plan(plan, acc.get("occluded")) if fates else None)
 
     def _pass(self, fd, cull: str, into, overdraw: bool, timings: dict, acc: dict | None = None
               ):
@@ -227,6 +235,7 @@ class Renderer:
         counts["triangles_occlusion_culled"] = int(info[occluded, 1].sum())
         counts["clusters_phase1"] = int(first.sum())
         counts["clusters_phase2"] = int(second.sum())
+        acc["occluded"] = keys[occluded]
         return out, acc
 
 

@@ -1,0 +1,474 @@
+"""``clraster demo``: the built-in plant, first person, with a culling inspector.
+
+Builds :func:`clraster.scenes.plant`, renders it from the first-person corridor camera
+(:func:`clraster.scenes.plant_inside_camera`) with frustum, normal-cone and two-phase
+occlusion culling for a few frames (the first one builds the kernels and has no visibility
+history; the later ones reuse it), and writes into ``--out``:
+
+* ``shaded.png``: flat Lambert shading (`clraster.shade.shade`);
+* ``depth.png``: eye distance on a log scale over the covered pixels, with a colour bar
+  in metres;
+* ``overdraw.png``: fragments tested per pixel (depth complexity) as a heat map, with a
+  colour bar;
+* ``inspector.png``: the same ground floor from a third-person camera above and behind,
+  storeys above it cut away, every cluster coloured by its fate in the first-person frame
+  (drawn, frustum-culled, back-face (cone) culled, occlusion-culled), lightly shaded, with
+  the first-person view frustum drawn as lines.
+
+It prints the culling funnel (`FrameStats`), the frame times, the fate counts and the
+files written. Text in the images is drawn with a small built-in bitmap font (NumPy only).
+Exit codes: 0 success, 1 the output could not be written or no OpenCL device, 2 bad
+arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .cli import _size
+from .device import NoDeviceError
+from .fates import Fate
+from .mesh import Mesh
+from .scene import Scene
+
+__all__ = ["FATE_COLORS", "main"]
+
+#: RGB of each fate in the inspector (and its legend).
+FATE_COLORS = {
+    Fate.DRAWN: (70, 200, 90),
+    Fate.FRUSTUM_CULLED: (80, 130, 230),
+    Fate.BACKFACE_CULLED: (250, 170, 40),
+    Fate.OCCLUSION_CULLED: (215, 55, 65),
+}
+FATE_LABELS = {
+    Fate.DRAWN: "drawn",
+    Fate.FRUSTUM_CULLED: "frustum culled",
+    Fate.BACKFACE_CULLED: "back-face culled (normal cone)",
+    Fate.OCCLUSION_CULLED: "occlusion culled (hi-z)",
+}
+#: Inspector: the first-person frustum, depth-tested (bright) and hidden parts (dim).
+FRUSTUM_COLOR = (255, 240, 60)
+FRUSTUM_HIDDEN_COLOR = (150, 140, 60)
+INSPECTOR_BACKGROUND = (28, 30, 36)
+#: The inspector leaves out every instance whose lowest point is above this height over
+#: the first-person storey's floor (the ceiling pipes, lamps, slabs and storeys above), so
+#: the corridor and the rooms around it can be seen from above.
+INSPECTOR_CUT = 2.6
+
+# -- a tiny bitmap font (5×7, lower case; upper case is drawn as lower case) -------------
+
+_GLYPHS = {
+    "0": ".###.|#...#|#..##|#.#.#|##..#|#...#|.###.",
+    "1": "..#..|.##..|..#..|..#..|..#..|..#..|.###.",
+    "2": ".###.|#...#|....#|...#.|..#..|.#...|#####",
+    "3": "#####|...#.|..#..|...#.|....#|#...#|.###.",
+    "4": "...#.|..##.|.#.#.|#..#.|#####|...#.|...#.",
+    "5": "#####|#....|####.|....#|....#|#...#|.###.",
+    "6": "..##.|.#...|#....|####.|#...#|#...#|.###.",
+    "7": "#####|....#|...#.|..#..|.#...|.#...|.#...",
+    "8": ".###.|#...#|#...#|.###.|#...#|#...#|.###.",
+    "9": ".###.|#...#|#...#|.####|....#|...#.|.##..",
+    "a": ".....|.....|.###.|....#|.####|#...#|.####",
+    "b": "#....|#....|#.##.|##..#|#...#|#...#|####.",
+    "c": ".....|.....|.###.|#....|#....|#...#|.###.",
+    "d": "....#|....#|.##.#|#..##|#...#|#...#|.####",
+    "e": ".....|.....|.###.|#...#|#####|#....|.###.",
+    "f": "..##.|.#..#|.#...|###..|.#...|.#...|.#...",
+    "g": ".....|.....|.####|#...#|#...#|#...#|.####|....#|.###.",
+    "h": "#....|#....|#.##.|##..#|#...#|#...#|#...#",
+    "i": "..#..|.....|.##..|..#..|..#..|..#..|.###.",
+    "j": "...#.|.....|..##.|...#.|...#.|...#.|...#.|#..#.|.##..",
+    "k": "#....|#....|#..#.|#.#..|##...|#.#..|#..#.",
+    "l": ".##..|..#..|..#..|..#..|..#..|..#..|.###.",
+    "m": ".....|.....|##.#.|#.#.#|#.#.#|#...#|#...#",
+    "n": ".....|.....|#.##.|##..#|#...#|#...#|#...#",
+    "o": ".....|.....|.###.|#...#|#...#|#...#|.###.",
+    "p": ".....|.....|####.|#...#|#...#|#...#|####.|#....|#....",
+    "q": ".....|.....|.####|#...#|#...#|#...#|.####|....#|....#",
+    "r": ".....|.....|#.##.|##..#|#....|#....|#....",
+    "s": ".....|.....|.###.|#....|.###.|....#|####.",
+    "t": ".#...|.#...|###..|.#...|.#...|.#..#|..##.",
+    "u": ".....|.....|#...#|#...#|#...#|#..##|.##.#",
+    "v": ".....|.....|#...#|#...#|#...#|.#.#.|..#..",
+    "w": ".....|.....|#...#|#...#|#.#.#|#.#.#|.#.#.",
+    "x": ".....|.....|#...#|.#.#.|..#..|.#.#.|#...#",
+    "y": ".....|.....|#...#|#...#|#...#|#...#|.####|....#|.###.",
+    "z": ".....|.....|#####|...#.|..#..|.#...|#####",
+    " ": ".....|.....|.....|.....|.....|.....|.....",
+    "-": ".....|.....|.....|#####|.....|.....|.....",
+    "+": ".....|..#..|..#..|#####|..#..|..#..|.....",
+    ".": ".....|.....|.....|.....|.....|.##..|.##..",
+    ",": ".....|.....|.....|.....|.....|.##..|..#..|.#...",
+    "(": "...#.|..#..|.#...|.#...|.#...|..#..|...#.",
+    ")": ".#...|..#..|...#.|...#.|...#.|..#..|.#...",
+    ":": ".....|.##..|.##..|.....|.##..|.##..|.....",
+    "/": ".....|....#|...#.|..#..|.#...|#....|.....",
+    "%": "##...|##..#|...#.|..#..|.#...|#..##|...##",
+    ">": ".#...|..#..|...#.|....#|...#.|..#..|.#...",
+}
+_FONT = {ch: np.array([[c == "#" for c in row] for row in (g + "|....." * 2).split("|")[:9]])
+         for ch, g in _GLYPHS.items()}  # 7 rows + 2 for descenders (g, j, p, q, y)
+_GLYPH_W, _GLYPH_H = 6, 7  # advance (5 + 1 spacing), height above the baseline
+
+
+def _text_width(s: str, scale: int) -> int:
+    return len(s) * _GLYPH_W * scale
+
+
+def _text(img: np.ndarray, x: int, y: int, s: str, color, scale: int = 1) -> None:
+    """Draw `s` into `img` (H, W, 3) uint8 with its top-left corner at (x, y); clipped."""
+    h, w = img.shape[:2]
+    for k, ch in enumerate(s.lower()):
+        g = _FONT.get(ch, _FONT[" "])
+        if scale > 1:
+            g = np.repeat(np.repeat(g, scale, 0), scale, 1)
+        x0 = x + k * _GLYPH_W * scale
+        ys, xs = np.nonzero(g)
+        ys, xs = ys + y, xs + x0
+        ok = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+        img[ys[ok], xs[ok]] = color
+
+
+def _panel(img: np.ndarray, x0: int, y0: int, x1: int, y1: int, alpha: float = 0.75) -> None:
+    """Darken a rectangle (clipped) so text on it stays legible."""
+    h, w = img.shape[:2]
+    x0, x1, y0, y1 = max(0, x0), min(w, x1), max(0, y0), min(h, y1)
+    if x1 > x0 and y1 > y0:
+        img[y0:y1, x0:x1] = (img[y0:y1, x0:x1] * (1.0 - alpha) + 12 * alpha).astype(np.uint8)
+
+
+def _ui_scale(width: int, height: int) -> int:
+    return max(1, min(width, height) // 360)
+
+
+# -- colour ramps ----------------------------------------------------------------------
+
+#: A perceptual-ish heat ramp (black → purple → red → orange → yellow → white).
+HEAT = ((0.0, (0, 0, 4)), (0.15, (40, 11, 84)), (0.35, (120, 28, 109)),
+        (0.55, (200, 60, 60)), (0.75, (245, 140, 30)), (0.9, (250, 220, 70)),
+        (1.0, (252, 255, 210)))
+#: Depth ramp: near = warm light, far = deep blue.
+DEPTH_RAMP = ((0.0, (253, 231, 37)), (0.25, (94, 201, 98)), (0.5, (33, 145, 140)),
+              (0.75, (59, 82, 139)), (1.0, (40, 10, 70)))
+
+
+def _ramp(t: np.ndarray, stops) -> np.ndarray:
+    """Piecewise-linear colour ramp: t in [0, 1] (any shape) → uint8 (..., 3)."""
+    xs = np.array([s[0] for s in stops])
+    cs = np.array([s[1] for s in stops], np.float64)
+    t = np.clip(np.asarray(t, np.float64), 0.0, 1.0)
+    out = np.stack([np.interp(t, xs, cs[:, k]) for k in range(3)], axis=-1)
+    return np.rint(out).astype(np.uint8)
+
+
+def _colorbar(img: np.ndarray, stops, ticks: list[tuple[float, str]], title: str) -> None:
+    """A horizontal colour bar with tick labels and a title in the lower right corner."""
+    h, w = img.shape[:2]
+    s = _ui_scale(w, h)
+    bar_w = min(w - 16 * s, max(160, w // 3))
+    bar_h = 8 * s
+    pad = 6 * s
+    label_w = max(_text_width(lbl, s) for _, lbl in ticks)
+    title_w = _text_width(title, s)
+    x1 = w - pad - label_w // 2 - 2 * s
+    x0 = x1 - bar_w
+    panel_x0 = min(x0 - label_w // 2, x1 - title_w) - pad
+    y1 = h - pad - (_GLYPH_H + 3) * s       # bar bottom, tick labels below
+    y0 = y1 - bar_h
+    ty = y0 - (_GLYPH_H + 4) * s            # title above
+    _panel(img, panel_x0, ty - pad, w, h)
+    img[y0:y1, x0:x1] = _ramp(np.linspace(0, 1, x1 - x0), stops)[None, :, :]
+    _text(img, x1 - title_w, ty, title, (235, 235, 235), s)
+    for t, lbl in ticks:
+        x = x0 + int(round(t * (x1 - x0 - 1)))
+        img[y1:y1 + 2 * s, max(0, x - (s // 2)):x + max(1, s // 2 + 1)] = (235, 235, 235)
+        _text(img, x - _text_width(lbl, s) // 2 + s // 2, y1 + 3 * s, lbl, (235, 235, 235), s)
+
+
+def _nice_step(span: float, n: int = 5) -> float:
+    raw = span / max(n, 1)
+    mag = 10.0 ** math.floor(math.log10(raw)) if raw > 0 else 1.0
+    return next(m * mag for m in (1, 2, 5, 10) if m * mag >= raw)
+
+
+# -- images ----------------------------------------------------------------------------
+
+def world_mesh(scene: Scene) -> Mesh:
+    """All instances of `scene` as one world-space mesh whose face indices are the scene's
+    triangle ids (``face_base[instance] + face``), e.g. for `clraster.shade.shade`."""
+    verts, faces = [], []
+    v0 = 0
+    for inst in scene.instances:
+        m = inst.transform
+        v = np.asarray(inst.mesh.vertices, np.float64) @ m[:3, :3].T + m[:3, 3]
+        verts.append(v)
+        faces.append(np.asarray(inst.mesh.faces, np.int64) + v0)
+        v0 += v.shape[0]
+    if not verts:
+        return Mesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64))
+    return Mesh(np.concatenate(verts), np.concatenate(faces))
+
+
+def depth_picture(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
+    """RGB (H, W, 3) uint8: eye distance (metres, from the window depth through the
+    projection's z rows) on a log scale between the nearest and farthest covered pixel,
+    with a colour bar; background black."""
+    d = np.asarray(depth, np.float64)
+    covered = d < 1.0
+    out = np.zeros(d.shape + (3,), np.uint8)
+    if not covered.any():
+        return out
+    zn = 2.0 * d[covered] - 1.0
+    p22, p23, p32 = projection[2, 2], projection[2, 3], projection[3, 2]
+    # perspective: z_ndc = (p22·z + p23) / (p32·z) at eye-space z; the distance is −z
+    dist = np.maximum(p23 / (p22 - p32 * zn), 1e-6)
+    lo, hi = float(dist.min()), float(dist.max())
+    hi = max(hi, lo * 1.001)
+    t = np.log(dist / lo) / math.log(hi / lo)
+    out[covered] = _ramp(t, DEPTH_RAMP)
+    ticks = []
+    for v in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000):
+        if lo <= v <= hi:
+            ticks.append((math.log(v / lo) / math.log(hi / lo), f"{v}"))
+    ticks = [(0.0, f"{lo:.1f}")] + [tk for tk in ticks if 0.12 < tk[0] < 0.88] + \
+        [(1.0, f"{hi:.0f}")]
+    _colorbar(out, DEPTH_RAMP, ticks, "distance from the eye (m, log scale)")
+    return out
+
+
+def overdraw_picture(overdraw: np.ndarray) -> tuple[np.ndarray, int]:
+    """RGB (H, W, 3) uint8 heat map of fragments tested per pixel, linear from 0 to a top
+    value (the 99.5th percentile of covered pixels, rounded up; higher values saturate),
+    with a colour bar. Returns (image, top)."""
+    o = np.asarray(overdraw, np.int64)
+    pos = o[o > 0]
+    top = int(np.ceil(np.percentile(pos, 99.5))) if pos.size else 1
+    step = max(1, int(_nice_step(top, 5)))
+    top = max(step, int(math.ceil(top / step) * step))
+    img = _ramp(o / top, HEAT)
+    ticks = [(v / top, str(v)) for v in range(0, top + 1, step)]
+    ticks[-1] = (1.0, f"{top}+")
+    _colorbar(img, HEAT, ticks, "fragments tested per pixel")
+    return img, top
+
+
+def inspector_scene(scene: Scene, floor_y: float, cut: float = INSPECTOR_CUT
+                    ) -> tuple[Scene, np.ndarray]:
+    """The instances of `scene` whose lowest point lies below ``floor_y + cut``: a
+    cut-away of one storey. Returns (scene, int64 index of each kept instance in
+    `scene`)."""
+    lo, _ = scene.world_aabbs()
+    keep = np.flatnonzero(np.asarray(lo)[:, 1] < floor_y + cut)
+    return Scene([scene.instances[i] for i in keep]), keep
+
+
+def inspector_camera(scene: Scene, floor_y: float, width: int, height: int,
+                     cut: float = INSPECTOR_CUT) -> Camera:
+    """Third-person camera above, behind (−x) and beside (+z) the storey whose floor is
+    at ``floor_y``, framing it (`Camera.framing`) up to ``floor_y + cut``."""
+    lo, hi = (np.asarray(a, np.float64) for a in scene.bounds())
+    box_lo = np.array([lo[0], floor_y - 0.3, lo[2]])
+    box_hi = np.array([hi[0], floor_y + cut, hi[2]])
+    return Camera.framing(box_lo, box_hi, direction=(-0.35, 1.0, 0.95), fov_y=40.0,
+                          aspect=width / height)
+
+
+def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: Mesh,
+                      scene: Scene, view_proj: np.ndarray, fp_view_proj: np.ndarray,
+                      width: int, height: int, context=None
+                      ) -> tuple[np.ndarray, dict[Fate, int]]:
+    """Colour the third-person `frame` of `sub_scene` (instances ``keep`` of `scene`) by
+    the fate of each pixel's cluster in `fates`, shade it lightly (|n·l| of `world`'s
+    faces, see `world_mesh`), draw the first-person frustum (``fp_view_proj``) seen through
+    ``view_proj`` — depth-tested in `FRUSTUM_COLOR` over its hidden parts in
+    `FRUSTUM_HIDDEN_COLOR` — and the legend. Returns (image, pixels per fate)."""
+    from .lines import LineRenderer, frustum_segments, overlay
+    from .shade import DEFAULT_LIGHT_DIR
+
+    sub_inst, face = sub_scene.split_ids(frame.triangle_id)
+    hit = sub_inst >= 0
+    inst = keep[sub_inst[hit]]
+    fate = fates.face_fate(inst, face[hit])
+    light = np.asarray(DEFAULT_LIGHT_DIR, np.float64)
+    light /= np.linalg.norm(light)
+    ids = np.asarray(scene.face_base, np.int64)[inst] + face[hit]
+    lam = np.abs(world.face_normals()[ids].astype(np.float64) @ light)
+    palette = np.array([FATE_COLORS[f] for f in Fate], np.float64)
+    img = np.empty((height, width, 3), np.uint8)
+    img[:] = INSPECTOR_BACKGROUND
+    img[hit] = np.clip(palette[fate] * (0.45 + 0.55 * lam)[:, None], 0, 255).astype(np.uint8)
+    per_fate = {f: int((fate == f).sum()) for f in Fate}
+
+    segs = frustum_segments(fp_view_proj)
+    lr = LineRenderer(width, height, context=context)
+    img = overlay(img, lr.render(segs, view_proj), FRUSTUM_HIDDEN_COLOR)
+    img = overlay(img, lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4),
+                  FRUSTUM_COLOR)
+
+    s = _ui_scale(width, height)
+    counts = fates.counts()
+    rows = [(FATE_COLORS[f], f"{FATE_LABELS[f]}: {counts[f]:,}") for f in Fate]
+    rows.append((FRUSTUM_COLOR, "first-person frustum (dim: hidden)"))
+    line_h = (_GLYPH_H + 5) * s
+    box = 9 * s
+    pad = 6 * s
+    panel_w = pad * 3 + box + max(_text_width(t, s) for _, t in rows)
+    title = "culling inspector: clusters by fate in the first-person view"
+    _panel(img, 0, 0, max(panel_w, _text_width(title, s) + 2 * pad),
+           pad * 2 + line_h * (len(rows) + 1))
+    _text(img, pad, pad, title, (240, 240, 240), s)
+    for k, (col, txt) in enumerate(rows):
+        y = pad + line_h * (k + 1)
+        img[y:y + box - s, pad:pad + box] = col
+        _text(img, pad * 2 + box, y, txt, (230, 230, 230), s)
+    return img, per_fate
+
+
+# -- command line ----------------------------------------------------------------------
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="clraster demo",
+        description="Render the built-in procedural power plant from a first-person "
+                    "corridor camera with frustum, normal-cone and occlusion culling, and "
+                    "write shaded.png, depth.png, overdraw.png and inspector.png (a "
+                    "third-person view with every cluster coloured by its fate).")
+    p.add_argument("--out", type=Path, default=Path("demo"), metavar="DIR",
+                   help="folder for the images, created if missing (default demo/)")
+    p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH",
+                   help="image size in pixels (default 1280x720)")
+    p.add_argument("--triangles", type=_triangles, default=1_000_000, metavar="N",
+                   help="plant size in triangles, >= 2000 (default 1000000)")
+    p.add_argument("--frames", type=_frames, default=3, metavar="N",
+                   help="first-person frames to render, >= 1 (default 3); the images show "
+                        "the last one, whose occlusion culling reuses the previous frame's "
+                        "visibility")
+    p.add_argument("--no-occlusion", action="store_true",
+                   help="frustum and cone culling only")
+    return p
+
+
+def _triangles(text: str) -> int:
+    try:
+        v = int(text.replace("_", "").replace(",", ""))
+    except ValueError:
+        v = -1
+    if v < 2000:
+        raise argparse.ArgumentTypeError(f"expected a whole number of triangles >= 2000, "
+                                         f"got {text!r}")
+    return v
+
+
+def _frames(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return v
+
+
+def _run(args: argparse.Namespace) -> int:
+    import imageio.v3 as iio
+
+    from .renderer import Renderer
+    from .scenes import EYE_HEIGHT, plant, plant_inside_camera
+    from .shade import shade
+
+    w, h = args.size
+    occlusion = not args.no_occlusion
+    t0 = time.perf_counter()
+    scene = plant(args.triangles)
+    t_scene = (time.perf_counter() - t0) * 1e3
+    print(f"scene: plant({args.triangles:,}): {scene.n_instances:,} instances, "
+          f"{scene.n_faces:,} triangles ({t_scene:.0f} ms)")
+    cam = plant_inside_camera(scene, w, h)
+    t0 = time.perf_counter()
+    renderer = Renderer(w, h)
+    t_init = (time.perf_counter() - t0) * 1e3
+    print(f"device: {renderer.context.devices[0].name.strip()} "
+          f"(renderer set-up {t_init:.0f} ms)")
+    times = []
+    frame = None
+    for _ in range(args.frames):
+        t0 = time.perf_counter()
+        frame = renderer.render(scene, cam, occlusion=occlusion, overdraw=True, fates=True)
+        times.append((time.perf_counter() - t0) * 1e3)
+        if occlusion:
+            st = frame.stats
+            print(f"frame {len(times)}: {times[-1]:7.1f} ms  phase 1 drew "
+                  f"{st.clusters_phase1:,} clusters, phase 2 {st.clusters_phase2:,}, "
+                  f"occlusion culled {st.clusters_occlusion_culled:,}")
+        else:
+            print(f"frame {len(times)}: {times[-1]:7.1f} ms")
+    assert frame is not None and frame.fates is not None
+    print(f"\nculling funnel (frame {len(times)}, {w}x{h}):")
+    print(frame.stats)
+    line = f"frame time: first {times[0]:.1f} ms (includes kernel build"
+    line += ", no visibility history)" if occlusion else ")"
+    if len(times) > 1:
+        warm = times[1:]
+        line += f"; warm: best {min(warm):.1f} ms, last {warm[-1]:.1f} ms"
+        if occlusion:
+            line += " (occlusion reuses the previous frame's visible set)"
+    print(line)
+    counts = frame.fates.counts()
+    print("cluster fates: " + ", ".join(f"{FATE_LABELS[f]} {counts[f]:,}" for f in Fate)
+          + f" (of {len(frame.fates):,})")
+
+    t0 = time.perf_counter()
+    world = world_mesh(scene)
+    shaded = shade(frame, world)
+    depth = depth_picture(frame.depth, cam.projection(w, h))
+    over, top = overdraw_picture(frame.overdraw)
+    floor_y = float(cam.eye[1]) - EYE_HEIGHT
+    sub, keep = inspector_scene(scene, floor_y)
+    icam = inspector_camera(scene, floor_y, w, h)
+    iframe = renderer.render(sub, icam)
+    inspector, per_fate = inspector_picture(
+        iframe, sub, keep, frame.fates, world, scene, icam.view_projection(w, h),
+        cam.view_projection(w, h), w, h, context=renderer.context)
+    t_img = (time.perf_counter() - t0) * 1e3
+    args.out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, img in (("shaded.png", shaded), ("depth.png", depth),
+                      ("overdraw.png", over), ("inspector.png", inspector)):
+        path = args.out / name
+        iio.imwrite(path, img)
+        written.append(path)
+    o = frame.overdraw
+    print(f"overdraw: mean {o[o > 0].mean():.2f} fragments per covered pixel, max "
+          f"{int(o.max())}; heat scale 0..{top} (black = none, white = {top} or more)")
+    print(f"inspector: {sub.n_instances:,} of {scene.n_instances:,} instances (the storey "
+          f"above {INSPECTOR_CUT} m cut away); pixels " + ", ".join(
+              f"{FATE_LABELS[f].split(' (')[0]} {per_fate[f]:,}" for f in Fate))
+    print(f"images: {t_img:.0f} ms")
+    print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``clraster demo`` with `argv` (default ``sys.argv[1:]``); returns the exit code."""
+    parser = _parser()
+    try:
+        args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
+        return int(exc.code or 0)
+    try:
+        return _run(args)
+    except (ValueError, OSError, NoDeviceError) as exc:
+        print(f"clraster demo: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
