@@ -29,6 +29,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -56,7 +57,7 @@ FATE_LABELS = {
 }
 #: Inspector: the first-person frustum, depth-tested (bright) and hidden parts (dim).
 FRUSTUM_COLOR = (255, 240, 60)
-FRUSTUM_HIDDEN_COLOR = (150, 140, 60)
+FRUSTUM_HIDDEN_COLOR = (165, 150, 70)
 INSPECTOR_BACKGROUND = (28, 30, 36)
 #: The inspector leaves out every instance whose lowest point is above this height over
 #: the first-person storey's floor (the ceiling pipes, lamps, slabs and storeys above), so
@@ -260,6 +261,16 @@ def overdraw_picture(overdraw: np.ndarray) -> tuple[np.ndarray, int]:
     return img, top
 
 
+def _grow(mask: np.ndarray) -> np.ndarray:
+    """`mask` dilated by one pixel (4-neighbourhood)."""
+    out = mask.copy()
+    out[1:] |= mask[:-1]
+    out[:-1] |= mask[1:]
+    out[:, 1:] |= mask[:, :-1]
+    out[:, :-1] |= mask[:, 1:]
+    return out
+
+
 def inspector_scene(scene: Scene, floor_y: float, cut: float = INSPECTOR_CUT
                     ) -> tuple[Scene, np.ndarray]:
     """The instances of `scene` whose lowest point lies below ``floor_y + cut``: a
@@ -309,11 +320,15 @@ def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: M
 
     segs = frustum_segments(fp_view_proj)
     lr = LineRenderer(width, height, context=context)
-    img = overlay(img, lr.render(segs, view_proj), FRUSTUM_HIDDEN_COLOR)
-    img = overlay(img, lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4),
-                  FRUSTUM_COLOR)
-
     s = _ui_scale(width, height)
+    hidden = lr.render(segs, view_proj)
+    shown = lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4)
+    if s > 1:  # thicker lines on big images: grow the masks by one pixel
+        hidden, shown = (SimpleNamespace(mask=_grow(f.mask), line_id=f.line_id)
+                         for f in (hidden, shown))
+    img = overlay(img, hidden, FRUSTUM_HIDDEN_COLOR)
+    img = overlay(img, shown, FRUSTUM_COLOR)
+
     counts = fates.counts()
     rows = [(FATE_COLORS[f], f"{FATE_LABELS[f]}: {counts[f]:,}") for f in Fate]
     rows.append((FRUSTUM_COLOR, "first-person frustum (dim: hidden)"))
