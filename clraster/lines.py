@@ -16,8 +16,9 @@ Rules (the kernel header in kernels/lines.cl has the details and the reasons):
   rejected; otherwise clipped exactly to the view volume (no guard band), in float64, plane
   by plane (near, far, left, right, bottom, top), recomputing outcodes after each clip and
   rejecting the segment as soon as nothing of it is left inside.
-* **Endpoint order never matters**: endpoints are put in a canonical order before clipping
-  and before rasterizing, so ``(a, b)`` and ``(b, a)`` give identical pixels and depths.
+* **Endpoint order never matters**: the clipper treats both endpoints alike and the
+  rasterizer puts them in a canonical order, so ``(a, b)`` and ``(b, a)`` give identical
+  pixels and depths.
 * **Rasterization** (aliased, like D3D11/GL): x-major when |dx| ≥ |dy|, else y-major. Along
   the major axis every pixel whose centre lies in the half-open interval [start, end) is lit,
   start being the endpoint with the smaller major coordinate (so the end pixel is excluded,
@@ -206,7 +207,8 @@ def check_bias(depth_bias: Any) -> np.float32:
     if isinstance(depth_bias, bool) or not isinstance(depth_bias, (int, float, np.integer,
                                                                    np.floating)):
         raise ValueError(f"depth_bias must be a real number, got {depth_bias!r}")
-    b = np.float32(depth_bias)
+    with np.errstate(over="ignore"):
+        b = np.float32(depth_bias)
     if not np.isfinite(b):
         raise ValueError(f"depth_bias must be finite in float32, got {depth_bias!r}")
     return b

@@ -9,25 +9,27 @@
  * line_setup   clip = M·[x y z 1]ᵀ in float32 (vertex.cl's operation order), 6-bit outcodes
  *              (x<-w, x>w, y<-w, y>w, z<-w, z>w; OC_INVALID for a NaN/Inf clip position).
  *              Cohen–Sutherland: c0 | c1 == 0 -> trivial accept; c0 & c1 != 0 -> trivial
- *              reject; otherwise clip. The endpoints are first put in a canonical order (the
- *              lexicographically smaller float32 clip position (x, y, z, w) first), so the
- *              result never depends on which endpoint the caller listed first. The clipper
- *              (double, as in setup.cl) visits the planes near, far, left, right, bottom,
- *              top once each: before each plane it rejects the segment if both current
+ *              reject; otherwise clip. The clipper (double, as in setup.cl) visits the
+ *              planes near, far, left, right, bottom, top once each, so it ends after at
+ *              most 6 clips. Before each plane it rejects the segment if both current
  *              outcodes share a bit (nothing of it is left inside); if one endpoint is
  *              outside the plane it moves that endpoint to the crossing, interpolating from
  *              the inside endpoint (t = d_in / (d_in − d_out)), puts the clipped coordinate
- *              exactly on the plane (x = ±w ...) and recomputes that endpoint's outcode. In
- *              exact arithmetic this leaves both endpoints inside; double rounding can leave
- *              one a hair outside a plane visited earlier, so the float32 result is put back
- *              into the view volume (x, y, z clamped to [−w, w]; a no-op for every point that
+ *              exactly on the plane (x = ±w ...) and recomputes that endpoint's outcode. Both
+ *              endpoints are treated alike (per plane, the one outside moves), so the result
+ *              does not depend on which one the caller listed first. In exact arithmetic
+ *              this leaves both endpoints inside; double rounding can leave one a hair
+ *              outside a plane visited earlier, so the float32 result is put back into the
+ *              view volume (x, y, z clamped to [−w, w]; a no-op for every point that
  *              already is inside). An endpoint with w < FLT_MIN after clipping (only the
  *              clip-space origin: |x|, |y|, |z| <= w) has no window position: the segment is
  *              dropped and counted (LS_*_DEGENERATE). With every endpoint in the view volume,
- *              |x/w| <= 1 holds in float32 too (|x · fl(1/w)| <= 1 + 2^-24 rounds to <= 1),
- *              so viewport_vertex (common.h, the triangles' own transform) maps it into
- *              [0, 256·W] × [0, 256·H] in 24.8 fixed point, depth into [0, 1]: no guard
- *              band, every loop below is bounded by max(W, H) pixels.
+ *              |x/w| <= 1 holds in float32 too (|x · fl(1/w)| <= 1 + 2^-24 rounds to <= 1;
+ *              for w > 2^126, where 1/w is subnormal, it can round to 1 + 2^-23, i.e. at
+ *              most 1/256 px beyond the border), so viewport_vertex (common.h, the
+ *              triangles' own transform) maps it into [0, 256·W + 1] × [0, 256·H + 1] in
+ *              24.8 fixed point, depth into [0, 1]: no guard band, every loop below is
+ *              bounded by max(W, H) pixels, and every major pixel index is in the image.
  *
  * line_depth   pass 1: walk the fragments (rule below), depth-test each against the optional
  *              input depth buffer (z <= depth[y, x] + bias, LEQUAL), atomic_min the passing
@@ -48,11 +50,11 @@
  * their joints and a zero-length segment lights nothing. The minor coordinate at c is the
  * exact rational m = (N_s·D + (c − M_s)·(N_e − N_s)) / D (D = M_e − M_s > 0); the pixel lit is
  * floor(m / 256), the pixel whose half-open square [k, k+1) contains m: a tie (m exactly on
- * a pixel boundary) goes to the larger index (down / right). Since m lies in [0, 256·size],
- * the only pixel index that can fall outside the image is size itself, when m is exactly on
- * the bottom (right) image border; that point belongs to no pixel of the image and lights
- * nothing. The major pixel range is always inside the image. Both are still checked before
- * every access.
+ * a pixel boundary) goes to the larger index (down / right). Since m lies between the
+ * endpoints, in [0, 256·size (+1)], the only pixel index that can fall outside the image is
+ * size itself, when m is on the bottom (right) image border; that point belongs to no pixel
+ * of the image and lights nothing. The major pixel range is always inside the image. Both
+ * are still checked before every access.
  *
  * Depth: linear in screen space along the major axis, t = float(c − M_s) / float(D),
  * z = z_s + t·(z_e − z_s) in float32, clamped to [0, 1] (as GL clamps to the depth range;
@@ -152,16 +154,6 @@ inline double4 on_plane(int k, double4 v)
     return v;
 }
 
-/* Strict lexicographic order on float32 clip positions (x, y, z, w). Equal positions (also
- * +0 vs −0) compare equal; swapping such a pair cannot change any result. */
-inline bool clip_less(float4 a, float4 b)
-{
-    if (a.x != b.x) return a.x < b.x;
-    if (a.y != b.y) return a.y < b.y;
-    if (a.z != b.z) return a.z < b.z;
-    return a.w < b.w;
-}
-
 /* Cohen–Sutherland clip of (*a, *b) with outcodes oa, ob (oa & ob == 0, oa | ob != 0), see
  * the header comment. Returns 0 if nothing is left inside the view volume. */
 inline int clip_segment(float4 *a, float4 *b, uint oa, uint ob)
@@ -209,10 +201,6 @@ __kernel void line_setup(__global const float *pos, const uint n, __global const
         if (o0 & o1) {
             r.status = LS_REJECTED;
         } else {
-            if (clip_less(c1, c0)) {
-                float4 tc = c0; c0 = c1; c1 = tc;
-                uint to = o0; o0 = o1; o1 = to;
-            }
             bool clipped = (o0 | o1) != 0;
             if (clipped && !clip_segment(&c0, &c1, o0, o1)) {
                 r.status = LS_CLIPPED_AWAY;

@@ -94,17 +94,6 @@ def _on_plane(k: int, v: np.ndarray) -> None:
     v[:, coord] = -v[:, 3] if k % 2 == 0 else v[:, 3]
 
 
-def _clip_less(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Strict lexicographic a < b on (K, 4) float32 positions (clip_less)."""
-    less = np.zeros(a.shape[0], bool)
-    undecided = np.ones(a.shape[0], bool)
-    for j in range(4):
-        ne = a[:, j] != b[:, j]
-        less |= undecided & ne & (a[:, j] < b[:, j])
-        undecided &= ~ne
-    return less
-
-
 def clip_segments(p0: np.ndarray, p1: np.ndarray, o0: np.ndarray, o1: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cohen–Sutherland clip (clip_segment in lines.cl), vectorized over K segments.
@@ -160,9 +149,6 @@ def setup(seg: np.ndarray, mvp: np.ndarray, width: int, height: int) -> np.ndarr
     rejected = finite & ((o0 & o1) != 0)
     status[rejected] = LS_REJECTED
     live = finite & ~rejected
-    swap = live & _clip_less(c1, c0)
-    c0[swap], c1[swap] = c1[swap], c0[swap].copy()
-    o0[swap], o1[swap] = o1[swap], o0[swap].copy()
     clipped = live & ((o0 | o1) != 0)
     idx = np.nonzero(clipped)[0]
     ok, q0, q1 = clip_segments(c0[idx], c1[idx], o0[idx], o1[idx])
