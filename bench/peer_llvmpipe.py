@@ -1,0 +1,485 @@
+"""Peer renderer for the benchmark harness: Mesa's llvmpipe (OpenGL on the CPU) via moderngl.
+
+The same mesh or scene, camera matrix and image size as clraster, drawn through a conformant
+OpenGL 4.5 with depth test LESS (clear 1.0), back-face culling (counter-clockwise front
+faces) and no MSAA, into a headless EGL framebuffer; the depth buffer is read back and put in
+clraster's conventions, so frames compare pixel for pixel:
+
+* row 0 is the top row (glReadPixels returns the bottom row first: flipped here);
+* window depth ``d = (z/w + 1) / 2`` in [0, 1] (default glDepthRange 0..1, clip control
+  NEGATIVE_ONE_TO_ONE), 1.0 for background;
+* clip = ``M @ [x, y, z, 1]`` with ``M = view_proj @ model`` formed per instance in float64
+  on the host and rounded to float32 once, exactly as clraster does (drawlist.frame_draws),
+  then passed to GL column-major (numpy is row-major: the matrix is transposed on upload).
+
+Depth attachment: ``GL_DEPTH_COMPONENT32F``. moderngl (5.8..5.13) only makes 24-bit depth
+textures, so the texture it creates is re-specified as 32F through the GL entry points from
+``eglGetProcAddress``; if that fails the 24-bit buffer is kept and `LlvmpipePeer.depth_format`
+says so. A colour attachment (R32I) receives the triangle id ``face_base[instance] +
+gl_PrimitiveID`` — roughly the per-fragment output work clraster does (it writes ids and
+barycentrics); read it back with ``render(..., ids=True)``.
+
+Geometry is uploaded once (`LlvmpipePeer.upload`): one vertex + index buffer per distinct
+mesh, and one instanced draw per distinct mesh with a per-instance ``mat4`` attribute, so a
+scene of thousands of instances (the procedural plant: 5,408 instances) is a few dozen draw
+calls (43).
+
+Install: ``pip install 'clraster[peers]'`` (moderngl, glcontext) and, on Debian/Ubuntu,
+``apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgl1`` (GLVND's libEGL, Mesa's EGL
+vendor, the gallium drivers with llvmpipe, and libGL, which glcontext's EGL backend loads).
+Before the first context this module sets, unless already set, ``LIBGL_ALWAYS_SOFTWARE=1``
+and ``GALLIUM_DRIVER=llvmpipe`` (Mesa then picks llvmpipe even where a GPU driver exists);
+EGL devices 0..3 are tried and a non-llvmpipe renderer (e.g. a vendor GPU driver) is
+refused, since the peer is meant to be the CPU OpenGL. ``LP_NUM_THREADS=n`` sets llvmpipe's
+raster threads (default: the CPU count); it is recorded in every `PeerFrame`.
+
+Load order: see `_load_opencl_first` (OpenCL ICDs are enumerated before Mesa is loaded).
+Depth: clraster interpolates depth over vertices snapped to 1/256 pixel, llvmpipe over the
+unsnapped float vertices, so depths differ by up to |grad d| / 512 per pixel (~1e-7 typical).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import re
+import statistics
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["INSTALL_HINT", "LlvmpipePeer", "PeerFrame", "coverage_agreement", "probe"]
+
+INSTALL_HINT = ("pip install 'clraster[peers]' (moderngl); Debian/Ubuntu: apt-get install "
+                "libegl1 libegl-mesa0 libgl1-mesa-dri libgl1")
+
+#: EGL devices tried, in order, for one whose renderer is llvmpipe.
+_EGL_DEVICES = 4
+
+_VERTEX_SHADER = """
+#version 330
+in vec3 in_pos;
+in mat4 in_mvp;        // per instance: view_proj @ model, float32
+in int in_base;        // per instance: face_base of the instance
+flat out int v_base;
+void main() {
+    gl_Position = in_mvp * vec4(in_pos, 1.0);
+    v_base = in_base;
+}
+"""
+
+_FRAGMENT_SHADER = """
+#version 330
+flat in int v_base;
+out int out_id;
+void main() {
+    out_id = v_base + gl_PrimitiveID;
+}
+"""
+
+# GL enums for the depth32f re-specification
+_GL_TEXTURE_2D = 0x0DE1
+_GL_DEPTH_COMPONENT = 0x1902
+_GL_DEPTH_COMPONENT32F = 0x8CAC
+_GL_FLOAT = 0x1406
+_GL_TEXTURE_INTERNAL_FORMAT = 0x1003
+
+
+def _lp_threads() -> int | None:
+    v = os.environ.get("LP_NUM_THREADS")
+    try:
+        return int(v) if v is not None else None
+    except ValueError:
+        return None
+
+
+def _describe(info: dict) -> str:
+    """'llvmpipe (LLVM 15.0.6, 256 bits), Mesa 22.3.6, OpenGL 4.5 core' from ctx.info."""
+    renderer = str(info.get("GL_RENDERER", "?"))
+    version = str(info.get("GL_VERSION", ""))
+    m = re.match(r"\s*(\d+\.\d+)", version)
+    gl = m.group(1) if m else version
+    mesa = re.search(r"Mesa\s+(\S+)", version)
+    profile = " core" if "core" in version.lower() else ""
+    parts = [renderer]
+    if mesa:
+        parts.append(f"Mesa {mesa.group(1)}")
+    parts.append(f"OpenGL {gl}{profile}")
+    return ", ".join(parts)
+
+
+def _load_opencl_first() -> None:
+    """Load the OpenCL ICDs (clGetPlatformIDs) before Mesa is loaded.
+
+    Mesa dlopens its driver, linked to the shared libLLVM, with RTLD_GLOBAL. An OpenCL ICD
+    with a statically linked LLVM (the pip PoCL's libpocl, Oclgrind's runtime) loaded after
+    that registers its LLVM command-line options into the shared LLVM's registry and LLVM
+    aborts the whole process ("Option '...' registered more than once!"). Loaded the other
+    way round, both work. So: enumerate the OpenCL platforms first (cheap; nothing is built).
+    """
+    try:
+        import pyopencl
+        pyopencl.get_platforms()
+    except Exception:  # noqa: BLE001 - no OpenCL is fine for the peer itself
+        pass
+
+
+def _create_context():
+    """(context, description) of a headless EGL context on llvmpipe, or (None, reason)."""
+    try:
+        import moderngl
+    except ImportError as exc:
+        return None, f"moderngl is not installed ({exc}); install: {INSTALL_HINT}"
+    _load_opencl_first()
+    os.environ.setdefault("LIBGL_ALWAYS_SOFTWARE", "1")
+    os.environ.setdefault("GALLIUM_DRIVER", "llvmpipe")
+    reasons = []
+    for dev in range(_EGL_DEVICES):
+        kw = {"device_index": dev} if dev else {}
+        try:
+            ctx = moderngl.create_standalone_context(backend="egl", require=330, **kw)
+        except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exception
+            reasons.append(f"EGL device {dev}: {type(exc).__name__}: {exc}")
+            if dev == 0:
+                continue
+            break
+        desc = _describe(ctx.info)
+        if "llvmpipe" in str(ctx.info.get("GL_RENDERER", "")).lower():
+            return ctx, desc
+        reasons.append(f"EGL device {dev}: renderer is {desc!r}, not Mesa's llvmpipe (the "
+                       f"peer is meant to be the CPU OpenGL)")
+        ctx.release()
+    return None, ("no headless EGL context with Mesa llvmpipe: " + "; ".join(reasons)
+                  + f". Install: {INSTALL_HINT}")
+
+
+_PROBE: tuple[bool, str] | None = None
+
+
+def probe() -> tuple[bool, str]:
+    """(True, "llvmpipe (LLVM 15.0.6, 256 bits), Mesa 22.3.6, OpenGL 4.5 core") when a
+    headless EGL context with Mesa's llvmpipe can be created, else (False, reason), the
+    reason saying what failed and what to install. Never raises; the answer is cached for
+    the process (a context is created and released once)."""
+    global _PROBE
+    if _PROBE is None:
+        try:
+            ctx, desc = _create_context()
+            if ctx is None:
+                _PROBE = (False, desc)
+            else:
+                ctx.release()
+                _PROBE = (True, desc)
+        except Exception as exc:  # noqa: BLE001 - never raises
+            _PROBE = (False, f"{type(exc).__name__}: {exc}; install: {INSTALL_HINT}")
+    return _PROBE
+
+
+def _gl_function(name: str, *argtypes):
+    """A GL entry point of the current context through eglGetProcAddress."""
+    lib = ctypes.util.find_library("EGL") or "libEGL.so.1"
+    egl = ctypes.CDLL(lib)
+    egl.eglGetProcAddress.restype = ctypes.c_void_p
+    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    ptr = egl.eglGetProcAddress(name.encode())
+    if not ptr:
+        raise RuntimeError(f"eglGetProcAddress({name}) returned NULL")
+    return ctypes.CFUNCTYPE(None, *argtypes)(ptr)
+
+
+def _make_depth32f(tex, width: int, height: int) -> bool:
+    """Re-specify moderngl's (24-bit) depth texture ``tex`` as GL_DEPTH_COMPONENT32F; True if
+    the driver reports the new internal format. The context must be current."""
+    u, i = ctypes.c_uint, ctypes.c_int
+    try:
+        bind = _gl_function("glBindTexture", u, u)
+        image = _gl_function("glTexImage2D", u, i, i, i, i, i, u, u, ctypes.c_void_p)
+        query = _gl_function("glGetTexLevelParameteriv", u, i, u, ctypes.POINTER(i))
+        bind(_GL_TEXTURE_2D, tex.glo)
+        image(_GL_TEXTURE_2D, 0, _GL_DEPTH_COMPONENT32F, width, height, 0,
+              _GL_DEPTH_COMPONENT, _GL_FLOAT, None)
+        fmt = i(0)
+        query(_GL_TEXTURE_2D, 0, _GL_TEXTURE_INTERNAL_FORMAT, ctypes.byref(fmt))
+        bind(_GL_TEXTURE_2D, 0)
+        return fmt.value == _GL_DEPTH_COMPONENT32F
+    except Exception:  # noqa: BLE001 - fall back to the 24-bit buffer
+        return False
+
+
+@dataclass
+class PeerFrame:
+    """One llvmpipe frame in clraster's conventions.
+
+    Attributes:
+        depth: (H, W) float32 window depth in [0, 1], 1.0 background, row 0 = top.
+        times_ms: one per timed frame: clear + all draws + glFinish (no read-back).
+        readback_ms: median time of reading the depth buffer back (glReadPixels + flip).
+        renderer: the GL_RENDERER string.
+        threads: LP_NUM_THREADS if set, else None (llvmpipe's default: the CPU count).
+        depth_format: "depth32f" or "depth24" (the fallback if 32F could not be set up).
+        triangle_id: (H, W) int32 ids (``face_base[instance] + face``, −1 background) when
+            rendered with ``ids=True``, else None.
+    """
+
+    depth: np.ndarray
+    times_ms: list[float]
+    readback_ms: float
+    renderer: str
+    threads: int | None
+    depth_format: str = "depth32f"
+    triangle_id: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def coverage(self) -> np.ndarray:
+        """(H, W) bool: pixels drawn (depth < 1)."""
+        return self.depth < 1.0
+
+    @property
+    def median_ms(self) -> float:
+        return statistics.median(self.times_ms)
+
+
+class _Group:
+    """The GL objects of one distinct mesh and the scene instances that draw it."""
+
+    __slots__ = ("instances", "vbo", "ibo", "mvp", "base", "vao", "n_faces")
+
+    def __init__(self) -> None:
+        self.instances: list[int] = []
+        self.vbo = self.ibo = self.mvp = self.base = self.vao = None
+        self.n_faces = 0
+
+    def release(self) -> None:
+        for name in ("vao", "vbo", "ibo", "mvp", "base"):
+            obj = getattr(self, name)
+            if obj is not None:
+                obj.release()
+                setattr(self, name, None)
+
+
+class LlvmpipePeer:
+    """A headless llvmpipe context and framebuffer of ``width × height`` pixels.
+
+    Raises:
+        RuntimeError: no llvmpipe EGL context can be created (the message is probe()'s
+            reason, with what to install).
+    """
+
+    def __init__(self, width: int, height: int) -> None:
+        w, h = int(width), int(height)
+        if w <= 0 or h <= 0:
+            raise ValueError(f"width and height must be positive, got {width}x{height}")
+        ctx, desc = _create_context()
+        if ctx is None:
+            raise RuntimeError(desc)
+        self.width, self.height = w, h
+        self.ctx = ctx
+        self.description = desc
+        self.renderer = str(ctx.info["GL_RENDERER"])
+        self._groups: list[_Group] = []
+        self._transforms: np.ndarray | None = None
+        self.n_faces = 0
+        with ctx:
+            self._depth = ctx.depth_texture((w, h))
+            self.depth_format = "depth32f" if _make_depth32f(self._depth, w, h) else "depth24"
+            self._ids = ctx.renderbuffer((w, h), 1, dtype="i4")
+            self.fbo = ctx.framebuffer(color_attachments=[self._ids],
+                                       depth_attachment=self._depth)
+            self.prog = ctx.program(vertex_shader=_VERTEX_SHADER,
+                                    fragment_shader=_FRAGMENT_SHADER)
+
+    # -- geometry ---------------------------------------------------------------------------
+    def upload(self, target) -> None:
+        """Upload a `clraster.Mesh` or `clraster.Scene` (replacing what was uploaded).
+
+        Each distinct mesh's vertices (float32) and faces (uint32) are uploaded once; the
+        scene's instances are grouped by mesh, each group drawn with one instanced call.
+        Meshes without faces are skipped.
+        """
+        from clraster.mesh import Mesh
+        from clraster.scene import Scene
+        if isinstance(target, Mesh):
+            meshes, transforms, bases = [target], np.eye(4)[None], np.zeros(1, np.int64)
+        elif isinstance(target, Scene):
+            meshes = [inst.mesh for inst in target.instances]
+            transforms = np.asarray(target.transforms(), np.float64).reshape(-1, 4, 4)
+            bases = np.asarray(target.face_base, np.int64)
+        else:
+            raise TypeError(f"target must be a clraster.Mesh or Scene, got "
+                            f"{type(target).__name__}")
+        if int(target.n_faces) >= 2**31:
+            raise ValueError("triangle ids are int32: at most 2**31 - 1 faces")
+        self._free_geometry()
+        by_mesh: dict[int, _Group] = {}
+        order: list[tuple[_Group, object]] = []
+        for k, mesh in enumerate(meshes):
+            g = by_mesh.get(id(mesh))
+            if g is None:
+                g = by_mesh[id(mesh)] = _Group()
+                order.append((g, mesh))
+            g.instances.append(k)
+        ctx = self.ctx
+        with ctx:
+            for g, mesh in order:
+                faces = np.asarray(mesh.faces)
+                if faces.shape[0] == 0:
+                    continue
+                g.n_faces = int(faces.shape[0])
+                idx = np.asarray(g.instances)
+                g.vbo = ctx.buffer(np.ascontiguousarray(mesh.vertices, np.float32))
+                g.ibo = ctx.buffer(np.ascontiguousarray(faces, np.int32).view(np.uint32))
+                g.mvp = ctx.buffer(reserve=64 * idx.size, dynamic=True)
+                g.base = ctx.buffer(bases[idx].astype(np.int32))
+                g.vao = ctx.vertex_array(
+                    self.prog,
+                    [(g.vbo, "3f", "in_pos"), (g.mvp, "16f/i", "in_mvp"),
+                     (g.base, "i/i", "in_base")],
+                    index_buffer=g.ibo, index_element_size=4)
+                self._groups.append(g)
+        self._transforms = transforms
+        self.n_faces = int(target.n_faces)
+
+    @property
+    def n_draws(self) -> int:
+        """Draw calls per frame (one instanced draw per distinct non-empty mesh)."""
+        return len(self._groups)
+
+    # -- frames -----------------------------------------------------------------------------
+    def render(self, view_proj, *, cull: str = "back", repeat: int = 5, warmup: int = 1,
+               ids: bool = False) -> PeerFrame:
+        """Draw what was uploaded, ``warmup`` untimed frames then ``repeat`` timed ones.
+
+        Args:
+            view_proj: (4, 4) world → clip matrix for column vectors (float64 is fine), or a
+                camera with ``view_projection(width, height)``.
+            cull: "back", "front" or "none"; counter-clockwise is front (glFrontFace CCW).
+            repeat: timed frames (>= 1); each is clear + all draws + glFinish.
+            warmup: untimed frames first (the first frame includes llvmpipe's shader JIT).
+            ids: also read back the triangle ids (untimed).
+
+        The per-instance matrices (``view_proj @ model`` in float64, rounded to float32) are
+        written once per call, before the frames, outside the timing.
+        """
+        if self._transforms is None:
+            raise RuntimeError("upload() a mesh or scene first")
+        if cull not in ("back", "front", "none"):
+            raise ValueError(f"cull must be 'back', 'front' or 'none', got {cull!r}")
+        if repeat < 1 or warmup < 0:
+            raise ValueError(f"repeat must be >= 1 and warmup >= 0, got {repeat}, {warmup}")
+        import moderngl
+        if hasattr(view_proj, "view_projection"):
+            view_proj = view_proj.view_projection(self.width, self.height)
+        vp = np.asarray(view_proj, np.float64)
+        if vp.shape != (4, 4):
+            raise ValueError(f"view_proj must be (4, 4), got {vp.shape}")
+        ctx, fbo = self.ctx, self.fbo
+        with ctx:
+            for g in self._groups:
+                mvp = np.matmul(vp, self._transforms[g.instances]).astype(np.float32)
+                # column-major for GL: the transpose of each row-major matrix, flattened
+                g.mvp.write(np.ascontiguousarray(mvp.transpose(0, 2, 1)))
+            fbo.use()
+            ctx.depth_func = "<"
+            ctx.enable(moderngl.DEPTH_TEST)
+            ctx.front_face = "ccw"
+            if cull == "none":
+                ctx.disable(moderngl.CULL_FACE)
+            else:
+                ctx.enable(moderngl.CULL_FACE)
+                ctx.cull_face = cull
+            draws = [(g.vao, len(g.instances)) for g in self._groups]
+
+            def frame() -> None:
+                fbo.clear(depth=1.0)
+                for vao, n in draws:
+                    vao.render(moderngl.TRIANGLES, instances=n)
+                ctx.finish()
+
+            for _ in range(warmup):
+                frame()
+            times, reads = [], []
+            depth = None
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                frame()
+                times.append((time.perf_counter() - t0) * 1e3)
+                t0 = time.perf_counter()
+                depth = self._read_depth()
+                reads.append((time.perf_counter() - t0) * 1e3)
+            tri = None
+            if ids:
+                raw = fbo.read(components=1, attachment=0, dtype="i4")
+                tri = np.frombuffer(raw, np.int32).reshape(self.height, self.width)[::-1]
+                tri = np.where(depth < 1.0, tri, -1).astype(np.int32)
+            err = ctx.error
+        if err != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL error after rendering: {err}")
+        return PeerFrame(depth=depth, times_ms=times, readback_ms=statistics.median(reads),
+                         renderer=self.renderer, threads=_lp_threads(),
+                         depth_format=self.depth_format, triangle_id=tri)
+
+    def _read_depth(self) -> np.ndarray:
+        raw = self.fbo.read(components=1, attachment=-1, dtype="f4")
+        d = np.frombuffer(raw, np.float32).reshape(self.height, self.width)
+        return np.ascontiguousarray(d[::-1])   # GL row 0 is the bottom row
+
+    # -- clean-up ---------------------------------------------------------------------------
+    def _free_geometry(self) -> None:
+        for g in self._groups:
+            g.release()
+        self._groups = []
+
+    def release(self) -> None:
+        """Free every GL object and the context (idempotent)."""
+        ctx = getattr(self, "ctx", None)
+        if ctx is None:
+            return
+        with ctx:
+            self._free_geometry()
+            for obj in (self.fbo, self._ids, self._depth, self.prog):
+                obj.release()
+        ctx.release()
+        self.ctx = None
+
+    def __enter__(self) -> LlvmpipePeer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def coverage_agreement(clraster_depth, peer_depth) -> dict:
+    """Compare two depth images (or objects with a ``.depth``) of the same size.
+
+    A pixel is covered iff its depth < 1 (NaN counts as background). Returns a dict:
+    ``pixels``; ``agree`` (fraction of pixels whose coverage agrees: both drawn or both
+    background) and ``agree_pixels``; ``both``, ``clraster_only``, ``peer_only`` (pixel
+    counts); and over the pixels both cover, ``depth_diff_median``, ``depth_diff_p99`` and
+    ``depth_diff_max`` of |depth difference| (None if no pixel is covered by both).
+    """
+    a = np.asarray(getattr(clraster_depth, "depth", clraster_depth), np.float64)
+    b = np.asarray(getattr(peer_depth, "depth", peer_depth), np.float64)
+    if a.shape != b.shape or a.ndim != 2:
+        raise ValueError(f"depth images must be 2-D and the same shape, got {a.shape} and "
+                         f"{b.shape}")
+    ca, cb = a < 1.0, b < 1.0
+    n = int(a.size)
+    both = ca & cb
+    agree = int(np.count_nonzero(ca == cb))
+    out = {
+        "pixels": n,
+        "agree": agree / n if n else 1.0,
+        "agree_pixels": agree,
+        "both": int(np.count_nonzero(both)),
+        "clraster_only": int(np.count_nonzero(ca & ~cb)),
+        "peer_only": int(np.count_nonzero(cb & ~ca)),
+        "depth_diff_median": None, "depth_diff_p99": None, "depth_diff_max": None,
+    }
+    if out["both"]:
+        d = np.abs(a[both] - b[both])
+        out["depth_diff_median"] = float(np.median(d))
+        out["depth_diff_p99"] = float(np.percentile(d, 99))
+        out["depth_diff_max"] = float(d.max())
+    return out
