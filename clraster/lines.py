@@ -135,8 +135,8 @@ class LineFrame:
 
 
 def check_segments(segments: npt.ArrayLike) -> np.ndarray:
-    """``segments`` as a C-contiguous float32 (N, 2, 3) copy; values beyond float32 range
-    become ±Inf (and those segments count as invalid)."""
+    """``segments`` as a C-contiguous float32 (N, 2, 3) array (never modified); values beyond
+    float32 range become ±Inf (and those segments count as invalid)."""
     try:
         arr = np.asarray(segments)
     except (TypeError, ValueError) as exc:
