@@ -332,20 +332,27 @@ class Progress:
         self.t0 = time.perf_counter()
         self.stream = stream or sys.stderr
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.label = ""
 
-    def start(self, label: str) -> None:
+    def start(self, label: str, detail: str = "") -> None:
+        self.label = label
         n = len(self.weights)
         el = time.perf_counter() - self.t0
         eta = (el / self.done_w * (self.total - self.done_w)) if self.done_w > 0 else None
         frac = self.done_w / self.total if self.total else 1.0
         bar = "#" * int(round(20 * frac))
         line = (f"[{bar:<20}] {self.k + 1}/{n} {label} | {_hms(el)} elapsed, ETA "
-                f"{_hms(eta) if eta is not None else '?'}")
+                f"{_hms(eta) if eta is not None else '?'}" + (f" | {detail}" if detail else ""))
         if self.tty:
             self.stream.write("\r\x1b[2K" + line[:160])
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
+
+    def detail(self, text: str) -> None:
+        """Where the current step is (redrawn on a terminal only, to keep logs short)."""
+        if self.tty:
+            self.start(self.label, text)
 
     def finish_step(self) -> None:
         if self.k < len(self.weights):
@@ -384,7 +391,7 @@ def _rate(n: float, ms: float | None) -> float | None:
 
 
 def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRunner,
-               log) -> dict[str, Any]:
+               log, note=lambda text: None) -> dict[str, Any]:
     """Measure one configuration (see the module docstring); returns its JSON record."""
     import numpy as np
 
@@ -404,6 +411,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     n_warm = a.warmup + (a.occlusion_warmup if cfg.mode == "occlusion" else 0)
     warm_ms = []
     f = None
+    note("OpenCL warm-up")
     for _ in range(max(1, n_warm)):
         t0 = time.perf_counter()
         f = r.render(sc.target, cam, cull=a.cull, **kw)
@@ -419,6 +427,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     twin_warm_ms: list[float] = []
     twin_spent = 0.0
     if twin_skip is None:
+        note("twin warm-up")
         t0 = time.perf_counter()
         g = clraster.reference.render(sc.target, cam, w, h, cull=a.cull, **twin_kw)
         twin_spent = time.perf_counter() - t0
@@ -426,7 +435,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
 
     cl_ms, cl_stages, tw_ms, tw_stages = [], [], [], []
     budget_hit = False
-    for _ in range(a.repeat):
+    for i in range(a.repeat):
+        note(f"round {i + 1}/{a.repeat}")
         t0 = time.perf_counter()
         f = r.render(sc.target, cam, cull=a.cull, **kw)
         cl_ms.append((time.perf_counter() - t0) * 1e3)
@@ -483,6 +493,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         if not ids_equal:
             log(f"WARNING {cfg.id}: OpenCL and twin triangle ids differ in "
                 f"{rec['agreement']['pixels_differing']} pixels")
+    note("llvmpipe")
     rec["peer"] = peer.measure(cfg, sc, cam, f.depth, a, cl_med)
     del r, f, g
     return rec
@@ -923,6 +934,15 @@ def markdown(res: dict) -> str:
 # main
 # =======================================================================================
 
+def _default_out() -> Path:
+    """bench/results/ of the repository (a checkout or an editable install); from an
+    installed package, ./clraster-bench-results."""
+    here = Path(__file__).resolve().parent
+    if (here.parent / "pyproject.toml").is_file():
+        return here / "results"
+    return Path.cwd() / "clraster-bench-results"
+
+
 def _default_meshes() -> Path:
     repo = Path(__file__).resolve().parent.parent
     cands = [repo.parent / "shared" / "meshes", Path.cwd().parent / "shared" / "meshes",
@@ -1045,7 +1065,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     out = a.out or (Path(tempfile.mkdtemp(prefix="clraster-bench-")) if a.quick
-                    else Path(__file__).resolve().parent / "results")
+                    else _default_out())
     out.mkdir(parents=True, exist_ok=True)
     print(f"clraster bench: {len(configs)} configurations; results in {out}", flush=True)
 
@@ -1095,7 +1115,7 @@ def main(argv: list[str] | None = None) -> int:
             if loaded is None or loaded.spec.geometry != c.scene.geometry:
                 loaded = None   # free the previous scene first (10M triangles are large)
                 loaded = load_scene(c.scene, a.meshes)
-            records.append(_jsonable(run_config(c, loaded, a, peer, prog.log)))
+            records.append(_jsonable(run_config(c, loaded, a, peer, prog.log, prog.detail)))
         except SceneMissing as exc:
             skipped.append(f"{c.id}: {exc}")
             prog.log(f"skipped {c.id}: {exc}")
