@@ -108,6 +108,9 @@ _lock = threading.Lock()
 
 def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program:
     """Built program for ``kernels/<stage>.cl``, cached per (context, stage, options)."""
+    if "portable computing language" not in ctx.devices[0].platform.name.lower():
+        # kernels/common.h: Clang builtins only where PoCL compiles them (not Oclgrind)
+        options = (*options, "-DCLRASTER_PORTABLE")
     key = (ctx.int_ptr, stage, tuple(options))
     with _lock:
         prg = _programs.get(key)

@@ -91,6 +91,17 @@ typedef struct {
 } Draw;
 #define DRAW_INSIDE 1   /* cluster inside the frustum by a margin: no clip tests needed */
 
+/* Round to nearest, ties to even (rint). On PoCL, __builtin_rintf is LLVM's rint intrinsic,
+ * one roundss on x86; PoCL's OpenCL rint() is a software routine that is not inlined and
+ * cost the vertex stage half its time (13.0 -> 6.5 ms on the dragon at 1080p). Other
+ * platforms (Oclgrind's interpreter has no llvm.rint) are built with -DCLRASTER_PORTABLE
+ * (clraster.device.program) and use rint(). Both round the same, bit for bit. */
+#ifdef CLRASTER_PORTABLE
+#define RINTF(x) rint(x)
+#else
+#define RINTF(x) __builtin_rintf(x)
+#endif
+
 /* A vertex after the viewport transform: 24.8 fixed-point window x/y (y down), window depth
  * (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the guard band
  * and per clipped vertex in setup.cl, with this one function, so both are bit-identical. */
@@ -104,11 +115,9 @@ inline WinVert viewport_vertex(float4 c, float hw, float hh)
     float xw = (xn + 1.0f) * hw;
     float yw = (1.0f - yn) * hh;
     /* round half to even (rint in the default rounding mode); the guard band keeps the
-     * values in range. __builtin_rintf is LLVM's rint intrinsic, one roundss on x86: PoCL's
-     * OpenCL rint() is a software routine that is not inlined, and cost the vertex stage
-     * half its time (13.0 -> 6.5 ms on the dragon at 1080p); same results bit for bit. */
-    v.x = (int)__builtin_rintf(xw * (float)SUB_ONE);
-    v.y = (int)__builtin_rintf(yw * (float)SUB_ONE);
+     * values in range */
+    v.x = (int)RINTF(xw * (float)SUB_ONE);
+    v.y = (int)RINTF(yw * (float)SUB_ONE);
     v.z = zn * 0.5f + 0.5f;
     v.iw = iw;
     return v;
