@@ -8,7 +8,11 @@ Quick start::
     frame = clraster.Renderer(1280, 720).render(mesh, cam)        # OpenCL
     same = clraster.reference.render(mesh, cam, 1280, 720)        # NumPy reference
 
-``Renderer``, ``reference``, ``Frame`` and ``FrameStats`` are imported on first use, so
+Line segments (frustums, wireframes): ``clraster.LineRenderer`` / ``clraster.render_lines``
+(Cohen–Sutherland clipping in clip space, depth-tested; see `clraster.lines`).
+
+``Renderer``, ``reference``, ``Frame``, ``FrameStats`` and the line API are imported on
+first use, so
 ``import clraster`` (and ``Mesh``, ``Camera``, ``RasterConfig``) works without touching
 OpenCL.
 """
@@ -25,9 +29,11 @@ from .mesh import Mesh
 if TYPE_CHECKING:
     from . import reference
     from .frame import Frame, FrameStats
+    from .lines import LineFrame, LineRenderer, render_lines
     from .renderer import Renderer
 
-__all__ = ["Camera", "Frame", "FrameStats", "Mesh", "RasterConfig", "Renderer", "reference"]
+__all__ = ["Camera", "Frame", "FrameStats", "LineFrame", "LineRenderer", "Mesh",
+           "RasterConfig", "Renderer", "reference", "render_lines"]
 __version__ = "0.1.0"
 
 _LAZY = {
@@ -35,6 +41,9 @@ _LAZY = {
     "reference": (".reference", None),
     "Frame": (".frame", "Frame"),
     "FrameStats": (".frame", "FrameStats"),
+    "LineRenderer": (".lines", "LineRenderer"),
+    "LineFrame": (".lines", "LineFrame"),
+    "render_lines": (".lines", "render_lines"),
 }
 
 
