@@ -111,6 +111,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="also save the (H, W) float32 window depth as .npy")
     r.add_argument("--ids", type=Path, metavar="NPY",
                    help="also save the (H, W) int32 triangle ids (-1 background) as .npy")
+    r.add_argument("--wireframe", action="store_true",
+                   help="draw the mesh's edges over the image (line segments, clipped in clip "
+                        "space and depth-tested against the frame, so hidden edges stay hidden)")
+    r.add_argument("--wireframe-bias", type=float, default=1e-4, metavar="D",
+                   help="window-depth bias of the wireframe's depth test (default 1e-4): an "
+                        "edge shows where its depth <= surface depth + D")
     r.add_argument("--tile-log2", type=int, choices=range(3, 7), default=4, metavar="{3..6}",
                    help="tiles are 2**N pixels square (default 4); never changes the image")
     r.add_argument("--reference", action="store_true",
@@ -190,7 +196,19 @@ def _render(args: argparse.Namespace) -> int:
         times.append((time.perf_counter() - t0) * 1e3)
     assert frame is not None
 
-    iio.imwrite(args.out, shade(frame, mesh))
+    image = shade(frame, mesh)
+    if args.wireframe:
+        from .lines import mesh_edges, overlay
+        from .lines import render_lines as draw_lines
+        from .reference.lines import render_lines as reference_lines
+
+        edges = mesh_edges(mesh)
+        draw = reference_lines if args.reference else draw_lines
+        lines = draw(edges, camera, width, height, depth=frame.depth,
+                     depth_bias=args.wireframe_bias)
+        image = overlay(image, lines, (20, 20, 20))
+        print(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
+    iio.imwrite(args.out, image)
     if args.depth is not None:
         np.save(args.depth, frame.depth)
     if args.ids is not None:

@@ -106,3 +106,27 @@ def test_bad_camera_exit_1(tmp_path, capsys):
 def test_help_exit_0(capsys):
     assert main(["render", "--help"]) == 0
     assert "--size" in capsys.readouterr().out
+
+
+def test_wireframe_overlay(tmp_path, capsys):
+    """--wireframe paints depth-tested mesh edges: only over drawn pixels (edges behind the
+    surface or off the mesh never show on the background), the same pixels for OpenCL and
+    the NumPy twin, and nothing changes in depth or ids."""
+    _, plain, depth, ids = _render(tmp_path)
+    _, wire, depth_w, ids_w = _render(tmp_path, "--wireframe")
+    _, wire_ref, _, _ = _render(tmp_path, "--wireframe", "--reference")
+    assert np.array_equal(depth, depth_w) and np.array_equal(ids, ids_w)
+    painted = np.any(wire != plain, axis=2)
+    assert painted.sum() > 0.05 * (ids >= 0).sum()
+    assert np.all(wire[painted] == 20)   # the overlay colour
+    # edges lie on the surface or its silhouette: a painted background pixel can only be
+    # one next to a drawn pixel (a silhouette edge lights pixel centres the faces miss)
+    drawn = np.pad(ids >= 0, 1)
+    h, w = ids.shape
+    near = np.zeros_like(ids, dtype=bool)
+    for dy in range(3):
+        for dx in range(3):
+            near |= drawn[dy:dy + h, dx:dx + w]
+    assert np.all(near[painted])
+    assert np.array_equal(wire, wire_ref)
+    assert "wireframe:" in capsys.readouterr().out
