@@ -14,6 +14,25 @@
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
 
+/* floor(a / d) for d > 0, exact in 64 bits (C division truncates towards zero). */
+inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
+
+/* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
+ * r + lx·s is >= bias. The value is linear in lx, so the set is a suffix (s > 0), a prefix
+ * (s < 0), or all / nothing (s = 0); its bound is one exact integer division. */
+inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
+{
+    if (s > 0) {          /* lx >= ceil((bias - r) / s) */
+        long b = -floor_div(r - bias, s);
+        if (b > *lo) *lo = (int)min(b, (long)INT_MAX);
+    } else if (s < 0) {   /* lx <= floor((r - bias) / -s) */
+        long b = floor_div(r - bias, -s);
+        if (b < *hi) *hi = (int)max(b, (long)INT_MIN);
+    } else if (r < bias) {
+        *hi = *lo - 1;
+    }
+}
+
 __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
@@ -96,21 +115,25 @@ __kernel void raster_tiles(__global const float *clip_bary,
         float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
         int id = pc->id;
         int lx0 = x0 - tx0, lx1 = x1 - tx0;
+        bool wide = x1 - x0 >= SPAN;
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
             int t_row = 0, p_row = 0;
-            for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN) {
-            /* skip spans no edge combination can reach (exact per edge). Only worth it
-             * when the row holds several spans: for a piece at most one span wide (most
-             * of a dense mesh) the test costs more than the span it would skip (raster
-             * 26 -> 18 ms on the dragon at 1080p). */
-            if (x1 - x0 >= SPAN && rect_outside(X0, Y0, X1, Y1, X2, Y2, tx0 + max(cx, lx0), y,
-                             tx0 + min(cx + SPAN - 1, lx1), y))
-                continue;
+            /* A piece wider than one span first finds the exact run of columns of this
+             * row inside all three edges (a triangle meets a row in one run) and walks
+             * only the spans over it; a narrow one tests its span or two directly, which
+             * is cheaper than finding the run. Either way `in` is the same exact test. */
+            int c0 = lx0, c1 = lx1;
+            if (wide) {
+                edge_columns(r0, sx0, b0, &c0, &c1);
+                edge_columns(r1, sx1, b1, &c0, &c1);
+                edge_columns(r2, sx2, b2, &c0, &c1);
+            }
+            for (int cx = c0 & ~(SPAN - 1); cx <= c1; cx += SPAN) {
             for (int j = 0; j < SPAN; ++j) {
                 int lx = cx + j;
                 long e0 = r0 + lx * sx0, e1 = r1 + lx * sx1, e2 = r2 + lx * sx2;
-                bool in = lx >= lx0 && lx <= lx1 && e0 >= b0 && e1 >= b1 && e2 >= b2;
+                bool in = lx >= c0 && lx <= c1 && e0 >= b0 && e1 >= b1 && e2 >= b2;
                 float l1 = (float)e1 * inv_area;
                 float l2 = (float)e2 * inv_area;
                 float z = (z0 + l1 * dz10) + l2 * dz20;
