@@ -29,45 +29,39 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
     *ty1 = bb_y(bb_max) >> TILE_LOG2;
 }
 
-/* Can edge a->b reach a pixel centre of tile column tx (∩ the piece's box) in tile row ty? */
-inline bool edge_reaches_tile(__global const Piece *pc, int a, int b, int tx, int ty)
-{
-    int x0 = max(bb_x(pc->bb_min), tx << TILE_LOG2);
-    int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
-    int x1 = min(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
-    int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
-    return edge_reaches(pc->x[a], pc->y[a], pc->x[b], pc->y[b], x0, y0, x1, y1);
-}
+/* floor(a / d) for d > 0, exact in 64 bits (C division truncates towards zero). */
+inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
 
 /* The tile columns [*lo, *hi] of row ty that all three edges reach — exactly the columns
- * where rect_outside(tile ∩ box) is false. Along a row, the corner edge_reaches tests moves right with
- * the column, so each edge's test is monotone: true on a suffix of the columns when its
- * function grows with x (dy < 0), on a prefix when it shrinks (dy > 0), everywhere or
- * nowhere when dy = 0. A binary search per edge finds each bound: O(log columns) tests per
- * row where a scan cost O(columns) for a long thin diagonal triangle. */
-inline void row_span(__global const Piece *pc, int ty, int tx0, int tx1, int *lo, int *hi)
+ * where rect_outside(tile ∩ box) is false. Along a row, edge_reaches
+ * tests the corner its gradient points to: the tile's right end (clamped to the box) when
+ * the edge function grows with x (dy < 0), its left end when it shrinks (dy > 0), and
+ * either when dy = 0. So each edge's test holds on a suffix / prefix / all or none of the
+ * columns, and the bound is one exact division: the first (last) pixel column where the
+ * edge function at the row's test y reaches the bias, then the tile holding it. O(1) per
+ * edge and row; it replaced a binary search over the columns (same columns). */
+inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
 {
-    *lo = tx0;
-    *hi = tx1;
+    int bx0 = bb_x(pc->bb_min), bx1 = bb_x(pc->bb_max);
+    int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
+    int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
     for (int e = 0; e < 3 && *lo <= *hi; ++e) {
         int a = e == 0 ? 1 : (e == 1 ? 2 : 0), b = e == 0 ? 2 : (e == 1 ? 0 : 1);
-        int dy = pc->y[b] - pc->y[a];
+        int ax = pc->x[a], ay = pc->y[a], bx = pc->x[b], by = pc->y[b];
+        long dx = (long)bx - ax, dy = (long)by - ay;
+        long py = ((long)(dx > 0 ? y1 : y0) << SUBPIXEL_BITS) + SUB_HALF;
+        /* E at pixel column x: K - dy·256·x */
+        long k = dx * (py - ay) - dy * ((long)SUB_HALF - ax) - edge_bias(ax, ay, bx, by);
         if (dy == 0) {
-            if (!edge_reaches_tile(pc, a, b, *lo, ty)) *hi = *lo - 1;
-        } else if (dy < 0) {            /* suffix: first column that reaches */
-            int l = *lo, r = *hi + 1;   /* answer in [l, r]; r = none */
-            while (l < r) {
-                int mid = (l + r) >> 1;
-                if (edge_reaches_tile(pc, a, b, mid, ty)) r = mid; else l = mid + 1;
-            }
-            *lo = l;
-        } else {                        /* prefix: last column that reaches */
-            int l = *lo - 1, r = *hi;   /* answer in [l, r]; l = none */
-            while (l < r) {
-                int mid = (l + r + 1) >> 1;
-                if (edge_reaches_tile(pc, a, b, mid, ty)) l = mid; else r = mid - 1;
-            }
-            *hi = l;
+            if (k < 0) *hi = *lo - 1;
+        } else if (dy < 0) {   /* E >= bias from pixel column xs on */
+            long xs = -floor_div(k, -dy * SUB_ONE);
+            if (xs > bx1) *hi = *lo - 1;
+            else *lo = (int)max((long)*lo, xs >> TILE_LOG2);
+        } else {               /* E >= bias up to pixel column xs */
+            long xs = floor_div(k, dy * SUB_ONE);
+            if (xs < bx0) *hi = *lo - 1;
+            else *hi = (int)min((long)*hi, xs >> TILE_LOG2);
         }
     }
 }
@@ -91,7 +85,7 @@ inline void row_span(__global const Piece *pc, int ty, int tx0, int tx1, int *lo
             bool single = tx0 == tx1 && ty0 == ty1;                                       \
             for (int ty = ty0; ty <= ty1; ++ty) {                                         \
                 int lo = tx0, hi = tx1;                                                   \
-                if (!single) row_span(pc, ty, tx0, tx1, &lo, &hi);                       \
+                if (!single) row_span(pc, ty, &lo, &hi);                             \
                 for (int tx = lo; tx <= hi; ++tx) {                                       \
                     int tile = ty * tiles_x + tx;                                         \
                     BODY                                                                  \
