@@ -22,6 +22,11 @@ inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) /
  * (s < 0), or all / nothing (s = 0); its bound is one exact integer division. */
 inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
 {
+    /* the value is linear: if both ends of the run are inside (outside), all of it is;
+     * only an edge that crosses the run needs the division */
+    bool in_lo = r + (long)*lo * s >= bias, in_hi = r + (long)*hi * s >= bias;
+    if (in_lo && in_hi) return;
+    if (!in_lo && !in_hi) { *hi = *lo - 1; return; }
     if (s > 0) {          /* lx >= ceil((bias - r) / s) */
         long b = -floor_div(r - bias, s);
         if (b > *lo) *lo = (int)min(b, (long)INT_MAX);
