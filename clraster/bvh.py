@@ -156,17 +156,34 @@ def dense_box_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
     term), so it pays for small K and many plane sets, where a per-(query, node) traversal
     would gather planes for every pair.
     """
-    n_q, n_k = planes.shape[0], lo.shape[0]
+    return dense_row_states(planes, scales, masks, dense_rows(lo, hi, mag),
+                            inside_margin=inside_margin, outside_margin=outside_margin)
+
+
+def dense_rows(lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The right-hand sides of `dense_box_states`' products for boxes lo, hi, mag (K, 3):
+    float64 (7, K) [lo; hi; 1], (7, K) [hi; lo; 1] and (4, K) [mag; 1]. They depend on the
+    boxes only, so a BVH keeps them (`BVH.dense_rows`)."""
+    one = np.ones((1, lo.shape[0]))
+    return (np.vstack([lo.T, hi.T, one]), np.vstack([hi.T, lo.T, one]),
+            np.vstack([mag.T, one]))
+
+
+def dense_row_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
+                     rows: tuple[np.ndarray, np.ndarray, np.ndarray], *,
+                     inside_margin: float, outside_margin: float):
+    """`dense_box_states` with the boxes given as their `dense_rows`."""
+    lohi, hilo, mag1 = rows
+    n_q, n_k = planes.shape[0], lohi.shape[1]
     n = planes[..., :3]
     w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0), planes[..., 3:]], axis=-1)
     w = np.ascontiguousarray(np.swapaxes(w, 0, 1)).reshape(6 * n_q, 7)  # rows (k, q)
     sc = np.ascontiguousarray(np.swapaxes(scales, 0, 1)).reshape(6 * n_q, 4)
-    one = np.ones((1, n_k))
-    lo_t, hi_t = lo.T, hi.T
     shape = (6, n_q, n_k)
-    dmin = (w @ np.vstack([lo_t, hi_t, one])).reshape(shape)
-    dmax = (w @ np.vstack([hi_t, lo_t, one])).reshape(shape)
-    mterm = (sc @ np.vstack([mag.T, one])).reshape(shape)
+    dmin = (w @ lohi).reshape(shape)
+    dmax = (w @ hilo).reshape(shape)
+    mterm = (sc @ mag1).reshape(shape)
     return _decide(dmin, dmax, mterm, masks[:, None], inside_margin, outside_margin)
 
 
@@ -269,6 +286,17 @@ class BVH:
         items.flags.writeable = False
         object.__setattr__(self, "_nodes9", nodes)
         object.__setattr__(self, "_items9", items)
+        object.__setattr__(self, "_dense_rows", None)
+
+    @property
+    def dense_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`dense_rows` of the items (by item index), made on first use and kept."""
+        if self._dense_rows is None:
+            rows = dense_rows(self.item_min, self.item_max, self.item_mag)
+            for r in rows:
+                r.flags.writeable = False
+            object.__setattr__(self, "_dense_rows", rows)
+        return self._dense_rows
 
     @property
     def n_nodes(self) -> int:

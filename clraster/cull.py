@@ -65,7 +65,7 @@ from .bvh import (
     _sort_keys,
     _sphere_extremes,
     box_magnitudes,
-    dense_box_states,
+    dense_row_states,
 )
 from .clusters import ClusteredMesh, clusters_of, cone_kernel, cone_table
 from .config import CULL_MODES
@@ -458,9 +458,8 @@ def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np
     step = max(1, _DENSE_CHUNK // max(bvh.n_items, 1))
     for q0 in range(0, planes.shape[0], step):
         sl = slice(q0, q0 + step)
-        st, _ = dense_box_states(planes[sl], scales[sl], masks[sl], bvh.item_min,
-                                 bvh.item_max, bvh.item_mag, inside_margin=inside_margin,
-                                 outside_margin=outside_margin)
+        st, _ = dense_row_states(planes[sl], scales[sl], masks[sl], bvh.dense_rows,
+                                 inside_margin=inside_margin, outside_margin=outside_margin)
         q, item = np.nonzero(st != OUTSIDE)
         out_q.append(q + q0)
         out_i.append(item)

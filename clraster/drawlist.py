@@ -135,8 +135,7 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> 
     n_verts, n_tris = int(nv.sum()), int(nt.sum())
     if n_verts >= 2**31 or n_tris >= 2**31:
         raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
-    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances]) \
-        if scene.instances else np.zeros((0, 4, 4))
+    mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
     mvps = np.matmul(np.asarray(view_proj, np.float64), mats).astype(np.float32)
     if not np.all(np.isfinite(mvps)):
         raise ValueError("an instance's view-projection · model matrix is not finite in "
