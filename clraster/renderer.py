@@ -179,7 +179,6 @@ class Renderer:
         w, h = self.width, self.height
         pool, fd, scene = plan.pool, plan.frame, plan.scene
         d = fd.draws
-        info = pool.clusters[d["cluster"]].astype(np.int64)
         keys = pool.instance_key_base[d["instance"]] + (
             d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
         # the scene object itself is kept and compared with `is` (not its id(), which a
@@ -187,9 +186,14 @@ class Renderer:
         version = getattr(scene, "version", 0)
         if self._boxes_key is None or not (self._boxes_key[0] is scene
                                            and self._boxes_key[1] == version):
-            self._boxes = key_boxes(pool, scene)
+            wlo, whi, wbounded = key_boxes(pool, scene)
+            # + the boxes in the Hi-Z test's layout, float32 (6, K), gathered per frame
+            rows = np.ascontiguousarray(np.vstack([wlo.T, whi.T]).astype(np.float32))
+            self._boxes = (wlo, whi, wbounded, rows)
             self._boxes_key = (scene, version)
-        lo, hi, bounded = (a[keys] for a in self._boxes)
+        bounded = self._boxes[2][keys]
+        rows = np.take(self._boxes[3], keys, axis=1)
+        vp32 = plan.view_proj.astype(np.float32).reshape(-1)
         hist = self._visible if (self._visible_key is not None
                                  and self._visible_key[0] is scene
                                  and self._visible_key[1] == version) else None
@@ -197,7 +201,7 @@ class Renderer:
             first = hist[keys]
         else:   # first frame: the nearest clusters, front to back, up to a budget
             vp_inv_eye = eye_position(plan.view_proj)
-            centre = 0.5 * (lo + hi)
+            centre = 0.5 * (self._boxes[0][keys] + self._boxes[1][keys])
             dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
                 else centre @ view_direction(plan.view_proj)
             budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)
@@ -210,8 +214,8 @@ class Renderer:
         verdict = np.zeros(d.size, np.uint8)
         if rest.any():
             pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
-            verdict[rest], ev = self.pyramid.enqueue_test(
-                self.queue, pyr, lo[rest], hi[rest], plan.view_proj.astype(np.float32), w, h)
+            verdict[rest], ev = self.pyramid.enqueue_test_rows(
+                self.queue, pyr, np.compress(rest, rows, axis=1), vp32, w, h)
             timings["pyramid+test"] = _ms([*pyr.events, ev] if ev else pyr.events)
         second = rest & (verdict == Occlusion.VISIBLE)
         occluded = rest & ~second
@@ -222,8 +226,9 @@ class Renderer:
         pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
         vis = np.zeros(d.size, bool)
         if drawn.any():
-            v2, _ = self.pyramid.enqueue_test(self.queue, pyr, lo[drawn], hi[drawn],
-                                              plan.view_proj.astype(np.float32), w, h)
+            v2, _ = self.pyramid.enqueue_test_rows(self.queue, pyr,
+                                                   np.compress(drawn, rows, axis=1), vp32,
+                                                   w, h)
             vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
         total_keys = int(pool.instance_key_base[-1])
         self._visible = np.zeros(total_keys, bool)
@@ -232,7 +237,8 @@ class Renderer:
         timings["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 - timings.get(
             "pyramid+test", 0.0)
         counts["clusters_occlusion_culled"] = int(occluded.sum())
-        counts["triangles_occlusion_culled"] = int(info[occluded, 1].sum())
+        counts["triangles_occlusion_culled"] = int(
+            pool.clusters[d["cluster"][occluded], 1].sum(dtype=np.int64))
         counts["clusters_phase1"] = int(first.sum())
         counts["clusters_phase2"] = int(second.sum())
         acc["occluded"] = keys[occluded]

@@ -175,7 +175,16 @@ class PyramidStage:
             raise ValueError(f"the pyramid is {pyramid.width}x{pyramid.height}, not "
                              f"{width}x{height}")
         lo, hi, vp = check_boxes(mins, maxs, view_proj)
-        k = lo.shape[0]
+        return self.enqueue_test_rows(queue, pyramid, np.vstack([lo.T, hi.T]), vp, width,
+                                      height)
+
+    def enqueue_test_rows(self, queue: cl.CommandQueue, pyramid: Pyramid, rows: np.ndarray,
+                          vp: np.ndarray, width: int, height: int
+                          ) -> tuple[np.ndarray, cl.Event | None]:
+        """`enqueue_test` with the boxes already in the kernel's layout: float32 (6, K)
+        rows min x, y, z, max x, y, z; vp float32 (16,) row-major. For callers that keep
+        their boxes that way (the renderer's occlusion culling, every frame)."""
+        k = rows.shape[1]
         if k == 0:
             return np.empty(0, np.uint8), None
         if k > MAX_TEST_BOXES:
@@ -184,8 +193,7 @@ class PyramidStage:
         b = self.buffers
         n_pad = -(-k // 8) * 8
         soa = np.zeros((6, n_pad), np.float32)   # rows min.xyz, max.xyz (kernel layout)
-        soa[:3, :k] = lo.T
-        soa[3:, :k] = hi.T
+        soa[:, :k] = rows
         bbox = b.boxes.ensure(soa.nbytes, "box buffer")
         bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
         cl.enqueue_copy(queue, bbox, soa, is_blocking=False)
