@@ -3,8 +3,8 @@
 - ``clraster render MESH --size WxH --out image.png``: render one mesh (this module).
 - ``clraster demo ...``: the built-in plant demo with the culling inspector
   (`clraster.demo.main`).
-- ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`, the repository's
-  ``bench/`` folder, installed as ``clraster.bench``).
+- ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
+  docs in the repository's ``bench/`` folder).
 
 Exit codes: 0 success; 1 the mesh, camera or output could not be used (one line on stderr,
 no traceback); 2 bad command-line arguments (argparse's usage message).

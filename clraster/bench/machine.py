@@ -112,7 +112,7 @@ def describe(repo: str | Path | None = None, peer_renderer: str | None = None
         peer_renderer: the GL renderer string the llvmpipe peer reported (e.g.
             "llvmpipe (LLVM 15.0.6, 256 bits)"), when it ran.
     """
-    repo = Path(repo) if repo is not None else Path(__file__).resolve().parent.parent
+    repo = Path(repo) if repo is not None else Path(__file__).resolve().parents[2]
     uname = platform.uname()
     return {
         "cpu": _cpu_model(),

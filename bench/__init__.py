@@ -1,1 +1,0 @@
-"""Benchmark harness of clraster (installed as ``clraster.bench``; see bench/README.md)."""
