@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from clraster.bench.peer_llvmpipe import LlvmpipePeer, coverage_agreement, probe
 
 import clraster
+from clraster.bench.peer_llvmpipe import LlvmpipePeer, coverage_agreement, probe
 
 DRAGON = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "stanford_dragon_vrip.ply"
 

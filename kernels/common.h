@@ -102,6 +102,33 @@ typedef struct {
 #define RINTF(x) __builtin_rintf(x)
 #endif
 
+/* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M, the operation order the NumPy twin
+ * uses (vertex.cl for triangles, lines.cl for line endpoints). */
+inline float4 clip_transform(__global const float *m, float px, float py, float pz)
+{
+    float4 c;
+    c.x = ((m[0] * px + m[1] * py) + m[2] * pz) + m[3];
+    c.y = ((m[4] * px + m[5] * py) + m[6] * pz) + m[7];
+    c.z = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
+    c.w = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
+    return c;
+}
+
+/* The classic 6-bit frustum outcode of a clip-space point: bit k set iff the signed distance
+ * to plane k is negative (the clipper's plane_dist expressions). The sign of a rounded sum
+ * is the sign of the exact sum, so float and double outcodes of one point agree. */
+inline uint frustum_outcode(float4 c)
+{
+    uint oc = 0;
+    oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
+    oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
+    oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
+    oc |= (c.w - c.y < 0.0f) ? OC_Y_POS : 0;
+    oc |= (c.z + c.w < 0.0f) ? OC_Z_NEG : 0;
+    oc |= (c.w - c.z < 0.0f) ? OC_Z_POS : 0;
+    return oc;
+}
+
 /* A vertex after the viewport transform: 24.8 fixed-point window x/y (y down), window depth
  * (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the guard band
  * and per clipped vertex in setup.cl, with this one function, so both are bit-identical. */

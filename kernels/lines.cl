@@ -92,29 +92,10 @@ __constant uint LPLANE_BIT[6] = {OC_Z_NEG, OC_Z_POS, OC_X_NEG, OC_X_POS, OC_Y_NE
 
 inline float4 seg_clip(__global const float *mvp, __global const float *p)
 {
-    float px = p[0], py = p[1], pz = p[2];
-    float4 c;
-    c.x = ((mvp[0] * px + mvp[1] * py) + mvp[2] * pz) + mvp[3];
-    c.y = ((mvp[4] * px + mvp[5] * py) + mvp[6] * pz) + mvp[7];
-    c.z = ((mvp[8] * px + mvp[9] * py) + mvp[10] * pz) + mvp[11];
-    c.w = ((mvp[12] * px + mvp[13] * py) + mvp[14] * pz) + mvp[15];
-    return c;
+    return clip_transform(mvp, p[0], p[1], p[2]);   /* common.h, as for triangle vertices */
 }
 
-/* The 6-bit frustum outcode, the same expressions as vertex.cl. The sign of a rounded sum is
- * the sign of the exact sum, so float and double outcodes of one point agree. */
-inline uint outcode_f(float4 c)
-{
-    uint oc = 0;
-    oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
-    oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
-    oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
-    oc |= (c.w - c.y < 0.0f) ? OC_Y_POS : 0;
-    oc |= (c.z + c.w < 0.0f) ? OC_Z_NEG : 0;
-    oc |= (c.w - c.z < 0.0f) ? OC_Z_POS : 0;
-    return oc;
-}
-
+/* frustum_outcode (common.h) in double, for the clipper's recomputed endpoints. */
 inline uint outcode_d(double4 c)
 {
     uint oc = 0;
@@ -197,7 +178,7 @@ __kernel void line_setup(__global const float *pos, const uint n, __global const
     bool finite = isfinite(c0.x) && isfinite(c0.y) && isfinite(c0.z) && isfinite(c0.w)
                   && isfinite(c1.x) && isfinite(c1.y) && isfinite(c1.z) && isfinite(c1.w);
     if (finite) {
-        uint o0 = outcode_f(c0), o1 = outcode_f(c1);
+        uint o0 = frustum_outcode(c0), o1 = frustum_outcode(c1);
         if (o0 & o1) {
             r.status = LS_REJECTED;
         } else {

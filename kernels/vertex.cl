@@ -26,23 +26,13 @@ __kernel void vertex_transform(__global const float *restrict pos, __global cons
     int vi = vert_ids[ci.z + lv];
     uint i = (uint)dr.vert_base + lv;
     __global const float *mvp = mvps + 16 * dr.instance;
-    float px = pos[3 * vi], py = pos[3 * vi + 1], pz = pos[3 * vi + 2];
-    float4 c;
-    c.x = ((mvp[0] * px + mvp[1] * py) + mvp[2] * pz) + mvp[3];
-    c.y = ((mvp[4] * px + mvp[5] * py) + mvp[6] * pz) + mvp[7];
-    c.z = ((mvp[8] * px + mvp[9] * py) + mvp[10] * pz) + mvp[11];
-    c.w = ((mvp[12] * px + mvp[13] * py) + mvp[14] * pz) + mvp[15];
+    float4 c = clip_transform(mvp, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]);
     uint oc = 0;
     if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
         oc = OC_INVALID;
     } else if (!(dr.flags & DRAW_INSIDE)) {
         /* clusters inside the frustum by a margin skip the tests: all bits would be 0 */
-        oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
-        oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
-        oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
-        oc |= (c.w - c.y < 0.0f) ? OC_Y_POS : 0;
-        oc |= (c.z + c.w < 0.0f) ? OC_Z_NEG : 0;
-        oc |= (c.w - c.z < 0.0f) ? OC_Z_POS : 0;
+        oc = frustum_outcode(c);
         oc |= (c.x + kx * c.w < 0.0f) ? OC_GB_X_NEG : 0;
         oc |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
         oc |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;

@@ -16,11 +16,11 @@ import types
 
 import numpy as np
 import pytest
-from clraster.bench import peer_llvmpipe as peer_mod
-from clraster.bench.peer_llvmpipe import LlvmpipePeer, coverage_agreement, probe
 from conftest import MatrixCamera, get_renderer, load_shared_mesh
 
 from clraster import Camera, Mesh
+from clraster.bench import peer_llvmpipe as peer_mod
+from clraster.bench.peer_llvmpipe import LlvmpipePeer, coverage_agreement, probe
 from clraster.scene import Scene
 
 OK, WHY = probe()
