@@ -146,23 +146,9 @@ def _sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray
     return dist - reach, dist + reach, mterm
 
 
-def dense_box_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
-                     lo: np.ndarray, hi: np.ndarray, mag: np.ndarray, *,
-                     inside_margin: float, outside_margin: float):
-    """Classify every box against every plane set: states and masks, uint8 (Q, K).
-
-    planes, scales: (Q, 6, 4); masks: (Q,) uint8; lo, hi, mag: (K, 3). Three matrix
-    products of (6Q, 7) by (7, K) (plane value at the n-vertex, at the p-vertex, margin
-    term), so it pays for small K and many plane sets, where a per-(query, node) traversal
-    would gather planes for every pair.
-    """
-    return dense_row_states(planes, scales, masks, dense_rows(lo, hi, mag),
-                            inside_margin=inside_margin, outside_margin=outside_margin)
-
-
 def dense_rows(lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The right-hand sides of `dense_box_states`' products for boxes lo, hi, mag (K, 3):
+    """The right-hand sides of `dense_row_states`' products for boxes lo, hi, mag (K, 3):
     float64 (7, K) [lo; hi; 1], (7, K) [hi; lo; 1] and (4, K) [mag; 1]. They depend on the
     boxes only, so a BVH keeps them (`BVH.dense_rows`)."""
     one = np.ones((1, lo.shape[0]))
@@ -173,7 +159,13 @@ def dense_rows(lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
 def dense_row_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
                      rows: tuple[np.ndarray, np.ndarray, np.ndarray], *,
                      inside_margin: float, outside_margin: float):
-    """`dense_box_states` with the boxes given as their `dense_rows`."""
+    """Classify every box against every plane set: states and masks, uint8 (Q, K).
+
+    planes, scales: (Q, 6, 4); masks: (Q,) uint8; rows: the boxes' `dense_rows`. Three
+    matrix products of (6Q, 7) by (7, K) (plane value at the n-vertex, at the p-vertex,
+    margin term), so it pays for small K and many plane sets, where a per-(query, node)
+    traversal would gather planes for every pair.
+    """
     lohi, hilo, mag1 = rows
     n_q, n_k = planes.shape[0], lohi.shape[1]
     n = planes[..., :3]

@@ -164,8 +164,7 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
     local = np.arange(inst.size) - np.repeat(pool.instance_key_base[:-1], n_keys)
     gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + local
     lo, hi = pool.aabb_min[gcl], pool.aabb_max[gcl]
-    mats = np.stack([np.asarray(i.transform, np.float64) for i in scene.instances]) if \
-        scene.instances else np.zeros((0, 4, 4))
+    mats = scene.transforms()
     wlo = np.full(lo.shape, np.inf)
     whi = np.full(lo.shape, -np.inf)
     for bits in np.ndindex(2, 2, 2):   # the 8 corners, each through its instance matrix

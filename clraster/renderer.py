@@ -74,7 +74,7 @@ class Renderer:
         self._plans = PlanCache()
         self._visible: np.ndarray | None = None   # occlusion: visible keys of last frame
         self._visible_key: tuple | None = None
-        self._boxes: tuple | None = None   # occlusion: world boxes of every key
+        self._boxes: tuple | None = None   # occlusion: world boxes of every key, + rows
         self._boxes_key: tuple | None = None
 
     def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
@@ -188,11 +188,12 @@ class Renderer:
                                            and self._boxes_key[1] == version):
             wlo, whi, wbounded = key_boxes(pool, scene)
             # + the boxes in the Hi-Z test's layout, float32 (6, K), gathered per frame
-            rows = np.ascontiguousarray(np.vstack([wlo.T, whi.T]).astype(np.float32))
-            self._boxes = (wlo, whi, wbounded, rows)
+            self._boxes = (wlo, whi, wbounded,
+                           np.ascontiguousarray(np.vstack([wlo.T, whi.T]).astype(np.float32)))
             self._boxes_key = (scene, version)
-        bounded = self._boxes[2][keys]
-        rows = np.take(self._boxes[3], keys, axis=1)
+        wlo, whi, wbounded, box_rows = self._boxes
+        bounded = wbounded[keys]
+        rows = np.take(box_rows, keys, axis=1)
         vp32 = plan.view_proj.astype(np.float32).reshape(-1)
         hist = self._visible if (self._visible_key is not None
                                  and self._visible_key[0] is scene
@@ -201,7 +202,7 @@ class Renderer:
             first = hist[keys]
         else:   # first frame: the nearest clusters, front to back, up to a budget
             vp_inv_eye = eye_position(plan.view_proj)
-            centre = 0.5 * (self._boxes[0][keys] + self._boxes[1][keys])
+            centre = 0.5 * (wlo[keys] + whi[keys])
             dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
                 else centre @ view_direction(plan.view_proj)
             budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)

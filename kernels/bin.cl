@@ -29,17 +29,14 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
     *ty1 = bb_y(bb_max) >> TILE_LOG2;
 }
 
-/* floor(a / d) for d > 0, exact in 64 bits (C division truncates towards zero). */
-inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
-
 /* The tile columns [*lo, *hi] of row ty that all three edges reach — exactly the columns
- * where rect_outside(tile ∩ box) is false. Along a row, edge_reaches
- * tests the corner its gradient points to: the tile's right end (clamped to the box) when
- * the edge function grows with x (dy < 0), its left end when it shrinks (dy > 0), and
- * either when dy = 0. So each edge's test holds on a suffix / prefix / all or none of the
- * columns, and the bound is one exact division: the first (last) pixel column where the
- * edge function at the row's test y reaches the bias, then the tile holding it. O(1) per
- * edge and row; it replaced a binary search over the columns (same columns). */
+ * where rect_outside(tile ∩ box) is false. Along a row, edge_reaches tests the corner its
+ * gradient points to: the tile's right end (clamped to the box) when the edge function
+ * grows with x (dy < 0), its left end when it shrinks (dy > 0), and either when dy = 0.
+ * So each edge's test holds on a suffix / prefix / all or none of the columns, and the
+ * bound is one exact division: the first (last) pixel column where the edge function at
+ * the row's test y reaches the bias, then the tile holding it. O(1) per edge and row; it
+ * replaced a binary search over the columns (same columns). */
 inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
 {
     int bx0 = bb_x(pc->bb_min), bx1 = bb_x(pc->bb_max);
@@ -85,7 +82,7 @@ inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
             bool single = tx0 == tx1 && ty0 == ty1;                                       \
             for (int ty = ty0; ty <= ty1; ++ty) {                                         \
                 int lo = tx0, hi = tx1;                                                   \
-                if (!single) row_span(pc, ty, &lo, &hi);                             \
+                if (!single) row_span(pc, ty, &lo, &hi);                                 \
                 for (int tx = lo; tx <= hi; ++tx) {                                       \
                     int tile = ty * tiles_x + tx;                                         \
                     BODY                                                                  \
@@ -94,10 +91,13 @@ inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
         }                                                                                 \
     }
 
-__kernel void bin_count(__global const uchar *restrict status, __global const int *restrict clip_count,
-                        __global const int *restrict clip_offset, __global const Piece *restrict pieces,
-                        __global const Piece *restrict clip_pieces, const uint m, const uint chunks,
-                        const int tiles_x, const int n_tiles, __global int *restrict counts)
+__kernel void bin_count(__global const uchar *restrict status,
+                        __global const int *restrict clip_count,
+                        __global const int *restrict clip_offset,
+                        __global const Piece *restrict pieces,
+                        __global const Piece *restrict clip_pieces, const uint m,
+                        const uint chunks, const int tiles_x, const int n_tiles,
+                        __global int *restrict counts)
 {
     uint chunk = get_global_id(0);
     if (chunk >= chunks) return;
@@ -136,11 +136,15 @@ __kernel void bin_scan_tiles(const int n_tiles, __global const int *restrict til
     overflow[0] = s > (long)INT_MAX;
 }
 
-__kernel void bin_scatter(__global const uchar *restrict status, __global const int *restrict clip_count,
-                          __global const int *restrict clip_offset, __global const Piece *restrict pieces,
-                          __global const Piece *restrict clip_pieces, const uint m, const uint chunks,
-                          const int tiles_x, const int n_tiles, __global int *restrict counts,
-                          __global const int *restrict tile_start, __global Piece *restrict entries)
+__kernel void bin_scatter(__global const uchar *restrict status,
+                          __global const int *restrict clip_count,
+                          __global const int *restrict clip_offset,
+                          __global const Piece *restrict pieces,
+                          __global const Piece *restrict clip_pieces, const uint m,
+                          const uint chunks, const int tiles_x, const int n_tiles,
+                          __global int *restrict counts,
+                          __global const int *restrict tile_start,
+                          __global Piece *restrict entries)
 {
     uint chunk = get_global_id(0);
     if (chunk >= chunks) return;

@@ -167,6 +167,9 @@ inline long edge_bias(int ax, int ay, int bx, int by)
     return (dy < 0 || (dy == 0 && dx > 0)) ? 0 : 1;
 }
 
+/* floor(a / d) for d > 0, exact in 64 bits (bin.cl, raster.cl) (C division truncates towards zero). */
+inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
+
 inline int bb_x(int packed) { return packed & 0xFFFF; }
 inline int bb_y(int packed) { return packed >> 16; }
 

@@ -14,28 +14,19 @@
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
 
-/* floor(a / d) for d > 0, exact in 64 bits (C division truncates towards zero). */
-inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
-
 /* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
- * r + lx·s is >= bias. The value is linear in lx, so the set is a suffix (s > 0), a prefix
- * (s < 0), or all / nothing (s = 0); its bound is one exact integer division. */
+ * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
+ * (outside), all of it is; otherwise the edge crosses the run (so s != 0) and the bound is
+ * one exact integer division, which lies inside the run. */
 inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
 {
-    /* the value is linear: if both ends of the run are inside (outside), all of it is;
-     * only an edge that crosses the run needs the division */
     bool in_lo = r + (long)*lo * s >= bias, in_hi = r + (long)*hi * s >= bias;
     if (in_lo && in_hi) return;
     if (!in_lo && !in_hi) { *hi = *lo - 1; return; }
-    if (s > 0) {          /* lx >= ceil((bias - r) / s) */
-        long b = -floor_div(r - bias, s);
-        if (b > *lo) *lo = (int)min(b, (long)INT_MAX);
-    } else if (s < 0) {   /* lx <= floor((r - bias) / -s) */
-        long b = floor_div(r - bias, -s);
-        if (b < *hi) *hi = (int)max(b, (long)INT_MIN);
-    } else if (r < bias) {
-        *hi = *lo - 1;
-    }
+    if (s > 0)   /* inside from lx = ceil((bias - r) / s) on */
+        *lo = (int)-floor_div(r - bias, s);
+    else         /* inside up to lx = floor((r - bias) / -s) */
+        *hi = (int)floor_div(r - bias, -s);
 }
 
 __kernel void raster_tiles(__global const float *clip_bary,

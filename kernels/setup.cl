@@ -184,13 +184,14 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
 }
 
 #define DRAW_ARGS                                                                          \
-    __global const Draw *restrict draws, const uint n_draws, __global const int4 *restrict clusters,         \
-    __global const uchar4 *restrict local_tris, __global const int *restrict face_ids
+    __global const Draw *restrict draws, const uint n_draws,                               \
+    __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
+    __global const int *restrict face_ids
 
-__kernel void setup_triangles(__global const float4 *restrict clip, __global const ushort *restrict outcode,
-                              __global const WinVert *restrict win, DRAW_ARGS,
-                              const int width, const int height, const int cull,
-                              const float kx, const float ky,
+__kernel void setup_triangles(__global const float4 *restrict clip,
+                              __global const ushort *restrict outcode,
+                              __global const WinVert *restrict win, DRAW_ARGS, const int width,
+                              const int height, const int cull, const float kx, const float ky,
                               __global Piece *restrict pieces, __global uchar *restrict status,
                               __global int *restrict clip_count)
 {
@@ -230,11 +231,13 @@ __kernel void setup_triangles(__global const float4 *restrict clip, __global con
     clip_count[t] = nclip;
 }
 
-__kernel void setup_clipped(__global const float4 *restrict clip, __global const ushort *restrict outcode,
-                            DRAW_ARGS, const int width, const int height,
-                            const float kx, const float ky,
-                            __global const int *restrict clip_count, __global const int *restrict clip_offset,
-                            __global Piece *restrict clip_pieces, __global float *restrict clip_bary)
+__kernel void setup_clipped(__global const float4 *restrict clip,
+                            __global const ushort *restrict outcode, DRAW_ARGS,
+                            const int width, const int height, const float kx, const float ky,
+                            __global const int *restrict clip_count,
+                            __global const int *restrict clip_offset,
+                            __global Piece *restrict clip_pieces,
+                            __global float *restrict clip_bary)
 {
     int t, i0, i1, i2, id;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,

@@ -8,12 +8,14 @@
  * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
 #include "common.h"
 
-__kernel void vertex_transform(__global const float *restrict pos, __global const int *restrict vert_ids,
-                               __global const int4 *restrict clusters, __global const Draw *restrict draws,
-                               const uint n_draws, __global const float *restrict mvps,
-                               const float kx, const float ky,
-                               const int width, const int height,
-                               __global float4 *restrict clip, __global ushort *restrict outcode,
+__kernel void vertex_transform(__global const float *restrict pos,
+                               __global const int *restrict vert_ids,
+                               __global const int4 *restrict clusters,
+                               __global const Draw *restrict draws, const uint n_draws,
+                               __global const float *restrict mvps, const float kx,
+                               const float ky, const int width, const int height,
+                               __global float4 *restrict clip,
+                               __global ushort *restrict outcode,
                                __global WinVert *restrict win)
 {
     /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
