@@ -13,10 +13,11 @@ subtree, a node outside any plane is dropped with its subtree, a node inside eve
 makes all its items INSIDE without further tests, and a leaf that is still intersecting
 tests its items one by one.
 
-Plane classification (also used by :mod:`clraster.cull`): a plane is a row (a, b, c, d)
-whose value ``a·x + b·y + c·z + d`` is >= 0 inside. With a relative margin μ and a
-per-plane *scale* row s >= 0 (the magnitude of the terms the renderer adds up in float32
-when it evaluates that plane; see :func:`clraster.cull.frustum_plane_scales`), a volume with
+Plane classification (also used by :mod:`clraster.frustum` and :mod:`clraster.cull`): a
+plane is a row (a, b, c, d) whose value ``a·x + b·y + c·z + d`` is >= 0 inside. With a
+relative margin μ and a per-plane *scale* row s >= 0 (the magnitude of the terms the
+renderer adds up in float32 when it evaluates that plane; see
+:func:`clraster.frustum.frustum_plane_scales`), a volume with
 coordinate magnitudes <= m (per axis) is
 
 * inside plane k iff ``min over the volume of plane_k >= μ_in · (s_k[:3]·m + s_k[3])``,
@@ -25,6 +26,11 @@ coordinate magnitudes <= m (per axis) is
 so both answers hold with room to spare for float32 rounding in clip space. Boxes use the
 n-vertex / p-vertex (the corner that minimizes / maximizes the plane), spheres centre ± r·|n|.
 NaN bounds compare false both ways: they are never culled and never INSIDE.
+
+Public API beyond the tree, for the frustum and draw-list code: the classification
+primitives (`box_extremes`, `sphere_extremes`, `classify_extremes`, `dense_rows`,
+`dense_row_states`, `box_magnitudes`), the argument checks they share (`check_planes`,
+`check_mask`, `check_boxes`) and two index helpers (`concat_ranges`, `argsort_distinct`).
 """
 
 from __future__ import annotations
@@ -35,7 +41,12 @@ from enum import IntEnum
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["ALL_PLANES", "BVH", "DEFAULT_MARGIN", "Visibility"]
+__all__ = [
+    "ALL_PLANES", "BVH", "DEFAULT_MARGIN", "INSIDE", "INTERSECTING", "OUTSIDE", "Visibility",
+    "argsort_distinct", "box_extremes", "box_magnitudes", "check_boxes", "check_mask",
+    "check_planes", "classify_extremes", "concat_ranges", "dense_row_states", "dense_rows",
+    "sphere_extremes",
+]
 
 
 class Visibility(IntEnum):
@@ -46,9 +57,10 @@ class Visibility(IntEnum):
     OUTSIDE = 2  #: outside some plane (by the outside margin): cannot touch the frustum
 
 
+#: The `Visibility` values as plain ints, for comparisons with uint8 state arrays.
 INSIDE, INTERSECTING, OUTSIDE = 0, 1, 2
 #: Default relative margin for INSIDE and OUTSIDE (see the module docstring and
-#: :mod:`clraster.cull`): 1e-5 of the float32 term magnitude, about 170× float32's unit
+#: :mod:`clraster.frustum`): 1e-5 of the float32 term magnitude, about 170× float32's unit
 #: roundoff and >10× the error of evaluating a plane through an object and a view matrix.
 DEFAULT_MARGIN = 1e-5
 #: Mask with all 6 plane bits set (test every plane).
@@ -68,13 +80,18 @@ _MASK_PLANES = (np.arange(64, dtype=np.uint8)[:, None] & _BITS) != 0
 _WEIGHTS = (1 << np.arange(6)).astype(np.uint8)
 
 
-def _decide(dmin: np.ndarray, dmax: np.ndarray, mterm: np.ndarray, mask: np.ndarray,
-            inside_margin: float, outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
+def classify_extremes(dmin: np.ndarray, dmax: np.ndarray, mterm: np.ndarray,
+                      mask: np.ndarray, inside_margin: float,
+                      outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
     """States and reduced masks from the plane values' extremes over each volume.
 
-    dmin, dmax, mterm: (6, *S) plane-major (min and max of each plane over each volume, and
-    its margin term); mask: uint8 plane masks broadcastable to S. Returns (state, mask),
-    uint8, of shape S (broadcast with the mask's).
+    dmin, dmax, mterm: float64 (6, *S) plane-major (min and max of each plane over each
+    volume, and its margin term: `box_extremes` / `sphere_extremes`); mask: uint8 plane
+    masks (bit k = test plane k) broadcastable to S. Returns (state, mask), uint8, of shape
+    S (broadcast with the mask's): state is a `Visibility` value (OUTSIDE if some tested
+    plane has ``dmax < −outside_margin · mterm``), and the mask loses the bits of the planes
+    with ``dmin >= inside_margin · mterm``; INSIDE iff no bit remains. NaN compares false
+    both ways, so NaN volumes stay INTERSECTING.
     """
     active = np.take(_MASK_PLANES.T, mask, axis=1)  # (6, *mask.shape)
     out = dmax < mterm * -outside_margin
@@ -104,11 +121,13 @@ def _plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
                            rows(scales[..., 3])], axis=0)
 
 
-def _box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                  mag: np.ndarray):
-    """Min and max of each plane over each box, and the margin term: (6, F) each.
+def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                 mag: np.ndarray):
+    """Min and max of each plane over each box, and the margin term: float64 (6, F) each.
 
-    planes, scales: (6, 4) shared by all boxes. lo, hi, mag: (3, F) coordinate-major.
+    planes, scales: float64 (6, 4) shared by all boxes. lo, hi, mag: float64 (3, F)
+    coordinate-major (box corners and per-axis margin magnitudes). Feed the result to
+    `classify_extremes`.
     """
     n = planes[:, :3]
     npos = np.maximum(n, 0.0)
@@ -121,7 +140,7 @@ def _box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np
 
 
 def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray):
-    """`_box_extremes` with one plane set per box: table (66, F) from `_plane_table`
+    """`box_extremes` with one plane set per box: table (66, F) from `_plane_table`
     (gathered per box), lo, hi, mag (3, F)."""
     f = lo.shape[1]
     npos = table[0:18].reshape(3, 6, f)
@@ -134,10 +153,11 @@ def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: 
     return dmin, dmax, mterm
 
 
-def _sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
-                     radii: np.ndarray):
-    """Like `_box_extremes` for spheres (centre ± r·|n|): centers (K, 3), radii (K,);
-    (6, K) results."""
+def sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
+                    radii: np.ndarray):
+    """Like `box_extremes` for spheres (centre ± r·|n|): planes, scales float64 (6, 4),
+    centers float64 (K, 3), radii float64 (K,); float64 (6, K) results. The margin
+    magnitude of a sphere is ``|centre| + r`` per axis."""
     n = planes[:, :3]
     dist = n @ centers.T + planes[:, 3:4]
     reach = np.linalg.norm(n, axis=1)[:, None] * radii[None, :]
@@ -176,10 +196,13 @@ def dense_row_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
     dmin = (w @ lohi).reshape(shape)
     dmax = (w @ hilo).reshape(shape)
     mterm = (sc @ mag1).reshape(shape)
-    return _decide(dmin, dmax, mterm, masks[:, None], inside_margin, outside_margin)
+    return classify_extremes(dmin, dmax, mterm, masks[:, None], inside_margin, outside_margin)
 
 
-def _check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None, batch: bool):
+def check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None,
+                 batch: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (planes, scales), float64 (6, 4), or (Q, 6, 4) when `batch`; scales
+    default to ``abs(planes)``. Raises ValueError on a wrong shape."""
     shape = "(Q, 6, 4)" if batch else "(6, 4)"
     p = np.asarray(planes, dtype=np.float64)
     if p.shape[-2:] != (6, 4) or p.ndim != (3 if batch else 2):
@@ -194,7 +217,9 @@ def _check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None, batch: bo
     return p, s
 
 
-def _check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
+def check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
+    """Plane masks as uint8 (n,): None → all 63; a scalar is broadcast. Raises ValueError
+    unless it is an integer scalar or (n,) array with values in 0..63."""
     if mask is None:
         return np.full(n, ALL_PLANES, np.uint8)
     m = np.asarray(mask)
@@ -206,7 +231,9 @@ def _check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
     return m.astype(np.uint8)
 
 
-def _check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+def check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Box bounds as float64 (K, 3) each (an empty 1-D input is read as (0, 3)). Raises
+    ValueError unless both have shape (K, 3); values (NaN, order) are not checked."""
     lo = np.asarray(mins, dtype=np.float64)
     hi = np.asarray(maxs, dtype=np.float64)
     if lo.ndim == 1 and lo.size == 0:
@@ -220,14 +247,18 @@ def _check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike) -> tuple[np.ndarray, 
 
 
 def box_magnitudes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(K, 3): largest |coordinate| per axis over each box (its margin magnitude)."""
+    """float64 (K, 3): largest |coordinate| per axis over each box (its margin magnitude),
+    for boxes lo, hi float64 (K, 3)."""
     return np.maximum(np.abs(lo), np.abs(hi))
 
 
 # -- the tree ---------------------------------------------------------------------------
 
-def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """Concatenation of arange(s, s + c) for each (s, c), int64."""
+def concat_ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Concatenation of arange(s, s + c) for each (s, c): int64 (counts.sum(),).
+
+    starts, counts: integer (R,), counts >= 0. Used to expand node / instance runs into
+    item positions without a Python loop."""
     total = int(counts.sum())
     if total == 0:
         return np.zeros(0, np.int64)
@@ -310,7 +341,7 @@ class BVH:
         Raises:
             ValueError: wrong shapes, NaN/Inf, ``mins > maxs`` or a bad leaf_size.
         """
-        lo, hi = _check_boxes(mins, maxs)
+        lo, hi = check_boxes(mins, maxs)
         if isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer)) \
                 or leaf_size < 1:
             raise ValueError(f"leaf_size must be a positive integer, got {leaf_size!r}")
@@ -356,10 +387,10 @@ class BVH:
             half = s_cnt // 2
             mid = s_start + half
             # Items of the left halves (in the chosen axis' order) go left.
-            pos = _ranges(s_start, half)
+            pos = concat_ranges(s_start, half)
             goes_left[orders[np.repeat(axis, half), pos]] = True
             # Stable partition of every axis order within each split segment.
-            all_pos = _ranges(s_start, s_cnt)
+            all_pos = concat_ranges(s_start, s_cnt)
             seg = np.repeat(np.arange(n_split), s_cnt)
             seg_begin = np.cumsum(s_cnt) - s_cnt  # index in all_pos of each segment start
             for a in range(3):
@@ -412,7 +443,7 @@ class BVH:
         """Items not outside the planes, with their state.
 
         Args:
-            planes: (6, 4) plane rows (>= 0 inside), e.g. `clraster.cull.frustum_planes`.
+            planes: (6, 4) plane rows (>= 0 inside), e.g. `clraster.frustum.frustum_planes`.
             scales: (6, 4) margin scales (default ``abs(planes)``).
             mask: planes to test (bit k = plane k), 0..63.
             inside_margin, outside_margin: relative margins (see the module docstring).
@@ -423,10 +454,10 @@ class BVH:
             (items int32 (D,), state uint8 (D,)) sorted by item index — OUTSIDE items are
             left out, the others are `Visibility.INSIDE` or `INTERSECTING` — and the masks
             uint8 (D,) if `return_mask`. Equal to classifying every item box on its own
-            with :func:`clraster.cull.classify_aabbs` (same margins), minus the OUTSIDE ones.
+            with :func:`clraster.frustum.classify_aabbs` (same margins), minus the OUTSIDE ones.
         """
-        p, s = _check_planes(planes, scales, batch=False)
-        m = _check_mask(mask, 1)
+        p, s = check_planes(planes, scales, batch=False)
+        m = check_mask(mask, 1)
         _, items, state, masks = self.cull_batch(p[None], s[None], m, inside_margin=inside_margin,
                                                  outside_margin=outside_margin)
         return (items, state, masks) if return_mask else (items, state)
@@ -446,9 +477,9 @@ class BVH:
             (query int32, item int32, state uint8, mask uint8), all (D,), sorted by
             (query, item); OUTSIDE pairs left out.
         """
-        p, s = _check_planes(planes, scales, batch=True)
+        p, s = check_planes(planes, scales, batch=True)
         n_q = p.shape[0]
-        qmask = _check_mask(masks, n_q)
+        qmask = check_mask(masks, n_q)
         empty = (np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.uint8),
                  np.zeros(0, np.uint8))
         if self.n_items == 0 or n_q == 0:
@@ -463,13 +494,13 @@ class BVH:
             data = np.take(self._nodes9, fn, axis=1)
             lo, hi, mag = data[0:3], data[3:6], data[6:9]
             if single:
-                ext = _box_extremes(p[0], s[0], lo, hi, mag)
+                ext = box_extremes(p[0], s[0], lo, hi, mag)
             else:
                 ext = _box_extremes_table(np.take(table, fq, axis=1), lo, hi, mag)
-            state, nmask = _decide(*ext, fm, inside_margin, outside_margin)
+            state, nmask = classify_extremes(*ext, fm, inside_margin, outside_margin)
             inside = state == INSIDE
             if inside.any():  # every item of the node is inside: no further tests
-                pos = _ranges(self.first[fn[inside]].astype(np.int64),
+                pos = concat_ranges(self.first[fn[inside]].astype(np.int64),
                               self.count[fn[inside]].astype(np.int64))
                 n_each = self.count[fn[inside]]
                 out_q.append(np.repeat(fq[inside], n_each))
@@ -481,17 +512,17 @@ class BVH:
             leaf = inter & (child < 0)
             if leaf.any():  # test the leaf's items one by one, with the reduced mask
                 n_each = self.count[fn[leaf]].astype(np.int64)
-                pos = _ranges(self.first[fn[leaf]].astype(np.int64), n_each)
+                pos = concat_ranges(self.first[fn[leaf]].astype(np.int64), n_each)
                 items = np.take(self.order, pos)
                 iq = np.repeat(fq[leaf], n_each)
                 im = np.repeat(nmask[leaf], n_each)
                 data = np.take(self._items9, pos, axis=1)
                 lo_i, hi_i, mag_i = data[0:3], data[3:6], data[6:9]
                 if single:
-                    ext = _box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
+                    ext = box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
                 else:
                     ext = _box_extremes_table(np.take(table, iq, axis=1), lo_i, hi_i, mag_i)
-                ist, imask = _decide(*ext, im, inside_margin, outside_margin)
+                ist, imask = classify_extremes(*ext, im, inside_margin, outside_margin)
                 keep = ist != OUTSIDE
                 out_q.append(iq[keep])
                 out_item.append(items[keep])
@@ -507,13 +538,13 @@ class BVH:
         item = np.concatenate(out_item).astype(np.int64)
         st = np.concatenate(out_state)
         mk = np.concatenate(out_mask)
-        order = _sort_keys(q * self.n_items + item, n_q * self.n_items)
+        order = argsort_distinct(q * self.n_items + item, n_q * self.n_items)
         return (q[order].astype(np.int32), item[order].astype(np.int32), st[order],
                 mk[order])
 
 
-def _sort_keys(keys: np.ndarray, key_range: int) -> np.ndarray:
-    """Permutation sorting distinct non-negative int64 `keys` < key_range.
+def argsort_distinct(keys: np.ndarray, key_range: int) -> np.ndarray:
+    """Permutation (int64 (N,)) sorting distinct non-negative int64 `keys` (N,) < key_range.
 
     Scatters into a dense bitmap when the range is small relative to the key count
     (O(range), no comparison sort), else arg-sorts.

@@ -1,9 +1,9 @@
-"""Object culling on the host: frustum planes, bounding-volume tests, draw lists.
+"""Object culling on the host: the draw list of (instance, cluster) pairs for one view.
 
 Step 1 of the pipeline (DESIGN.md): instances and clusters are classified against the six
-frustum planes of the view-projection matrix, and clusters that face away are removed with
-their normal cones. The result is a :class:`DrawList` of (instance, cluster) pairs for the
-renderer.
+frustum planes of the view-projection matrix (:mod:`clraster.frustum`: planes, margins,
+eye), and clusters that face away are removed with their normal cones. The result is a
+:class:`DrawList` of (instance, cluster) pairs for the renderer.
 
 Frustum culling has two levels. Top: a BVH over the instances' world boxes; an instance
 OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE with no
@@ -20,23 +20,9 @@ three equivalent-in-spirit, all-conservative paths chosen by mesh size:
   cluster) box precomputed once in world space (the exact box around the transformed
   cluster box) and tested against the world planes, all instances at once.
 
-Frustum planes (Gribb & Hartmann, "Fast extraction of viewing frustum planes from the
-world-view-projection matrix", 2001): with rows r0..r3 of VP, a point p is inside iff
-−w <= x, y, z <= w for (x, y, z, w) = VP·[p, 1], i.e. iff the six planes
-r3 + r0, r3 − r0, r3 + r1, r3 − r1, r3 + r2, r3 − r2 (left, right, bottom, top, near, far)
-are all >= 0 at p. For an object transform M the same planes in object space are the rows
-times M (plane·(M·p) = (plane·M)·p), so no bounding volume is ever transformed: boxes and
-spheres are tested where they were computed, which stays exact under any affine M
-(non-uniform scale included).
-
-Margins. The renderer evaluates those inequalities in float32. A plane row's value at p is a
-sum of products whose magnitude is at most ``scale · [|p|, 1]`` with ``scale = |r3| + |ri|``
-(elementwise; in object space ``(|r3| + |ri|) @ |M|``, which also covers evaluating
-``VP @ (M @ p)`` in two steps); its float32 rounding error is a small multiple of 2**−24
-times that. INSIDE therefore requires every plane value to be >= ``inside_margin`` (default
-1e-5, ~170× float32's unit roundoff) times that magnitude over the whole volume, and
-OUTSIDE requires some plane value to stay below −``outside_margin`` times it: what the
-culler calls INSIDE passes every clip test in float32 too, and what it removes fails one.
+Planes move to object space as rows times the object transform and boxes are never
+transformed (see :mod:`clraster.frustum`), so every path stays exact under any affine
+transform; INSIDE and OUTSIDE use the float32 margins described there.
 """
 
 from __future__ import annotations
@@ -55,218 +41,24 @@ from .bvh import (
     INSIDE,
     INTERSECTING,
     OUTSIDE,
-    Visibility,
-    _box_extremes,
-    _check_boxes,
-    _check_mask,
-    _check_planes,
-    _decide,
-    _ranges,
-    _sort_keys,
-    _sphere_extremes,
+    argsort_distinct,
+    box_extremes,
     box_magnitudes,
+    classify_extremes,
+    concat_ranges,
     dense_row_states,
 )
 from .clusters import ClusteredMesh, clusters_of, cone_kernel, cone_table
 from .config import CULL_MODES
+from .frustum import check_view_proj, eye_and_flip, normalize_planes, raw_planes
 from .mesh import Mesh
 from .scene import Scene
 
-__all__ = [
-    "COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DEFAULT_MARGIN", "PLANE_NAMES", "DrawList",
-    "Visibility", "build_draw_list",
-    "classify_aabbs", "classify_spheres", "eye_from_view_proj", "frustum_plane_scales",
-    "frustum_planes", "view_proj_flips",
-]
+__all__ = ["COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList", "build_draw_list"]
 
 #: Cone-culling margin in radians: a culled cluster's triangles are all seen at least this
 #: far from edge-on (in world space).
 DEFAULT_CONE_MARGIN = 1e-3
-
-PLANE_NAMES = ("left", "right", "bottom", "top", "near", "far")
-
-
-# -- matrices and planes ----------------------------------------------------------------
-
-def _check_vp(view_proj: npt.ArrayLike) -> np.ndarray:
-    try:
-        vp = np.array(view_proj, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"view_proj must be a 4×4 real matrix; could not convert "
-                         f"{type(view_proj).__name__} ({exc})") from exc
-    if vp.shape != (4, 4):
-        raise ValueError(f"view_proj must have shape (4, 4), got shape {vp.shape}")
-    if not np.all(np.isfinite(vp)):
-        raise ValueError("view_proj contains NaN or Inf")
-    return vp
-
-
-def _raw_planes(vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unnormalized Gribb–Hartmann rows (6, 4) and their magnitude rows (6, 4)."""
-    r = vp
-    a = np.abs(vp)
-    raw = np.stack([r[3] + r[0], r[3] - r[0], r[3] + r[1], r[3] - r[1], r[3] + r[2],
-                    r[3] - r[2]])
-    mag = np.stack([a[3] + a[0], a[3] + a[0], a[3] + a[1], a[3] + a[1], a[3] + a[2],
-                    a[3] + a[2]])
-    return raw, mag
-
-
-def _normalize(raw: np.ndarray, mag: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Divide plane rows (..., 6, 4) and their scales by the normal length. A plane with a
-    zero normal (e.g. an infinitely far plane: constant sign everywhere) is divided by
-    |d| instead, so its value is ±1 (or 0 if it is identically zero)."""
-    n = np.linalg.norm(raw[..., :3], axis=-1)
-    n = np.where(n > 0.0, n, np.abs(raw[..., 3]))
-    n = np.where(n > 0.0, n, 1.0)[..., None]
-    return raw / n, mag / n
-
-
-def frustum_planes(view_proj: npt.ArrayLike) -> np.ndarray:
-    """The six frustum planes of an OpenGL-style view-projection matrix.
-
-    Args:
-        view_proj: (4, 4) world → clip for column vectors; a point p is inside iff
-            −w <= x, y, z <= w for (x, y, z, w) = view_proj @ [p, 1].
-
-    Returns:
-        float64 (6, 4): rows (a, b, c, d) for left, right, bottom, top, near, far, each
-        scaled so that (a, b, c) is a unit vector and ``a·x + b·y + c·z + d`` is the signed
-        distance of (x, y, z) to the plane, >= 0 inside. A plane whose normal is zero (an
-        infinitely distant far plane) is scaled to ``(0, 0, 0, ±1)``.
-    """
-    planes, _ = _normalize(*_raw_planes(_check_vp(view_proj)))
-    return planes
-
-
-def frustum_plane_scales(view_proj: npt.ArrayLike,
-                         transform: npt.ArrayLike | None = None) -> np.ndarray:
-    """Margin scales (6, 4) of the planes of ``view_proj @ transform``.
-
-    Row k bounds the magnitude of the float32 terms of plane k: its value at p is off by a
-    small multiple of 2**−24 · ``scales[k] · [|x|, |y|, |z|, 1]`` at most (see the module
-    docstring). Scaled like `frustum_planes` of ``view_proj @ transform``.
-    """
-    vp = _check_vp(view_proj)
-    raw, mag = _raw_planes(vp)
-    if transform is not None:
-        m = _check_vp(transform)
-        raw, mag = raw @ m, mag @ np.abs(m)
-    return _normalize(raw, mag)[1]
-
-
-def _cofactor_eye(vp: np.ndarray) -> np.ndarray:
-    """c with c·q = det([x; y; w; q]) for the x, y, w rows of vp: their null vector."""
-    p3 = vp[[0, 1, 3]]
-    c = np.empty(4)
-    for j in range(4):
-        cols = [k for k in range(4) if k != j]
-        c[j] = (-1.0) ** (3 + j) * np.linalg.det(p3[:, cols])
-    return c
-
-
-def _eye_and_flip(vp: np.ndarray) -> tuple[np.ndarray, bool]:
-    c = _cofactor_eye(vp)
-    scale = float(np.prod(np.linalg.norm(vp[[0, 1, 3]], axis=1)))
-    if not np.linalg.norm(c) > 1e-12 * scale:
-        raise ValueError("view_proj has linearly dependent x, y and w rows: it has no eye "
-                         "point or viewing direction (a degenerate projection)")
-    if abs(c[3]) > 1e-12 * np.linalg.norm(c):
-        return np.append(c[:3] / c[3], 1.0), bool(c[3] > 0.0)
-    d = c[:3] / np.linalg.norm(c[:3])
-    return np.append(d, 0.0), bool(np.dot(vp[2, :3], d) < 0.0)
-
-
-def eye_from_view_proj(view_proj: npt.ArrayLike) -> np.ndarray:
-    """The homogeneous eye of a view-projection matrix, float64 (4,).
-
-    The eye is the null vector of the x, y and w rows of VP (every point on a line through
-    it projects to the same pixel). Perspective: ``(ex, ey, ez, 1)``, the eye point.
-    Orthographic (w row constant): ``(dx, dy, dz, 0)`` with d the unit viewing direction,
-    signed so that a face with normal n is clockwise in NDC (culled by cull="back") iff
-    ``dot(n, d) > 0``.
-
-    For a perspective eye e, a face with normal n through point p is clockwise in NDC iff
-    ``dot(n, p − e) > 0`` — unless the projection mirrors (`view_proj_flips`), which swaps
-    the two. (Derivation: det([x; y; w] of the three clip vertices) = −c_w·dot(n, e − p)
-    where c = the cofactor vector of the x, y, w rows and e = c[:3] / c_w; its sign is the
-    NDC orientation when all w > 0, and c_w < 0 for an unmirrored camera.)
-
-    Raises:
-        ValueError: not a finite (4, 4) matrix, or its x, y, w rows are linearly dependent.
-    """
-    return _eye_and_flip(_check_vp(view_proj))[0]
-
-
-def view_proj_flips(view_proj: npt.ArrayLike) -> bool:
-    """Whether the projection mirrors the image: faces that point towards the eye come out
-    clockwise in NDC. Perspective: the cofactor c_w = det of the x, y, w rows' 3×3 part is
-    > 0 (it is < 0 for look_at + perspective). Orthographic: the viewing direction points
-    towards decreasing depth. Cone culling is disabled for such projections.
-
-    Raises:
-        ValueError: as `eye_from_view_proj`.
-    """
-    return _eye_and_flip(_check_vp(view_proj))[1]
-
-
-# -- single-level classification --------------------------------------------------------
-
-def classify_spheres(planes: npt.ArrayLike, centers: npt.ArrayLike, radii: npt.ArrayLike,
-                     mask: npt.ArrayLike | None = None, *, scales: npt.ArrayLike | None = None,
-                     inside_margin: float = DEFAULT_MARGIN,
-                     outside_margin: float = DEFAULT_MARGIN) -> tuple[np.ndarray, np.ndarray]:
-    """Classify K spheres against 6 planes.
-
-    Args:
-        planes: (6, 4) plane rows, >= 0 inside (e.g. `frustum_planes`).
-        centers: (K, 3); radii: (K,) >= 0.
-        mask: uint8 scalar or (K,): bit k set = test plane k (default all 63); a clear bit
-            means the sphere is already known to be inside plane k.
-        scales: (6, 4) margin scales (default ``abs(planes)``; `frustum_plane_scales` gives
-            the renderer's float32 scales).
-        inside_margin, outside_margin: relative margins (see the module docstring). With
-            both 0 the test is exact: INSIDE iff the closed sphere is inside every tested
-            plane, OUTSIDE iff it is strictly outside one.
-
-    Returns:
-        (state uint8 (K,) of `Visibility` values, mask uint8 (K,)): the input mask with the
-        bits of the planes the sphere is inside (by the margin) cleared. A sphere is OUTSIDE
-        if it is outside some tested plane, INSIDE if no bit remains, else INTERSECTING.
-        NaN inputs are INTERSECTING.
-    """
-    p, s = _check_planes(planes, scales, batch=False)
-    c = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
-    r = np.asarray(radii, dtype=np.float64).reshape(-1)
-    if r.shape[0] != c.shape[0]:
-        raise ValueError(f"radii must have shape ({c.shape[0]},) to match centers, got "
-                         f"{np.shape(radii)}")
-    if np.any(r < 0):
-        raise ValueError("radii must be >= 0")
-    m = _check_mask(mask, c.shape[0])
-    with np.errstate(invalid="ignore", over="ignore"):
-        return _decide(*_sphere_extremes(p, s, c, r), m, inside_margin, outside_margin)
-
-
-def classify_aabbs(planes: npt.ArrayLike, mins: npt.ArrayLike, maxs: npt.ArrayLike,
-                   mask: npt.ArrayLike | None = None, *, scales: npt.ArrayLike | None = None,
-                   mags: npt.ArrayLike | None = None, inside_margin: float = DEFAULT_MARGIN,
-                   outside_margin: float = DEFAULT_MARGIN) -> tuple[np.ndarray, np.ndarray]:
-    """Classify K axis-aligned boxes against 6 planes (n-vertex / p-vertex test).
-
-    Same arguments and results as `classify_spheres`, with boxes ``[mins[k], maxs[k]]``
-    (K, 3) and optional margin magnitudes `mags` (K, 3) (default ``max(|mins|, |maxs|)``).
-    Infinite bounds are clipped to ±1e300 (so an infinite box is never culled).
-    """
-    p, s = _check_planes(planes, scales, batch=False)
-    lo, hi = _check_boxes(mins, maxs)
-    lo = np.clip(lo, -1e300, 1e300)
-    hi = np.clip(hi, -1e300, 1e300)
-    mag = box_magnitudes(lo, hi) if mags is None else np.asarray(mags, np.float64)
-    m = _check_mask(mask, lo.shape[0])
-    with np.errstate(invalid="ignore", over="ignore"):
-        return _decide(*_box_extremes(p, s, lo.T, hi.T, mag.T), m, inside_margin,
-                       outside_margin)
 
 
 # -- draw lists -------------------------------------------------------------------------
@@ -394,7 +186,7 @@ class _SceneCull:
         self.flat_start = np.cumsum(fc) - fc
         self.flat_count = fc
         pi = np.repeat(self.flat_ids, fc)
-        pc = _ranges(self.flat_start, fc) - np.repeat(self.flat_start, fc)
+        pc = concat_ranges(self.flat_start, fc) - np.repeat(self.flat_start, fc)
         self.flat_inst = pi.astype(np.int32)
         self.flat_cl = pc.astype(np.int32)
         self.flat_g = (self.mesh_base[self.inst_umesh[pi]] + pc).astype(np.int32)
@@ -476,16 +268,16 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
     st = inst_state[ids]
     keep_inst = st != OUTSIDE
     if planes is None:  # frustum off: every pair, none marked inside
-        pos = _ranges(prep.flat_start[keep_inst], prep.flat_count[keep_inst])
+        pos = concat_ranges(prep.flat_start[keep_inst], prep.flat_count[keep_inst])
         ins = np.zeros(pos.size, bool)
     else:
         test = st == INTERSECTING
-        pos_in = _ranges(prep.flat_start[st == INSIDE], prep.flat_count[st == INSIDE])
-        pos_t = _ranges(prep.flat_start[test], prep.flat_count[test])
+        pos_in = concat_ranges(prep.flat_start[st == INSIDE], prep.flat_count[st == INSIDE])
+        pos_t = concat_ranges(prep.flat_start[test], prep.flat_count[test])
         if pos_t.size:
             box = np.take(prep.flat_boxes, pos_t, axis=1)
             mask = np.repeat(inst_mask[ids[test]], prep.flat_count[test])
-            cst, _ = _decide(*_box_extremes(planes, scales, box[0:3], box[3:6], box[6:9]),
+            cst, _ = classify_extremes(*box_extremes(planes, scales, box[0:3], box[3:6], box[6:9]),
                              mask, inside_margin, outside_margin)
             alive = cst != OUTSIDE
             pos_t, cst = pos_t[alive], cst[alive]
@@ -494,20 +286,77 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
         pos = np.concatenate([pos_in, pos_t])
         ins = np.concatenate([np.ones(pos_in.size, bool), cst == INSIDE])
         if pos_in.size and pos_t.size:  # merge the two sorted runs
-            order = _sort_keys(pos, prep.flat_inst.size)
+            order = argsort_distinct(pos, prep.flat_inst.size)
             pos, ins = pos[order], ins[order]
     g = prep.flat_g[pos]
     return (prep.flat_inst[pos].astype(np.int64), prep.flat_cl[pos].astype(np.int64), ins,
             prep.g_tri[g], g)
 
 
+@dataclass(frozen=True)
+class _ConeView:
+    """The normal-cone test's inputs for one view, per instance (I = scene.n_instances)."""
+
+    #: float64 (I, 3): the eye in each instance's object space, a point (perspective: M is
+    #: affine, so w stays 1) or a unit direction (orthographic).
+    eye_obj: np.ndarray
+    #: float64 (I,): +1 to cull back faces, −1 front faces (mirroring transforms swap them).
+    side: np.ndarray
+    #: float64 (I,): sine of the object-space angle margin, <= 1 (1: never culled).
+    sin_m: np.ndarray
+    #: Orthographic projection (eye_obj holds directions).
+    ortho: bool
+
+
+def _cone_view(prep: _SceneCull, vp: np.ndarray, cones: bool, cull: str,
+               cone_margin: float) -> _ConeView | None:
+    """Cone set-up: eye in each instance's object space, side and margin per instance.
+    None when no cluster can be cone-culled in this view (cones off, cull="none", a
+    degenerate or mirroring projection, or margins too wide for every instance)."""
+    if not cones or cull == "none":
+        return None
+    try:
+        eye, flips = eye_and_flip(vp)
+    except ValueError:
+        return None
+    if flips:
+        return None
+    # Object-space eye (I, 3): a point (perspective: M is affine, so w stays 1) or a unit
+    # direction (orthographic). Side: mirroring transforms swap front and back.
+    ortho = bool(eye[3] == 0.0)
+    eye_obj = (prep.minv @ eye)[:, :3]
+    if ortho:
+        eye_obj /= np.linalg.norm(eye_obj, axis=1)[:, None]
+    side = np.where(prep.det_neg ^ (cull == "front"), -1.0, 1.0)
+    # An angle margin m in world space needs sin(m)·cond(M) in object space: for unit
+    # n, u, sin of the world angle = dot(n, u) / (|M^-T n|·|M u|) >= sin_obj / cond.
+    sin_m = np.minimum(1.0, math.sin(cone_margin) * prep.cond)
+    if not (sin_m < 1.0).any():
+        return None
+    return _ConeView(eye_obj, side, sin_m, ortho)
+
+
+def _flat_cone_cull(prep: _SceneCull, inst: np.ndarray, g: np.ndarray,
+                    view: _ConeView) -> np.ndarray:
+    """Cone test of flat-path pairs (instance `inst`, global cluster `g`, int64 (P,));
+    bool (P,), True = culled. Clusters whose cone admits every direction are not tested."""
+    back = np.zeros(g.size, bool)
+    sel = np.flatnonzero(prep.g_can_cone[g])
+    if sel.size:
+        ip = inst[sel]
+        table = np.take(prep.g_cones, g[sel], axis=1)
+        back[sel] = cone_kernel(table, np.take(view.eye_obj, ip, axis=0).T, view.side[ip],
+                                view.sin_m[ip], view.ortho)
+    return back
+
+
 def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndarray,
-               eye_obj: np.ndarray, side: np.ndarray, sin_m: np.ndarray,
-               ortho: bool) -> np.ndarray:
+               view: _ConeView) -> np.ndarray:
     """Cone test of the pairs (inst, cl) of one mesh's instances; bool (P,).
 
     Evaluated densely over (visible instance, every cluster) when the pairs cover at least
     a third of that grid (contiguous arithmetic, no gathers), else per pair."""
+    eye_obj, side, sin_m, ortho = view.eye_obj, view.side, view.sin_m, view.ortho
     n_c = mc.cm.n_clusters
     if 3 * cl.size >= visible.size * n_c and visible.size * n_c <= (1 << 22):
         e = eye_obj[visible].T[:, :, None]  # (3, Q, 1)
@@ -517,6 +366,173 @@ def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndar
         return dense[row, cl]
     table = np.take(mc.cones, cl, axis=1)
     return cone_kernel(table, eye_obj[inst].T, side[inst], sin_m[inst], ortho)
+
+
+def _group_frustum(prep: _SceneCull, mc: _MeshCull, members: np.ndarray,
+                   inst_state: np.ndarray, inst_mask: np.ndarray, raw: np.ndarray,
+                   rmag: np.ndarray, inside_margin: float, outside_margin: float):
+    """Frustum test of the clusters of one mesh's group instances (`members`, int64, some
+    not OUTSIDE), against each instance's world planes (`raw`, `rmag`: `raw_planes`)
+    moved to object space: (inst int64, cluster int64, inside bool), (P,) each, the pairs
+    not culled, grouped by how they were decided (not in draw order)."""
+    st = inst_state[members]
+    c_count = mc.cm.n_clusters
+    inside_i = members[st == INSIDE]
+    inter_i = members[st == INTERSECTING]
+    pi_list, pc_list, pin_list = [], [], []
+    if inside_i.size:  # every cluster of an INSIDE instance is INSIDE: no tests
+        pi_list.append(np.repeat(inside_i, c_count))
+        pc_list.append(np.tile(np.arange(c_count, dtype=np.int64), inside_i.size))
+        pin_list.append(np.ones(inside_i.size * c_count, bool))
+    if inter_i.size:
+        qmask = inst_mask[inter_i]
+        tested = inter_i[qmask != 0]
+        untested = inter_i[qmask == 0]  # frustum off (or nothing left to test)
+        if untested.size:
+            pi_list.append(np.repeat(untested, c_count))
+            pc_list.append(np.tile(np.arange(c_count, dtype=np.int64), untested.size))
+            pin_list.append(np.zeros(untested.size * c_count, bool))
+        if tested.size:
+            m = prep.m[tested]
+            oraw = np.einsum("kj,qjl->qkl", raw, m)
+            omag = np.einsum("kj,qjl->qkl", rmag, prep.abs_m[tested])
+            oplanes, oscales = normalize_planes(oraw, omag)
+            q, item, cst = _cluster_frustum(mc.bvh, oplanes, oscales, inst_mask[tested],
+                                            inside_margin, outside_margin)
+            pi_list.append(tested[q])
+            pc_list.append(mc.bvh_ids[item].astype(np.int64))
+            pin_list.append(cst == INSIDE)
+            if mc.unbounded.size:  # clusters with NaN/Inf vertices: never culled
+                pi_list.append(np.repeat(tested, mc.unbounded.size))
+                pc_list.append(np.tile(mc.unbounded.astype(np.int64), tested.size))
+                pin_list.append(np.zeros(tested.size * mc.unbounded.size, bool))
+    return np.concatenate(pi_list), np.concatenate(pc_list), np.concatenate(pin_list)
+
+
+def _check_draw_args(scene: Scene, view_proj: npt.ArrayLike, cull: str, inside_margin: float,
+                     outside_margin: float, cone_margin: float) -> np.ndarray:
+    """Validate `build_draw_list`'s arguments; the checked float64 (4, 4) view_proj."""
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a clraster.scene.Scene, got {type(scene).__name__}; "
+                         f"wrap a mesh with Scene.from_mesh(mesh)")
+    vp = check_view_proj(view_proj)
+    if cull not in CULL_MODES:
+        raise ValueError(f"cull must be one of {sorted(CULL_MODES)}, got {cull!r}")
+    for name, v in (("inside_margin", inside_margin), ("outside_margin", outside_margin),
+                    ("cone_margin", cone_margin)):
+        if not (math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+    if cone_margin >= math.pi / 2:
+        raise ValueError(f"cone_margin must be < pi/2 radians, got {cone_margin!r}")
+    return vp
+
+
+def _classify_instances(prep: _SceneCull, planes: np.ndarray, scales: np.ndarray,
+                        frustum: bool, inside_margin: float,
+                        outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Top level: (state, plane mask), uint8 (I,) each, per instance.
+
+    Empty instances are OUTSIDE; unbounded ones (NaN/Inf vertices) INTERSECTING with every
+    plane to test. With frustum=False every non-empty instance is INTERSECTING with mask 0
+    (no plane tests below)."""
+    inst_state = np.full(prep.n, OUTSIDE, np.uint8)
+    inst_mask = np.zeros(prep.n, np.uint8)
+    if frustum:
+        items, st, mk = prep.inst_bvh.cull(planes, scales, inside_margin=inside_margin,
+                                           outside_margin=outside_margin, return_mask=True)
+        ids = prep.inst_ids[items]
+        inst_state[ids] = st
+        inst_mask[ids] = mk
+        inst_state[prep.unbounded_ids] = INTERSECTING
+        inst_mask[prep.unbounded_ids] = ALL_PLANES
+    else:
+        inst_state[prep.nonempty] = INTERSECTING  # mask 0: no plane tests below
+    return inst_state, inst_mask
+
+
+class _Pairs:
+    """The pairs that survive, collected path by path (flat path first, then the groups),
+    with the running counts and times the `DrawList` reports."""
+
+    def __init__(self, keep_cone_culled: bool) -> None:
+        self.keep_cone_culled = keep_cone_culled
+        self.inst: list[np.ndarray] = []
+        self.cl: list[np.ndarray] = []
+        self.ins: list[np.ndarray] = []
+        self.clusters_after_frustum = 0
+        self.tri_frustum = 0  # triangles of the clusters that survive the frustum test
+        self.n_cone_cl = 0
+        self.n_cone_tri = 0
+        self.cone_pairs: list[tuple[np.ndarray, np.ndarray]] = []  # with keep_cone_culled
+        self.t_clusters = 0.0
+        self.t_cones = 0.0
+        # The flat path emits pairs in (instance, cluster) order; groups do not.
+        self.in_order = True
+
+    def frustum_done(self, cl: np.ndarray, tri: np.ndarray, t0: float) -> float:
+        """Count one path's frustum survivors (clusters `cl`, their triangle counts `tri`),
+        whose test started at perf_counter `t0`; returns the time now."""
+        self.clusters_after_frustum += cl.size
+        self.tri_frustum += int(tri.sum())
+        t1 = time.perf_counter()
+        self.t_clusters += t1 - t0
+        return t1
+
+    def drop_cone_culled(self, back: np.ndarray, inst: np.ndarray, cl: np.ndarray,
+                         ins: np.ndarray, tri: np.ndarray):
+        """(inst, cl, ins) without the pairs where `back` (bool (P,)) is set, counted."""
+        if back.any():
+            keep = ~back
+            self.n_cone_cl += int(back.sum())
+            self.n_cone_tri += int(tri[back].sum())
+            if self.keep_cone_culled:
+                self.cone_pairs.append((inst[back], cl[back]))
+            inst, cl, ins = inst[keep], cl[keep], ins[keep]
+        return inst, cl, ins
+
+    def keep(self, inst: np.ndarray, cl: np.ndarray, ins: np.ndarray) -> None:
+        self.inst.append(inst)
+        self.cl.append(cl)
+        self.ins.append(ins)
+
+    def in_draw_order(self, prep: _SceneCull):
+        """All kept pairs sorted by (instance, cluster): (inst int64, cl int64, ins bool)."""
+        if len(self.inst) == 1 and self.in_order:  # only flat-path pairs: already in order
+            return self.inst[0], self.cl[0], self.ins[0]
+        if not self.inst:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, bool)
+        inst = np.concatenate(self.inst)
+        cl = np.concatenate(self.cl)
+        ins = np.concatenate(self.ins)
+        order = argsort_distinct(prep.cluster_base[inst] + cl, prep.clusters_total)
+        return inst[order], cl[order], ins[order]
+
+    def counts(self, prep: _SceneCull, inst_state: np.ndarray, n_drawn: int) -> dict[str, int]:
+        """`DrawList.counts`."""
+        n_empty = int((~prep.nonempty).sum())
+        return {
+            "instances_total": prep.n,
+            "instances_frustum_culled": int(((inst_state == OUTSIDE) & prep.nonempty).sum()),
+            "instances_empty": n_empty,
+            "clusters_total": prep.clusters_total,
+            "clusters_frustum_culled": prep.clusters_total - self.clusters_after_frustum,
+            "clusters_cone_culled": self.n_cone_cl,
+            "clusters_drawn": n_drawn,
+            "triangles_total": prep.tri_total,
+            "triangles_frustum_culled": prep.tri_total - self.tri_frustum,
+            "triangles_cone_culled": self.n_cone_tri,
+            "triangles_drawn": self.tri_frustum - self.n_cone_tri,
+        }
+
+    def cone_culled(self) -> np.ndarray | None:
+        """`DrawList.cone_culled`: int32 (P, 2), or None without keep_cone_culled."""
+        if not self.keep_cone_culled:
+            return None
+        if not self.cone_pairs:
+            return np.zeros((0, 2), np.int32)
+        return np.stack([np.concatenate([a for a, _ in self.cone_pairs]),
+                         np.concatenate([b for _, b in self.cone_pairs])],
+                        axis=1).astype(np.int32)
 
 
 def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = True,
@@ -530,7 +546,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     Args:
         scene: the scene; its clusters (`clusters_of`) and BVHs are built on first use and
             cached (per mesh, and per scene version).
-        view_proj: (4, 4) world → clip matrix (OpenGL conventions, see `frustum_planes`).
+        view_proj: (4, 4) world → clip matrix (OpenGL conventions, see
+            `clraster.frustum.frustum_planes`).
         frustum: cull instances and clusters outside the view frustum (top-level BVH over
             instance world boxes, then each intersecting instance's clusters against the
             planes it still crosses; see the module docstring).
@@ -543,7 +560,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             determinant) are tested for the opposite side, as their winding flips.
         cull: the renderer's face culling mode: "back", "front" or "none".
         max_triangles, max_vertices: cluster limits (see `clusterize`).
-        inside_margin, outside_margin: relative frustum margins (module docstring).
+        inside_margin, outside_margin: relative frustum margins (the module docstring of
+            :mod:`clraster.frustum`).
         cone_margin: radians, >= 0.
         keep_cone_culled: also return the cone-culled pairs (``DrawList.cone_culled``).
 
@@ -554,199 +572,54 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         ValueError: bad matrix, cull mode or margins.
     """
     t_start = time.perf_counter()
-    if not isinstance(scene, Scene):
-        raise ValueError(f"scene must be a clraster.scene.Scene, got {type(scene).__name__}; "
-                         f"wrap a mesh with Scene.from_mesh(mesh)")
-    vp = _check_vp(view_proj)
-    if cull not in CULL_MODES:
-        raise ValueError(f"cull must be one of {sorted(CULL_MODES)}, got {cull!r}")
-    for name, v in (("inside_margin", inside_margin), ("outside_margin", outside_margin),
-                    ("cone_margin", cone_margin)):
-        if not (math.isfinite(v) and v >= 0.0):
-            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
-    if cone_margin >= math.pi / 2:
-        raise ValueError(f"cone_margin must be < pi/2 radians, got {cone_margin!r}")
-
+    vp = _check_draw_args(scene, view_proj, cull, inside_margin, outside_margin, cone_margin)
     prep = _prepare(scene, max_triangles, max_vertices)
     t_prep = time.perf_counter()
     timings = {"prepare": (t_prep - t_start) * 1e3}
 
     # Top level: instances.
-    inst_state = np.full(prep.n, OUTSIDE, np.uint8)
-    inst_mask = np.zeros(prep.n, np.uint8)
-    raw, rmag = _raw_planes(vp)
-    planes, scales = _normalize(raw, rmag)
-    if frustum:
-        items, st, mk = prep.inst_bvh.cull(planes, scales, inside_margin=inside_margin,
-                                           outside_margin=outside_margin, return_mask=True)
-        ids = prep.inst_ids[items]
-        inst_state[ids] = st
-        inst_mask[ids] = mk
-        inst_state[prep.unbounded_ids] = INTERSECTING
-        inst_mask[prep.unbounded_ids] = ALL_PLANES
-    else:
-        inst_state[prep.nonempty] = INTERSECTING  # mask 0: no plane tests below
+    raw, rmag = raw_planes(vp)
+    planes, scales = normalize_planes(raw, rmag)
+    inst_state, inst_mask = _classify_instances(prep, planes, scales, frustum, inside_margin,
+                                                outside_margin)
     t_inst = time.perf_counter()
     timings["instances"] = (t_inst - t_prep) * 1e3
 
-    # Cone set-up: eye in each instance's object space, side and margin per instance.
-    use_cones = cones and cull != "none"
-    eye_obj = side = sin_m = np.zeros(0)
-    ortho = False
-    if use_cones:
-        try:
-            eye, flips = _eye_and_flip(vp)
-        except ValueError:
-            use_cones = False
-        else:
-            use_cones = not flips
-    if use_cones:
-        # Object-space eye (I, 3): a point (perspective: M is affine, so w stays 1) or a unit
-        # direction (orthographic). Side: mirroring transforms swap front and back.
-        ortho = eye[3] == 0.0
-        eye_obj = (prep.minv @ eye)[:, :3]
-        if ortho:
-            eye_obj /= np.linalg.norm(eye_obj, axis=1)[:, None]
-        side = np.where(prep.det_neg ^ (cull == "front"), -1.0, 1.0)
-        # An angle margin m in world space needs sin(m)·cond(M) in object space: for unit
-        # n, u, sin of the world angle = dot(n, u) / (|M^-T n|·|M u|) >= sin_obj / cond.
-        sin_m = np.minimum(1.0, math.sin(cone_margin) * prep.cond)
-        use_cones = bool((sin_m < 1.0).any())
-
-    out_inst, out_cl, out_in = [], [], []
-    tri_frustum = 0
-    clusters_after_frustum = 0
-    n_cone_cl = 0
-    n_cone_tri = 0
-    cone_pairs: list[tuple[np.ndarray, np.ndarray]] = []  # with keep_cone_culled
-    t_clusters = 0.0
-    t_cones = 0.0
-    t0 = time.perf_counter()
-    if prep.flat_ids.size:
+    cone_view = _cone_view(prep, vp, cones, cull, cone_margin)
+    pairs = _Pairs(keep_cone_culled)
+    if prep.flat_ids.size:  # small meshes: all their (instance, cluster) pairs at once
+        t0 = time.perf_counter()
         inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, planes if frustum
                                               else None, scales if frustum else None,
                                               inside_margin, outside_margin)
-        clusters_after_frustum += cl.size
-        tri_frustum += int(tri.sum())
-        t1 = time.perf_counter()
-        t_clusters += t1 - t0
-        if use_cones and cl.size:
-            sel = np.flatnonzero(prep.g_can_cone[g])
-            if sel.size:
-                ip = inst[sel]
-                table = np.take(prep.g_cones, g[sel], axis=1)
-                back_sel = cone_kernel(table, np.take(eye_obj, ip, axis=0).T, side[ip],
-                                       sin_m[ip], ortho)
-                if back_sel.any():
-                    back = np.zeros(cl.size, bool)
-                    back[sel[back_sel]] = True
-                    n_cone_cl += int(back_sel.sum())
-                    n_cone_tri += int(tri[back].sum())
-                    if keep_cone_culled:
-                        cone_pairs.append((inst[back], cl[back]))
-                    keep = ~back
-                    inst, cl, ins = inst[keep], cl[keep], ins[keep]
-            t_cones += time.perf_counter() - t1
-        out_inst.append(inst)
-        out_cl.append(cl)
-        out_in.append(ins)
-    in_order = True  # the flat path emits pairs in (instance, cluster) order; groups do not
+        t1 = pairs.frustum_done(cl, tri, t0)
+        if cone_view is not None and cl.size:
+            back = _flat_cone_cull(prep, inst, g, cone_view)
+            inst, cl, ins = pairs.drop_cone_culled(back, inst, cl, ins, tri)
+            pairs.t_cones += time.perf_counter() - t1
+        pairs.keep(inst, cl, ins)
 
-    for mc, members in prep.groups:
+    for mc, members in prep.groups:  # other meshes: one group of instances per mesh
         t0 = time.perf_counter()
-        st = inst_state[members]
-        vis = st != OUTSIDE
+        vis = inst_state[members] != OUTSIDE
         if not vis.any():
             continue
-        c_count = mc.cm.n_clusters
-        inside_i = members[st == INSIDE]
-        inter_i = members[st == INTERSECTING]
-        pi_list, pc_list, pin_list = [], [], []
-        if inside_i.size:  # every cluster of an INSIDE instance is INSIDE: no tests
-            pi_list.append(np.repeat(inside_i, c_count))
-            pc_list.append(np.tile(np.arange(c_count, dtype=np.int64), inside_i.size))
-            pin_list.append(np.ones(inside_i.size * c_count, bool))
-        if inter_i.size:
-            qmask = inst_mask[inter_i]
-            tested = inter_i[qmask != 0]
-            untested = inter_i[qmask == 0]  # frustum off (or nothing left to test)
-            if untested.size:
-                pi_list.append(np.repeat(untested, c_count))
-                pc_list.append(np.tile(np.arange(c_count, dtype=np.int64), untested.size))
-                pin_list.append(np.zeros(untested.size * c_count, bool))
-            if tested.size:
-                m = prep.m[tested]
-                oraw = np.einsum("kj,qjl->qkl", raw, m)
-                omag = np.einsum("kj,qjl->qkl", rmag, prep.abs_m[tested])
-                oplanes, oscales = _normalize(oraw, omag)
-                q, item, cst = _cluster_frustum(mc.bvh, oplanes, oscales, inst_mask[tested],
-                                                inside_margin, outside_margin)
-                pi_list.append(tested[q])
-                pc_list.append(mc.bvh_ids[item].astype(np.int64))
-                pin_list.append(cst == INSIDE)
-                if mc.unbounded.size:  # clusters with NaN/Inf vertices: never culled
-                    pi_list.append(np.repeat(tested, mc.unbounded.size))
-                    pc_list.append(np.tile(mc.unbounded.astype(np.int64), tested.size))
-                    pin_list.append(np.zeros(tested.size * mc.unbounded.size, bool))
-        in_order = False
-        inst = np.concatenate(pi_list)
-        cl = np.concatenate(pc_list)
-        ins = np.concatenate(pin_list)
+        inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, raw, rmag,
+                                       inside_margin, outside_margin)
+        pairs.in_order = False
         tri = mc.tri_count[cl]
-        clusters_after_frustum += cl.size
-        tri_frustum += int(tri.sum())
-        t1 = time.perf_counter()
-        t_clusters += t1 - t0
-        if use_cones and mc.can_cone and cl.size:
-            back = _cone_cull(mc, inst, cl, members[vis], eye_obj, side, sin_m, ortho)
-            if back.any():
-                keep = ~back
-                n_cone_cl += int(back.sum())
-                n_cone_tri += int(tri[back].sum())
-                if keep_cone_culled:
-                    cone_pairs.append((inst[back], cl[back]))
-                inst, cl, ins = inst[keep], cl[keep], ins[keep]
-            t_cones += time.perf_counter() - t1
-        out_inst.append(inst)
-        out_cl.append(cl)
-        out_in.append(ins)
+        t1 = pairs.frustum_done(cl, tri, t0)
+        if cone_view is not None and mc.can_cone and cl.size:
+            back = _cone_cull(mc, inst, cl, members[vis], cone_view)
+            inst, cl, ins = pairs.drop_cone_culled(back, inst, cl, ins, tri)
+            pairs.t_cones += time.perf_counter() - t1
+        pairs.keep(inst, cl, ins)
 
     t_order = time.perf_counter()
-    if len(out_inst) == 1 and in_order:  # only flat-path pairs: already in draw order
-        inst, cl, ins = out_inst[0], out_cl[0], out_in[0]
-    elif out_inst:
-        inst = np.concatenate(out_inst)
-        cl = np.concatenate(out_cl)
-        ins = np.concatenate(out_in)
-        order = _sort_keys(prep.cluster_base[inst] + cl, prep.clusters_total)
-        inst, cl, ins = inst[order], cl[order], ins[order]
-    else:
-        inst = cl = np.zeros(0, np.int64)
-        ins = np.zeros(0, bool)
+    inst, cl, ins = pairs.in_draw_order(prep)
     t_end = time.perf_counter()
-    timings.update(clusters=t_clusters * 1e3, cones=t_cones * 1e3,
+    timings.update(clusters=pairs.t_clusters * 1e3, cones=pairs.t_cones * 1e3,
                    order=(t_end - t_order) * 1e3, total=(t_end - t_start) * 1e3)
-
-    n_empty = int((~prep.nonempty).sum())
-    counts = {
-        "instances_total": prep.n,
-        "instances_frustum_culled": int(((inst_state == OUTSIDE) & prep.nonempty).sum()),
-        "instances_empty": n_empty,
-        "clusters_total": prep.clusters_total,
-        "clusters_frustum_culled": prep.clusters_total - clusters_after_frustum,
-        "clusters_cone_culled": n_cone_cl,
-        "clusters_drawn": int(cl.size),
-        "triangles_total": prep.tri_total,
-        "triangles_frustum_culled": prep.tri_total - tri_frustum,
-        "triangles_cone_culled": n_cone_tri,
-        "triangles_drawn": tri_frustum - n_cone_tri,
-    }
-    cone_culled = None
-    if keep_cone_culled:
-        cone_culled = np.zeros((0, 2), np.int32) if not cone_pairs else np.stack(
-            [np.concatenate([a for a, _ in cone_pairs]),
-             np.concatenate([b for _, b in cone_pairs])], axis=1).astype(np.int32)
     return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
-                    inside=ins.astype(bool), counts=counts, timings_ms=timings,
-                    cone_culled=cone_culled)
-
+                    inside=ins.astype(bool), counts=pairs.counts(prep, inst_state, int(cl.size)),
+                    timings_ms=timings, cone_culled=pairs.cone_culled())

@@ -16,7 +16,8 @@ history; the later ones reuse it), and writes into ``--out``:
   the first-person view frustum drawn as lines.
 
 It prints the culling funnel (`FrameStats`), the frame times, the fate counts and the
-files written. Text in the images is drawn with a small built-in bitmap font (NumPy only).
+files written. The lettering, panels, colour ramps and colour bars in the images come from
+`clraster.annotate` (text in Pillow's default font).
 Exit codes: 0 success, 1 the output could not be written or no OpenCL device, 2 bad
 arguments.
 """
@@ -33,6 +34,18 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .annotate import (
+    DEPTH_RAMP,
+    HEAT,
+    TEXT_HEIGHT,
+    colorbar,
+    draw_text,
+    nice_step,
+    panel,
+    ramp,
+    text_width,
+    ui_scale,
+)
 from .camera import Camera
 from .cli import _size
 from .device import NoDeviceError
@@ -63,142 +76,14 @@ INSPECTOR_BACKGROUND = (28, 30, 36)
 #: the first-person storey's floor (the ceiling pipes, lamps, slabs and storeys above), so
 #: the corridor and the rooms around it can be seen from above.
 INSPECTOR_CUT = 2.6
-
-# -- a tiny bitmap font (5×7, lower case; upper case is drawn as lower case) -------------
-
-_GLYPHS = {
-    "0": ".###.|#...#|#..##|#.#.#|##..#|#...#|.###.",
-    "1": "..#..|.##..|..#..|..#..|..#..|..#..|.###.",
-    "2": ".###.|#...#|....#|...#.|..#..|.#...|#####",
-    "3": "#####|...#.|..#..|...#.|....#|#...#|.###.",
-    "4": "...#.|..##.|.#.#.|#..#.|#####|...#.|...#.",
-    "5": "#####|#....|####.|....#|....#|#...#|.###.",
-    "6": "..##.|.#...|#....|####.|#...#|#...#|.###.",
-    "7": "#####|....#|...#.|..#..|.#...|.#...|.#...",
-    "8": ".###.|#...#|#...#|.###.|#...#|#...#|.###.",
-    "9": ".###.|#...#|#...#|.####|....#|...#.|.##..",
-    "a": ".....|.....|.###.|....#|.####|#...#|.####",
-    "b": "#....|#....|#.##.|##..#|#...#|#...#|####.",
-    "c": ".....|.....|.###.|#....|#....|#...#|.###.",
-    "d": "....#|....#|.##.#|#..##|#...#|#...#|.####",
-    "e": ".....|.....|.###.|#...#|#####|#....|.###.",
-    "f": "..##.|.#..#|.#...|###..|.#...|.#...|.#...",
-    "g": ".....|.....|.####|#...#|#...#|#...#|.####|....#|.###.",
-    "h": "#....|#....|#.##.|##..#|#...#|#...#|#...#",
-    "i": "..#..|.....|.##..|..#..|..#..|..#..|.###.",
-    "j": "...#.|.....|..##.|...#.|...#.|...#.|...#.|#..#.|.##..",
-    "k": "#....|#....|#..#.|#.#..|##...|#.#..|#..#.",
-    "l": ".##..|..#..|..#..|..#..|..#..|..#..|.###.",
-    "m": ".....|.....|##.#.|#.#.#|#.#.#|#...#|#...#",
-    "n": ".....|.....|#.##.|##..#|#...#|#...#|#...#",
-    "o": ".....|.....|.###.|#...#|#...#|#...#|.###.",
-    "p": ".....|.....|####.|#...#|#...#|#...#|####.|#....|#....",
-    "q": ".....|.....|.####|#...#|#...#|#...#|.####|....#|....#",
-    "r": ".....|.....|#.##.|##..#|#....|#....|#....",
-    "s": ".....|.....|.###.|#....|.###.|....#|####.",
-    "t": ".#...|.#...|###..|.#...|.#...|.#..#|..##.",
-    "u": ".....|.....|#...#|#...#|#...#|#..##|.##.#",
-    "v": ".....|.....|#...#|#...#|#...#|.#.#.|..#..",
-    "w": ".....|.....|#...#|#...#|#.#.#|#.#.#|.#.#.",
-    "x": ".....|.....|#...#|.#.#.|..#..|.#.#.|#...#",
-    "y": ".....|.....|#...#|#...#|#...#|#...#|.####|....#|.###.",
-    "z": ".....|.....|#####|...#.|..#..|.#...|#####",
-    " ": ".....|.....|.....|.....|.....|.....|.....",
-    "-": ".....|.....|.....|#####|.....|.....|.....",
-    "+": ".....|..#..|..#..|#####|..#..|..#..|.....",
-    ".": ".....|.....|.....|.....|.....|.##..|.##..",
-    ",": ".....|.....|.....|.....|.....|.##..|..#..|.#...",
-    "(": "...#.|..#..|.#...|.#...|.#...|..#..|...#.",
-    ")": ".#...|..#..|...#.|...#.|...#.|..#..|.#...",
-    ":": ".....|.##..|.##..|.....|.##..|.##..|.....",
-    "/": ".....|....#|...#.|..#..|.#...|#....|.....",
-    "%": "##...|##..#|...#.|..#..|.#...|#..##|...##",
-    ">": ".#...|..#..|...#.|....#|...#.|..#..|.#...",
-}
-_FONT = {ch: np.array([[c == "#" for c in row] for row in (g + "|....." * 2).split("|")[:9]])
-         for ch, g in _GLYPHS.items()}  # 7 rows + 2 for descenders (g, j, p, q, y)
-_GLYPH_W, _GLYPH_H = 6, 7  # advance (5 + 1 spacing), height above the baseline
-
-
-def _text_width(s: str, scale: int) -> int:
-    return len(s) * _GLYPH_W * scale
-
-
-def _text(img: np.ndarray, x: int, y: int, s: str, color, scale: int = 1) -> None:
-    """Draw `s` into `img` (H, W, 3) uint8 with its top-left corner at (x, y); clipped."""
-    h, w = img.shape[:2]
-    for k, ch in enumerate(s.lower()):
-        g = _FONT.get(ch, _FONT[" "])
-        if scale > 1:
-            g = np.repeat(np.repeat(g, scale, 0), scale, 1)
-        x0 = x + k * _GLYPH_W * scale
-        ys, xs = np.nonzero(g)
-        ys, xs = ys + y, xs + x0
-        ok = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
-        img[ys[ok], xs[ok]] = color
-
-
-def _panel(img: np.ndarray, x0: int, y0: int, x1: int, y1: int, alpha: float = 0.75) -> None:
-    """Darken a rectangle (clipped) so text on it stays legible."""
-    h, w = img.shape[:2]
-    x0, x1, y0, y1 = max(0, x0), min(w, x1), max(0, y0), min(h, y1)
-    if x1 > x0 and y1 > y0:
-        img[y0:y1, x0:x1] = (img[y0:y1, x0:x1] * (1.0 - alpha) + 12 * alpha).astype(np.uint8)
-
-
-def _ui_scale(width: int, height: int) -> int:
-    return max(1, min(width, height) // 360)
-
-
-# -- colour ramps ----------------------------------------------------------------------
-
-#: A perceptual-ish heat ramp (black → purple → red → orange → yellow → white).
-HEAT = ((0.0, (0, 0, 4)), (0.15, (40, 11, 84)), (0.35, (120, 28, 109)),
-        (0.55, (200, 60, 60)), (0.75, (245, 140, 30)), (0.9, (250, 220, 70)),
-        (1.0, (252, 255, 210)))
-#: Depth ramp: near = warm light, far = deep blue.
-DEPTH_RAMP = ((0.0, (253, 231, 37)), (0.25, (94, 201, 98)), (0.5, (33, 145, 140)),
-              (0.75, (59, 82, 139)), (1.0, (40, 10, 70)))
-
-
-def _ramp(t: np.ndarray, stops) -> np.ndarray:
-    """Piecewise-linear colour ramp: t in [0, 1] (any shape) → uint8 (..., 3)."""
-    xs = np.array([s[0] for s in stops])
-    cs = np.array([s[1] for s in stops], np.float64)
-    t = np.clip(np.asarray(t, np.float64), 0.0, 1.0)
-    out = np.stack([np.interp(t, xs, cs[:, k]) for k in range(3)], axis=-1)
-    return np.rint(out).astype(np.uint8)
-
-
-def _colorbar(img: np.ndarray, stops, ticks: list[tuple[float, str]], title: str) -> None:
-    """A horizontal colour bar with tick labels and a title in the lower right corner."""
-    h, w = img.shape[:2]
-    s = _ui_scale(w, h)
-    bar_w = min(w - 16 * s, max(160, w // 3))
-    bar_h = 8 * s
-    pad = 6 * s
-    label_w = max(_text_width(lbl, s) for _, lbl in ticks)
-    title_w = _text_width(title, s)
-    x1 = w - pad - label_w // 2 - 2 * s
-    x0 = x1 - bar_w
-    panel_x0 = min(x0 - label_w // 2, x1 - title_w) - pad
-    y1 = h - pad - (_GLYPH_H + 3) * s       # bar bottom, tick labels below
-    y0 = y1 - bar_h
-    ty = y0 - (_GLYPH_H + 4) * s            # title above
-    _panel(img, panel_x0, ty - pad, w, h)
-    img[y0:y1, x0:x1] = _ramp(np.linspace(0, 1, x1 - x0), stops)[None, :, :]
-    _text(img, x1 - title_w, ty, title, (235, 235, 235), s)
-    for t, lbl in ticks:
-        x = x0 + int(round(t * (x1 - x0 - 1)))
-        img[y1:y1 + 2 * s, max(0, x - (s // 2)):x + max(1, s // 2 + 1)] = (235, 235, 235)
-        _text(img, x - _text_width(lbl, s) // 2 + s // 2, y1 + 3 * s, lbl, (235, 235, 235), s)
-
-
-def _nice_step(span: float, n: int = 5) -> float:
-    raw = span / max(n, 1)
-    mag = 10.0 ** math.floor(math.log10(raw)) if raw > 0 else 1.0
-    return next(m * mag for m in (1, 2, 5, 10) if m * mag >= raw)
-
+#: Largest ``--triangles``: the demo holds the plant flattened into one world mesh
+#: (`world_mesh`, for shading) plus the renderer's per-triangle buffers, about 300 bytes of
+#: host memory per triangle over a base of about 0.2 GiB (peak RSS measured: 0.5 GiB at 1M,
+#: 1.35 GiB at 4M, 2.5 GiB at 8M triangles at 640x360; 2.6 GiB at 8M at 1920x1080), so the
+#: cap peaks near 15 GiB, well under a 24 GiB machine; without it a typo such as 10**12
+#: would run until memory ran out. Checked when the arguments are parsed, before anything
+#: is built.
+MAX_TRIANGLES = 50_000_000
 
 # -- images ----------------------------------------------------------------------------
 
@@ -234,14 +119,14 @@ def depth_picture(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
     lo, hi = float(dist.min()), float(dist.max())
     hi = max(hi, lo * 1.001)
     t = np.log(dist / lo) / math.log(hi / lo)
-    out[covered] = _ramp(t, DEPTH_RAMP)
+    out[covered] = ramp(t, DEPTH_RAMP)
     ticks = []
     for v in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000):
         if lo <= v <= hi:
             ticks.append((math.log(v / lo) / math.log(hi / lo), f"{v}"))
     ticks = [(0.0, f"{lo:.1f}")] + [tk for tk in ticks if 0.12 < tk[0] < 0.88] + \
         [(1.0, f"{hi:.0f}")]
-    _colorbar(out, DEPTH_RAMP, ticks, "distance from the eye (m, log scale)")
+    colorbar(out, DEPTH_RAMP, ticks, "distance from the eye (m, log scale)")
     return out
 
 
@@ -252,12 +137,12 @@ def overdraw_picture(overdraw: np.ndarray) -> tuple[np.ndarray, int]:
     o = np.asarray(overdraw, np.int64)
     pos = o[o > 0]
     top = int(np.ceil(np.percentile(pos, 99.5))) if pos.size else 1
-    step = max(1, int(_nice_step(top, 5)))
+    step = max(1, int(nice_step(top, 5)))
     top = max(step, int(math.ceil(top / step) * step))
-    img = _ramp(o / top, HEAT)
+    img = ramp(o / top, HEAT)
     ticks = [(v / top, str(v)) for v in range(0, top + 1, step)]
     ticks[-1] = (1.0, f"{top}+")
-    _colorbar(img, HEAT, ticks, "fragments tested per pixel")
+    colorbar(img, HEAT, ticks, "fragments tested per pixel")
     return img, top
 
 
@@ -320,7 +205,7 @@ def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: M
 
     segs = frustum_segments(fp_view_proj)
     lr = LineRenderer(width, height, context=context)
-    s = _ui_scale(width, height)
+    s = ui_scale(width, height)
     hidden = lr.render(segs, view_proj)
     shown = lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4)
     if s > 1:  # thicker lines on big images: grow the masks by one pixel
@@ -332,18 +217,18 @@ def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: M
     counts = fates.counts()
     rows = [(FATE_COLORS[f], f"{FATE_LABELS[f]}: {counts[f]:,}") for f in Fate]
     rows.append((FRUSTUM_COLOR, "first-person frustum (dim: hidden)"))
-    line_h = (_GLYPH_H + 5) * s
+    line_h = (TEXT_HEIGHT + 5) * s
     box = 9 * s
     pad = 6 * s
-    panel_w = pad * 3 + box + max(_text_width(t, s) for _, t in rows)
+    panel_w = pad * 3 + box + max(text_width(t, s) for _, t in rows)
     title = "culling inspector: clusters by fate in the first-person view"
-    _panel(img, 0, 0, max(panel_w, _text_width(title, s) + 2 * pad),
-           pad * 2 + line_h * (len(rows) + 1))
-    _text(img, pad, pad, title, (240, 240, 240), s)
+    panel(img, 0, 0, max(panel_w, text_width(title, s) + 2 * pad),
+          pad * 2 + line_h * (len(rows) + 1))
+    draw_text(img, pad, pad, title, (240, 240, 240), s)
     for k, (col, txt) in enumerate(rows):
         y = pad + line_h * (k + 1)
         img[y:y + box - s, pad:pad + box] = col
-        _text(img, pad * 2 + box, y, txt, (230, 230, 230), s)
+        draw_text(img, pad * 2 + box, y, txt, (230, 230, 230), s)
     return img, per_fate
 
 
@@ -361,7 +246,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH",
                    help="image size in pixels (default 1280x720)")
     p.add_argument("--triangles", type=_triangles, default=1_000_000, metavar="N",
-                   help="plant size in triangles, >= 2000 (default 1000000)")
+                   help=f"plant size in triangles, 2000..{MAX_TRIANGLES:,} (default "
+                        f"1000000); the cap bounds host memory, about 300 bytes per "
+                        f"triangle (some 15 GiB at the cap)")
     p.add_argument("--frames", type=_frames, default=3, metavar="N",
                    help="first-person frames to render, >= 1 (default 3); the images show "
                         "the last one, whose occlusion culling reuses the previous frame's "
@@ -379,6 +266,10 @@ def _triangles(text: str) -> int:
     if v < 2000:
         raise argparse.ArgumentTypeError(f"expected a whole number of triangles >= 2000, "
                                          f"got {text!r}")
+    if v > MAX_TRIANGLES:
+        raise argparse.ArgumentTypeError(
+            f"at most {MAX_TRIANGLES:,} triangles (the demo needs about 300 bytes of host "
+            f"memory per triangle, some 15 GiB at the cap), got {text!r}")
     return v
 
 

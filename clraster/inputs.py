@@ -18,7 +18,8 @@ def check_size(width: int, height: int) -> tuple[int, int]:
 
 
 def check_cull(cull: str) -> str:
-    if cull not in CULL_MODES:
+    """A face-culling mode: one of CULL_MODES ("back", "front", "none")."""
+    if not isinstance(cull, str) or cull not in CULL_MODES:
         raise ValueError(f"cull must be one of {sorted(CULL_MODES)}, got {cull!r}")
     return cull
 
@@ -42,3 +43,11 @@ def mvp_matrix(camera, width: int, height: int) -> np.ndarray:
     if not np.all(np.isfinite(m32)):
         raise ValueError("the view-projection matrix overflows float32")
     return np.ascontiguousarray(m32)
+
+
+def check_flag(value: object, name: str) -> bool:
+    """A yes/no option: True/False (or NumPy bool) only. Strings such as "no" are truthy,
+    so accepting any object would silently turn an option on."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)

@@ -2,23 +2,25 @@
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 
 import numpy as np
 import pyopencl as cl
 
 from .config import RasterConfig, guard_band_factors
-from .cull import eye_from_view_proj
-from .device import default_context
+from .device import check_process, default_context
 from .drawlist import PlanCache, key_boxes, plan_frame, subset
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .inputs import check_cull, check_size
+from .frustum import eye_from_view_proj
+from .inputs import check_cull, check_flag, check_size
 from .occlusion import Occlusion
 from .stages.bin import BinStage
 from .stages.geometry import GeometryStage
 from .stages.pyramid import PyramidStage
-from .stages.raster import RasterStage
+from .stages.raster import RasterOutput, RasterStage
 from .stages.setup import SetupStage
 from .stages.vertex import VertexStage
 
@@ -49,7 +51,10 @@ class Renderer:
             PYOPENCL_CTX, else the first PoCL CPU device).
 
     Device buffers are kept and grown between frames; programs are built once per context
-    and config. A Renderer is not thread-safe; use one per thread.
+    and config. Threads may share a Renderer: its frames are serialized by a lock (one per
+    Renderer; use one Renderer per thread for parallel frames). It works only in the process
+    that created it: after fork() a child must make its own, and only if its parent never
+    used OpenCL (`clraster.device.ForkedProcessError` says why and what to do instead).
     """
 
     def __init__(self, width: int, height: int, *, config: RasterConfig | None = None,
@@ -57,6 +62,8 @@ class Renderer:
         self.width, self.height = check_size(width, height)
         self.config = config or RasterConfig()
         self.context = context or default_context()
+        self._pid = os.getpid()
+        self._lock = threading.Lock()
         dev = self.context.devices[0]
         need = 12 * self.width * self.height
         if need > dev.max_mem_alloc_size:
@@ -106,6 +113,16 @@ class Renderer:
             and counted in ``stats.invalid``.
         """
         check_cull(cull)
+        for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
+                            ("overdraw", overdraw), ("fates", fates)):
+            check_flag(value, name)
+        check_process(self._pid)
+        with self._lock:
+            return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
+                                fates)
+
+    def _render(self, target, camera, cull: str, frustum: bool, cones: bool, occlusion: bool,
+                overdraw: bool, fates: bool) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -143,8 +160,9 @@ class Renderer:
         acc = acc if acc is not None else {"status": [], "clip_pieces": 0,
                                            "binned_entries": 0, "tested": 0, "passed": 0}
         if fd.n_tris == 0:
-            if into is None:
-                raise AssertionError("a first pass always has triangles")
+            if into is None:   # nothing to draw yet: a cleared frame to continue from
+                into = RasterOutput.allocate(self.context, w, h, overdraw)
+                into.clear()
             return into, acc
         q = self.queue
         kx, ky = guard_band_factors(w, h)
@@ -198,9 +216,10 @@ class Renderer:
         hist = self._visible if (self._visible_key is not None
                                  and self._visible_key[0] is scene
                                  and self._visible_key[1] == version) else None
-        if hist is not None:
-            first = hist[keys]
-        else:   # first frame: the nearest clusters, front to back, up to a budget
+        first = hist[keys] if hist is not None else None
+        if first is None or not first.any():
+            # first frame, or a camera cut (none of last frame's visible clusters is in
+            # view): the nearest clusters, front to back, up to a budget
             vp_inv_eye = eye_position(plan.view_proj)
             centre = 0.5 * (wlo[keys] + whi[keys])
             dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \

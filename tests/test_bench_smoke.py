@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -92,3 +93,26 @@ def test_json_schema(quick):
         for path in ("opencl", "twin"):
             assert "error" not in m[path], m[path]
             assert _positive(m[path]["peak_rss_mib"])
+
+
+@pytest.mark.parametrize("where", ["parent_is_file", "is_file", "read_only"])
+def test_unwritable_out_is_one_error_line(tmp_path, capsys, where):
+    """A bad --out fails at once (before any measurement) with one line naming the path and
+    the reason, exit code 1, not a traceback."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    if where == "parent_is_file":
+        out, reason = blocker / "results", "Not a directory"
+    elif where == "is_file":
+        out, reason = blocker, "not a folder"
+    else:
+        if not Path("/proc/self").is_dir():
+            pytest.skip("needs Linux /proc (read-only even for root)")
+        out, reason = Path("/proc/clraster-bench-results"), ""
+    rc = main(["bench", "--quick", "--no-peer", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1
+    assert len(err) == 1, err
+    assert err[0].startswith("clraster bench: error: ") and str(out) in err[0], err
+    assert reason in err[0], err
+    assert not out.is_dir() and blocker.read_text() == "not a folder"

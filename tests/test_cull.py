@@ -14,10 +14,9 @@ from hypothesis import strategies as st
 from clraster.bvh import BVH
 from clraster.camera import Camera
 from clraster.clusters import clusters_of
-from clraster.cull import (
-    COUNT_NAMES,
+from clraster.cull import COUNT_NAMES, build_draw_list
+from clraster.frustum import (
     Visibility,
-    build_draw_list,
     classify_aabbs,
     classify_spheres,
     eye_from_view_proj,

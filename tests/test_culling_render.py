@@ -401,10 +401,10 @@ def fine_meshes() -> list[Mesh]:
     """Meshes with several clusters each: a UV sphere, a torus and a box subdivided into
     small quads (closed), and a flat square grid (one-sided: its clusters are flat, their
     normal cones as narrow as they get). Built once, shared by all scenes."""
-    from clraster.scenes import _torus, _uv_sphere  # procedural generators of scenes.py
+    from clraster.scenes.primitives import torus, uv_sphere  # procedural mesh primitives
 
     if not _FINE:
-        _FINE.extend([Mesh(*_uv_sphere(0.5, 24, 48)), Mesh(*_torus(0.4, 0.15, 64, 16)),
+        _FINE.extend([Mesh(*uv_sphere(0.5, 24, 48)), Mesh(*torus(0.4, 0.15, 64, 16)),
                       subdivided_box(12), flat_grid(32)])
     return _FINE
 

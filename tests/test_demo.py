@@ -6,7 +6,10 @@
   front (drawn), behind the eye (every cluster frustum-culled), facing away (cone-culled),
   hidden behind a wall (occlusion-culled on the second frame).
 * The demo: writes the four images at the requested size; the inspector shows fate colours
-  and the frustum lines; bad arguments exit with 2 and a message.
+  and the frustum lines; bad arguments exit with 2 and a message; a triangle count above
+  the cap is refused while the arguments are parsed, before the plant is built.
+* The picture helpers (`clraster.annotate`): text lands where the layout puts it, in its
+  colour, clipped at the edges; colour ramps hit their stops; tick steps are 1, 2, 5 × 10^k.
 """
 
 from __future__ import annotations
@@ -258,3 +261,61 @@ def test_help(capsys):
 
     assert demo.main(["--help"]) == 0
     assert "inspector" in capsys.readouterr().out
+
+
+class _PlantBuilt(Exception):
+    """Raised by the stand-in plant: the command got past argument parsing."""
+
+
+@pytest.mark.parametrize("count", ["50_000_001", "1000000000000"])
+def test_triangle_cap_is_checked_at_parsing(count, tmp_path, capsys, monkeypatch):
+    """--triangles above `demo.MAX_TRIANGLES` is a usage error (exit 2) naming the cap and
+    the reason; the plant is never built (with no cap, 10**12 triangles ran until the host
+    ran out of memory)."""
+    from clraster import cli, demo, scenes
+
+    def plant(*args, **kwargs):
+        raise _PlantBuilt("the demo built the plant instead of refusing the count")
+
+    monkeypatch.setattr(scenes, "plant", plant)
+    args = ["--triangles", count, "--out", str(tmp_path / "d")]
+    for run in (demo.main, lambda a: cli.main(["demo", *a])):
+        assert run(args) == 2
+        err = capsys.readouterr().err
+        assert "at most 50,000,000 triangles" in err and "memory" in err, err
+    assert not (tmp_path / "d").exists()
+    # the cap itself and the default are accepted
+    p = demo._parser()
+    assert p.parse_args(["--triangles", "50,000,000"]).triangles == demo.MAX_TRIANGLES
+    assert p.parse_args([]).triangles <= demo.MAX_TRIANGLES
+
+
+def test_annotate_text_panel_ramp():
+    from clraster import annotate
+
+    img = np.zeros((40, 200, 3), np.uint8)
+    img[:] = (50, 60, 70)
+    col = (250, 10, 120)
+    w = annotate.text_width("hello 123", 1)
+    assert 20 < w < 100 and annotate.text_width("hello 123", 2) > w
+    annotate.draw_text(img, 10, 5, "hello 123", col, 1)
+    changed = (img != (50, 60, 70)).any(axis=2)
+    ys, xs = np.nonzero(changed)
+    # the ink sits on the line: top of the line at row 5, baseline at 5 + TEXT_HEIGHT
+    # (descenders and anti-aliasing a pixel or two beyond), pen from column 10
+    assert ys.min() >= 5 - 2 and ys.max() <= 5 + annotate.TEXT_HEIGHT + 3
+    assert xs.min() >= 10 - 1 and xs.max() <= 10 + w + 1
+    # glyph cores in the text's colour (anti-aliased one-pixel strokes cover a pixel
+    # not quite fully: within 10 % of the way from the background)
+    assert (np.abs(img.astype(np.int64) - col).max(axis=2) <= 20).sum() > 10
+    # clipped at every edge, nothing raised, nothing outside touched
+    for x, y in ((-30, -4), (190, 35), (-500, 0), (0, 500)):
+        annotate.draw_text(img, x, y, "clipped", col, 2)
+    # the panel darkens towards 12, clipped
+    annotate.panel(img, -5, -5, 3, 3)
+    assert (img[:3, :3] == int(50 * 0.25 + 12 * 0.75)).any()
+    # ramps hit their stops; steps are 1, 2, 5 × 10^k
+    r = annotate.ramp(np.array([0.0, 0.15, 1.0, 2.0]), annotate.HEAT)
+    assert r.dtype == np.uint8 and r.shape == (4, 3)
+    assert [tuple(c) for c in r] == [(0, 0, 4), (40, 11, 84), (252, 255, 210), (252, 255, 210)]
+    assert [annotate.nice_step(s) for s in (15, 7, 120, 0.3)] == [5, 2, 50, 0.1]

@@ -10,6 +10,7 @@ import pytest
 import trimesh
 
 from clraster import Camera, Mesh, scenes
+from clraster.scenes.primitives import boxes
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 
@@ -122,7 +123,7 @@ def test_helpers_detect_inside_points_and_inside_out_parts():
     np.testing.assert_array_equal(_inside_any_solid(s, pts), [True, True, False, False])
     _assert_closed_outward(mesh, "box")
     with pytest.raises(AssertionError, match="inside out"):
-        v, f = scenes._boxes([[0, 0, 0], [2, 0, 0]], [[1, 1, 1], [3, 1, 1]])
+        v, f = boxes([[0, 0, 0], [2, 0, 0]], [[1, 1, 1], [3, 1, 1]])
         f[12:] = f[12:, ::-1]  # the second box inside out
         _assert_closed_outward(Mesh(v, f), "two boxes")
 
@@ -246,7 +247,7 @@ def test_plant_rejects_bad_sizes(bad):
 # -- instance grid ----------------------------------------------------------------------------
 
 def _box_mesh(ex=(1.0, 2.0, 0.5)) -> Mesh:
-    v, f = scenes._boxes(np.zeros(3), np.asarray(ex))
+    v, f = boxes(np.zeros(3), np.asarray(ex))
     return Mesh(v, f)
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import PIECE_DTYPE, RasterConfig
-from ..device import program
+from ..device import program, wait
 from ._buffers import GrowBuffer
 
 
@@ -58,6 +58,7 @@ class BinStage:
                               tile_start, b.overflow.ensure(4)))
         head = np.zeros(1, np.int32)
         over = np.zeros(1, np.int32)
+        wait(queue)   # interruptibly, with the GIL free (device.wait)
         cl.enqueue_copy(queue, over, b.overflow.buf)
         cl.enqueue_copy(queue, head, tile_start, src_offset=4 * n_tiles)
         if over[0]:

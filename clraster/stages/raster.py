@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import RasterConfig
-from ..device import program
+from ..device import program, wait
 from ._buffers import GrowBuffer
 
 
@@ -67,8 +67,11 @@ class RasterStage:
                          np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
                          self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
                          np.int32(want), into.bufs[3] if want else into.bufs[1])
+        # wait first: a non-blocking read here kept the GIL for the whole raster kernel
+        # (~200 ms of a big frame during which no other Python thread ran)
+        wait(queue)
         tstats = np.empty((n_tiles, 2), np.int64)
-        cl.enqueue_copy(queue, tstats, self.buffers.tile_stats.buf, is_blocking=False)
+        cl.enqueue_copy(queue, tstats, self.buffers.tile_stats.buf)
         into.sync(queue)
         return into, tstats, ev
 
@@ -95,6 +98,15 @@ class RasterOutput:
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
         bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in arrs]
         return cls(arrs[0], arrs[1], arrs[2], arrs[3] if overdraw else None, bufs)
+
+    def clear(self) -> None:
+        """Set the arrays to the cleared frame (depth 1.0, id −1, barycentrics and overdraw
+        0) on the host, for a pass that draws nothing (the buffers wrap these arrays)."""
+        self.depth.fill(1.0)
+        self.ids.fill(-1)
+        self.bary.fill(0.0)
+        if self.overdraw is not None:
+            self.overdraw.fill(0)
 
     def sync(self, queue: cl.CommandQueue) -> None:
         """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for

@@ -9,7 +9,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import CLUSTER_MAX, CULL_MODES, PIECE_DTYPE, RasterConfig
-from ..device import program
+from ..device import program, wait
 from ._buffers import GrowBuffer
 
 
@@ -75,6 +75,7 @@ class SetupStage:
             ev.append(self.k_offsets(queue, (int(chunks),), (1,), b.clip_count.buf,
                                      np.uint32(m), chunks, part, b.clip_offset.ensure(4 * m),
                                      b.clip_total.ensure(4)))
+            wait(queue)   # interruptibly, with the GIL free (device.wait)
             cl.enqueue_copy(queue, total, b.clip_total.buf)
         p = int(total[0])
         if p:

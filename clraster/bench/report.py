@@ -1,0 +1,298 @@
+"""What the benchmark harness writes: results.json (schema :data:`SCHEMA`), results.md and the
+summary it prints. The PNG plots are `clraster.bench.plots`.
+
+The results dict (:func:`results_record`) is the JSON document as written; :func:`markdown`
+renders it section by section and reads nothing else, so results.md can be rebuilt from a
+results.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+SCHEMA = "clraster-bench/1"
+
+
+def jsonable(v: Any) -> Any:
+    """Plain JSON values from NumPy scalars/arrays, dicts and lists (NaN/Inf → None)."""
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v]
+    if hasattr(v, "tolist") and not isinstance(v, (str, bytes)):
+        return jsonable(v.tolist())
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def hms(s: float) -> str:
+    """A duration in seconds as ``1h02m`` (an hour or more) or ``3m07s``."""
+    s = int(round(max(0.0, s)))
+    return f"{s // 3600}h{s // 60 % 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
+# =======================================================================================
+# results.json
+# =======================================================================================
+
+def results_record(*, argv: list[str], a: argparse.Namespace, machine: dict,
+                   peer: dict, configs: list[dict], targets: list[dict],
+                   startup: dict | None, memory: list[dict], memory_method: str,
+                   skipped: list[str], errors: list[str]) -> dict[str, Any]:
+    """The results document of a run, less ``elapsed_s`` and ``plots`` (the caller adds them
+    last, in that order, then passes it through :func:`jsonable`)."""
+    return {
+        "schema": SCHEMA,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "command": ["clraster", "bench", *argv],
+        "quick": bool(a.quick),
+        "settings": {"repeat": a.repeat, "warmup": a.warmup,
+                     "occlusion_warmup": a.occlusion_warmup, "twin_budget_s": a.twin_budget,
+                     "twin_max_triangles": a.twin_max_triangles, "cull": a.cull,
+                     "sweeps": a.sweeps, "meshes": str(a.meshes), "no_twin": a.no_twin},
+        "machine": machine,
+        "peer": peer,
+        "configs": configs,
+        "targets": targets,
+        "startup": startup,
+        "memory": memory,
+        "memory_method": memory_method,
+        "skipped": skipped,
+        "errors": errors,
+    }
+
+
+def write_partial(out: Path, argv: list[str], configs: list[dict], errors: list[str],
+                  skipped: list[str]) -> None:
+    """Checkpoint results.partial.json: a long run that dies later still leaves its
+    measurements."""
+    (out / "results.partial.json").write_text(json.dumps(
+        {"schema": SCHEMA, "command": ["clraster", "bench", *argv], "configs": configs,
+         "errors": errors, "skipped": skipped}, indent=1) + "\n")
+
+
+def write_results(res: dict, out: Path) -> tuple[Path, Path]:
+    """Write results.json and results.md of `res` (already :func:`jsonable`) into `out`."""
+    js, md = out / "results.json", out / "results.md"
+    js.write_text(json.dumps(res, indent=1) + "\n")
+    md.write_text(markdown(res))
+    return js, md
+
+
+# =======================================================================================
+# Markdown
+# =======================================================================================
+
+def _f(v: Any, spec: str = ".1f", none: str = "—") -> str:
+    if v is None:
+        return none
+    if isinstance(v, float) and not math.isfinite(v):
+        return none
+    return format(v, spec)
+
+
+def _x(v: float | None, spec: str = ".1f") -> str:
+    return "—" if v is None else f"{v:{spec}}×"
+
+
+def _si(v: float | None) -> str:
+    if v is None:
+        return "—"
+    for div, suf in ((1e9, "G"), (1e6, "M"), (1e3, "K")):
+        if abs(v) >= div:
+            return f"{v / div:.2f}{suf}"
+    return f"{v:.0f}"
+
+
+def markdown(res: dict) -> str:
+    """results.md of a results dict: one section after another, each a list of lines."""
+    L: list[str] = []
+    for section in (_md_header, _md_targets, _md_configs, _md_stages, _md_funnel,
+                    _md_startup, _md_memory, _md_lists):
+        L += section(res)
+    return "\n".join(L) + "\n"
+
+
+def _md_header(res: dict) -> list[str]:
+    from clraster.bench.machine import summary
+
+    return ["# clraster benchmark results", "",
+            f"Run {res['created']} ({hms(res['elapsed_s'])}); command: "
+            f"`{' '.join(res['command'])}`.", "",
+            f"Machine: {summary(res['machine'])}", "",
+            "Frame time = wall time of `render()` (host culling and read-back included), "
+            f"median of {res['settings']['repeat']} frames after warm-up, OpenCL and the NumPy "
+            "twin interleaved. Stage times are OpenCL profiling-event device times (median). "
+            f"llvmpipe: {res['peer']['reason']}.", ""]
+
+
+def _md_targets(res: dict) -> list[str]:
+    L = ["## Targets", "", "| target | configuration | measured | threshold | status |",
+         "|---|---|---:|---:|---|"]
+    for t in res["targets"]:
+        st = {True: "**met**", False: "**missed**", None: "not measured"}[t["met"]]
+        if t["met"] is None and t["note"]:
+            st += f" ({t['note']})"
+        L.append(f"| {t['description']} | {t['config'] or '—'} | {_x(t['value'], '.2f')} | "
+                 f"{t['comparison']} {t['threshold']:g}× | {st} |")
+    return L
+
+
+def _md_config_row(c: dict) -> str:
+    """One row of the configurations table."""
+    tw, pe, ag = c["twin"], c["peer"], c["agreement"]
+    if tw.get("median_ms") is not None:
+        tws = f"{tw['median_ms']:.1f} ({tw['n_runs']})"
+        if tw.get("mode") != c["mode"]:
+            tws += f" [{tw['mode']}]"
+        if tw.get("budget_exceeded"):
+            tws += " ⏱"
+    else:
+        tws = "skipped"
+    pes = _f(pe.get("median_ms")) if "skipped" not in pe else "skipped"
+    if "error" in pe:
+        pes = "error"
+    agree = "—" if ag is None else ("yes" if ag["agree"] else
+                                    f"NO ({ag['pixels_differing']} px)")
+    if ag is not None:
+        agree += f", Δz {ag['max_depth_diff']:.1g}"
+    return (f"| {', '.join(c['sweeps'])} | {c['scene']['name']} | {c['triangles']:,} | "
+            f"{c['size'][0]}×{c['size'][1]} | {c['mode']} | "
+            f"{_f(c['opencl']['median_ms'])} | {tws} | {_x(c['speedup_vs_twin'])} | "
+            f"{pes} | {_f(pe.get('ratio_clraster_over_llvmpipe'), '.2f')} | "
+            f"{_si(c['opencl']['triangles_per_s'])} | {_si(c['opencl']['pixels_per_s'])} "
+            f"| {agree} |")
+
+
+def _md_configs(res: dict) -> list[str]:
+    L = ["", "## Configurations", "",
+         "| sweep | scene | triangles | size | mode | OpenCL ms | twin ms (runs) | "
+         "speedup | llvmpipe ms | clraster/llvmpipe | tri/s | px/s | twin agrees |",
+         "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    notes = []
+    for c in res["configs"]:
+        L.append(_md_config_row(c))
+        if "error" in c["peer"]:
+            notes.append(f"- {c['id']}: llvmpipe error: {c['peer']['error']}")
+        if c["twin"].get("skipped"):
+            notes.append(f"- {c['id']}: {c['twin']['skipped']}")
+    L += ["", "[frustum] after a twin time: the twin has no occlusion culling and rendered the "
+          "frustum mode (same image). ⏱: the twin's time budget "
+          f"({res['settings']['twin_budget_s']:g} s per configuration) was spent; (runs) is "
+          "how many timed frames it made. Occlusion configurations are timed after "
+          f"{res['settings']['warmup'] + res['settings']['occlusion_warmup']} warm-up frames "
+          "(temporal history warm)."]
+    if notes:
+        L += [""] + notes
+    return L
+
+
+def _md_stages(res: dict) -> list[str]:
+    stages: list[str] = []
+    for c in res["configs"]:
+        stages += [k for k in c["opencl"]["stages_median_ms"] if k not in stages]
+    L = ["", "## Per-stage times (OpenCL, median ms)", "",
+         "| configuration | " + " | ".join(stages) + " | frame |",
+         "|---|" + "---:|" * (len(stages) + 1)]
+    for c in res["configs"]:
+        s = c["opencl"]["stages_median_ms"]
+        L.append(f"| {c['id']} | " + " | ".join(_f(s.get(k), ".2f") for k in stages)
+                 + f" | {_f(c['opencl']['median_ms'])} |")
+    return L
+
+
+def _md_funnel(res: dict) -> list[str]:
+    cul = [c for c in res["configs"] if "culling" in c["sweeps"]]
+    if not cul:
+        return []
+    L = ["", "## Culling funnel (triangles; last OpenCL frame)", "",
+         "| mode | total | frustum culled | cone culled | occlusion culled | to setup | "
+         "back-face culled | rasterized | fragments tested | frame ms |",
+         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for c in cul:
+        k = c["opencl"]["counts"]
+        L.append(f"| {c['mode']} | {k['triangles_total']:,} | "
+                 f"{k['triangles_frustum_culled']:,} | {k['triangles_cone_culled']:,} | "
+                 f"{k['triangles_occlusion_culled']:,} | {k['triangles_in']:,} | "
+                 f"{k['backface_culled']:,} | {k['rasterized']:,} | "
+                 f"{k['fragments_tested']:,} | {_f(c['opencl']['median_ms'])} |")
+    return L
+
+
+def _md_startup(res: dict) -> list[str]:
+    st = res.get("startup")
+    if not st:
+        return []
+    L = ["", f"## Cold and warm start ({st['scene']}, {st['size'][0]}×{st['size'][1]})",
+         "", "| start | import | context | programs | first frame | to first frame | "
+         "process wall |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for k in ("cold", "warm"):
+        s = st[k]
+        if "error" in s:
+            L.append(f"| {k} | error: {s['error']} ||||||")
+            continue
+        L.append(f"| {k} | {s['import_s']:.2f} s | {s['context_s']:.2f} s | "
+                 f"{s['renderer_programs_s']:.2f} s | {s['first_frame_s']:.2f} s | "
+                 f"{s['to_first_frame_s']:.2f} s | {s['process_wall_s']:.2f} s |")
+    return L + ["", st["method"]]
+
+
+def _md_memory(res: dict) -> list[str]:
+    mem = res.get("memory")
+    if not mem:
+        return []
+    L = ["", "## Peak host memory (MiB)", "",
+         "| scene | size, mode | path | after imports | scene loaded | peak RSS | "
+         "rendering adds |", "|---|---|---|---:|---:|---:|---:|"]
+    for m in mem:
+        where = f"{m['scene']} | {m['size'][0]}×{m['size'][1]} {m['mode']}"
+        for path in ("opencl", "twin"):
+            x = m[path]
+            if "peak_rss_mib" not in x:
+                why = x.get("error") or x.get("skipped")
+                L.append(f"| {where} | {path} | "
+                         f"{why} ||||")
+                continue
+            L.append(f"| {where} | {path} | "
+                     f"{_f(x['baseline_rss_mib'], '.0f')} | {_f(x['scene_rss_mib'], '.0f')} "
+                     f"| {_f(x['peak_rss_mib'], '.0f')} | "
+                     f"{_f(x.get('render_extra_mib'), '.0f')} |")
+    return L + ["", res["memory_method"]]
+
+
+def _md_lists(res: dict) -> list[str]:
+    """The errors, skipped configurations and plots, each a section when there are any."""
+    L: list[str] = []
+    if res.get("errors"):
+        L += ["", "## Errors", ""] + [f"- {s}" for s in res["errors"]]
+    if res["skipped"]:
+        L += ["", "## Skipped", ""] + [f"- {s}" for s in res["skipped"]]
+    if res.get("plots"):
+        L += ["", "## Plots", ""] + [f"![{p}]({p})" for p in res["plots"]]
+    return L
+
+
+# =======================================================================================
+# Summary (stdout)
+# =======================================================================================
+
+def summary_lines(res: dict) -> str:
+    """One line per configuration (OpenCL, twin, speed-up, llvmpipe) and per target."""
+    lines = []
+    for c in res["configs"]:
+        pe = c["peer"].get("median_ms")
+        lines.append(f"{c['id']:<42} OpenCL {_f(c['opencl']['median_ms']):>8} ms  twin "
+                     f"{_f(c['twin'].get('median_ms')):>9} ms  x{_f(c['speedup_vs_twin']):>6}"
+                     f"  llvmpipe {_f(pe):>8} ms")
+    for t in res["targets"]:
+        st = {True: "MET", False: "MISSED", None: "not measured"}[t["met"]]
+        v = f"{t['value']:.2f}x" if t["value"] is not None else "—"
+        lines.append(f"target {t['name']}: {v} (needs {t['comparison']} {t['threshold']:g}x)"
+                     f" {st}" + (f" — {t['note']}" if t["note"] else ""))
+    return "\n".join(lines)
