@@ -25,6 +25,7 @@ import numpy as np
 
 import clraster
 import clraster.device as dev
+from clraster import layout
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,6 +37,9 @@ def revision_source(rev: str):
                               capture_output=True, text=True).stdout
 
     header = show("common.h")
+    if layout.LAYOUT_INCLUDE.search(header):
+        # its generated constants and records, from this working tree's clraster/layout.py
+        header = layout.inline_layout(header)
 
     def source(stage: str) -> str:
         return re.sub(r'^#include "common\.h"\s*$', lambda _m: header, show(f"{stage}.cl"),
@@ -64,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     current = dev.kernel_source
     renderers = {}
     for name, source in ((a.rev, revision_source(a.rev)), ("working tree", current)):
-        dev._programs.clear()   # build this renderer's programs from `source`
+        dev.clear_program_cache(dev.default_context())   # rebuild from `source`
         dev.kernel_source = source
         try:
             renderers[name] = clraster.Renderer(w, h)

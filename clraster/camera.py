@@ -21,6 +21,8 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from .inputs import check_mat4, check_size
+
 __all__ = ["Camera", "look_at_matrix", "perspective_matrix"]
 
 #: |sin| of the angle between `up` and the view direction below which they count as parallel.
@@ -47,17 +49,6 @@ def _vec3(value: npt.ArrayLike, name: str) -> np.ndarray:
         raise ValueError(f"{name} must have shape (3,) (x, y, z), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
-    return arr
-
-
-def _mat4(value: npt.ArrayLike, name: str) -> np.ndarray:
-    """`value` as a finite, read-only float64 (4, 4) array, or ValueError naming `name`."""
-    arr = _real_array(value, name, "a 4×4 real matrix")
-    if arr.shape != (4, 4):
-        raise ValueError(f"{name} must have shape (4, 4), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite; it contains NaN or Inf")
-    arr.flags.writeable = False
     return arr
 
 
@@ -158,24 +149,33 @@ class Camera:
         if (projection is None) == (lens is None):
             raise ValueError("Camera needs exactly one of projection or lens; use "
                              "Camera.look_at or Camera.from_matrices")
-        view = _mat4(view, "view")
+        view = check_mat4(view, "view", read_only=True)
+        # An affine view (last row 0 0 0 1) is tested on its 3×3 part only: the condition
+        # number of the whole 4×4 grows with the square of the translation, which refused
+        # every camera ~1e6 units from the origin (georeferenced scenes) although a rigid
+        # transform is perfectly conditioned wherever it is.
+        affine = bool(np.all(view[3] == (0.0, 0.0, 0.0, 1.0)))
         try:
-            cond = np.linalg.cond(view)
+            cond = np.linalg.cond(view[:3, :3] if affine else view)
         except np.linalg.LinAlgError:
             cond = math.inf
         if not cond < _MAX_COND:
             raise ValueError("view matrix is not invertible (singular or nearly so); it must "
                              "map world to eye space, e.g. a rigid transform")
-        inv = np.linalg.inv(view)
-        w = inv[3, 3]
-        if abs(w) < 1e-12:
-            raise ValueError("view matrix maps the eye to infinity (its inverse has "
-                             "w = 0 in the last column); use an affine view matrix")
-        eye = inv[:3, 3] / w
+        if affine:   # the eye is where the view maps to the origin: L @ eye + t = 0
+            eye = -np.linalg.solve(view[:3, :3], view[:3, 3])
+        else:
+            inv = np.linalg.inv(view)
+            w = inv[3, 3]
+            if abs(w) < 1e-12:
+                raise ValueError("view matrix maps the eye to infinity (its inverse has "
+                                 "w = 0 in the last column); use an affine view matrix")
+            eye = inv[:3, 3] / w
         eye.flags.writeable = False
         self._view = view
         self._eye = eye
-        self._projection = None if projection is None else _mat4(projection, "projection")
+        self._projection = (None if projection is None
+                            else check_mat4(projection, "projection", read_only=True))
         if lens is None:
             self._fov_y = self._near = self._far = None
         else:
@@ -313,7 +313,7 @@ class Camera:
         look_at cameras use ``aspect = width / height``; from_matrices cameras return their
         projection unchanged (a read-only array).
         """
-        width, height = _check_size(width, height)
+        width, height = check_size(width, height)
         if self._projection is not None:
             return self._projection
         assert self._fov_y is not None and self._near is not None and self._far is not None
@@ -329,10 +329,3 @@ class Camera:
             return f"Camera.from_matrices(eye=({eye}))"
         return (f"Camera.look_at(eye=({eye}), fov_y={self._fov_y:.6g}, "
                 f"near={self._near:.6g}, far={self._far:.6g})")
-
-
-def _check_size(width: int, height: int) -> tuple[int, int]:
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-            raise ValueError(f"{name} must be a positive integer (pixels), got {v!r}")
-    return int(width), int(height)

@@ -6,13 +6,15 @@
 - ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
   docs in the repository's ``bench/`` folder).
 
-Exit codes: 0 success; 1 the mesh, camera or output could not be used (one line on stderr,
-no traceback); 2 bad command-line arguments (argparse's usage message).
+Exit codes: 0 success; 1 the mesh, camera or output could not be used, or memory ran out
+(one line on stderr, no traceback); 2 bad command-line arguments (argparse's usage message);
+130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -22,8 +24,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .camera import Camera
-from .config import MAX_IMAGE_SIZE, RasterConfig
+from .config import RasterConfig
 from .device import NoDeviceError
+from .inputs import parse_size
 from .mesh import Mesh
 
 if TYPE_CHECKING:
@@ -32,21 +35,6 @@ if TYPE_CHECKING:
 __all__ = ["main"]
 
 EXAMPLE = "example"
-
-
-def _size(text: str) -> tuple[int, int]:
-    parts = text.lower().split("x")
-    try:
-        if len(parts) != 2:
-            raise ValueError
-        w, h = int(parts[0]), int(parts[1])
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT in pixels, e.g. 1280x720, got {text!r}") from None
-    if not (0 < w <= MAX_IMAGE_SIZE and 0 < h <= MAX_IMAGE_SIZE):
-        raise argparse.ArgumentTypeError(
-            f"width and height must be in 1..{MAX_IMAGE_SIZE}, got {text!r}")
-    return w, h
 
 
 def _vec3(text: str) -> np.ndarray:
@@ -59,6 +47,30 @@ def _vec3(text: str) -> np.ndarray:
             f"expected three finite numbers x,y,z, e.g. 0,1.5,4, got {text!r} "
             f"(write --eye=-1,2,3 when the first one is negative)")
     return v
+
+
+def _output_file(path: Path, option: str, suffixes: tuple[str, ...] | None = None) -> None:
+    """Refuse an output path before rendering (not after): a folder, a missing folder, no
+    or the wrong suffix."""
+    if path.is_dir():
+        raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
+    if not path.parent.is_dir():
+        raise ValueError(f"{option} {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    suffix = path.suffix.lower()
+    if suffixes is None:
+        if not suffix:
+            raise ValueError(f"{option} {str(path)!r} has no file extension; give one that "
+                             f"names the image format, e.g. .png")
+    elif suffix not in suffixes:
+        raise ValueError(f"{option} {str(path)!r} must end in {' or '.join(suffixes)} "
+                         f"(it is written as a NumPy array file)")
+
+
+def _save_npy(path: Path, array: np.ndarray) -> None:
+    # through a file object: np.save(name) would append .npy to any other name, so the
+    # file written would not be the one reported
+    with open(path, "wb") as fh:
+        np.save(fh, array)
 
 
 def _positive(text: str) -> float:
@@ -85,7 +97,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("mesh", metavar="MESH",
                    help=f"mesh file trimesh can read (PLY, OBJ, STL, ...), or "
                         f"'{EXAMPLE}' for the built-in example scene")
-    r.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH",
+    r.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
                    help="image size in pixels (default 1280x720)")
     r.add_argument("--out", type=Path, required=True, metavar="PNG",
                    help="shaded image to write (any format imageio writes)")
@@ -108,9 +120,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--cull", choices=("back", "front", "none"), default="back",
                    help="face culling; counter-clockwise is front (default back)")
     r.add_argument("--depth", type=Path, metavar="NPY",
-                   help="also save the (H, W) float32 window depth as .npy")
+                   help="also save the (H, W) float32 window depth to this .npy file")
     r.add_argument("--ids", type=Path, metavar="NPY",
-                   help="also save the (H, W) int32 triangle ids (-1 background) as .npy")
+                   help="also save the (H, W) int32 triangle ids (-1 background) to this .npy "
+                        "file")
     r.add_argument("--wireframe", action="store_true",
                    help="draw the mesh's edges over the image (line segments, clipped in clip "
                         "space and depth-tested against the frame, so hidden edges stay hidden)")
@@ -162,6 +175,10 @@ def _render(args: argparse.Namespace) -> int:
     from .shade import shade
 
     width, height = args.size
+    _output_file(args.out, "--out")
+    for option, path in (("--depth", args.depth), ("--ids", args.ids)):
+        if path is not None:
+            _output_file(path, option, (".npy",))
     if args.mesh == EXAMPLE:
         from .examples import example_mesh
 
@@ -210,9 +227,9 @@ def _render(args: argparse.Namespace) -> int:
         print(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
     iio.imwrite(args.out, image)
     if args.depth is not None:
-        np.save(args.depth, frame.depth)
+        _save_npy(args.depth, frame.depth)
     if args.ids is not None:
-        np.save(args.ids, frame.triangle_id)
+        _save_npy(args.ids, frame.triangle_id)
 
     print(frame.stats)
     line = f"frame time: {times[0]:.1f} ms (first frame"
@@ -262,6 +279,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Bad mesh, camera, output path or no OpenCL device: a message, not a traceback.
         print(f"clraster: error: {exc}", file=sys.stderr)
         return 1
+    except MemoryError as exc:
+        print(f"clraster: error: out of memory ({exc or 'host memory'}); render a smaller "
+              f"image (--size) or a smaller mesh", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("clraster: interrupted", file=sys.stderr)
+        from .device import device_busy
+
+        if device_busy():
+            # a kernel cannot be cancelled: rather than wait for it (seconds) or tear the
+            # interpreter down under it, leave now
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(130)
+        return 130
 
 
 if __name__ == "__main__":

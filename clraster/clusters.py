@@ -367,8 +367,12 @@ def clusterize(mesh: Mesh, max_triangles: int = 128, max_vertices: int = 128) ->
 
     bounded = np.ones(n_clusters, dtype=bool)
     bounded[tri_offset[:-1] >= good.size] = False  # clusters made of non-finite faces
-    aabb_min, aabb_max, sphere, apex, axis, cutoff = _geometry(
-        cols, faces, face_seq, tri_offset, vert_ids, vert_offset, bounded)
+    # Clusters of non-finite faces (not `bounded`) get NaN/Inf bounds and cones that no test
+    # ever reads (they are always drawn); NumPy's warnings about them would only leak into
+    # the caller's output.
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        aabb_min, aabb_max, sphere, apex, axis, cutoff = _geometry(
+            cols, faces, face_seq, tri_offset, vert_ids, vert_offset, bounded)
 
     return _frozen(ClusteredMesh(
         n_clusters=n_clusters,

@@ -47,9 +47,9 @@ from .annotate import (
     ui_scale,
 )
 from .camera import Camera
-from .cli import _size
 from .device import NoDeviceError
 from .fates import Fate
+from .inputs import parse_size
 from .mesh import Mesh
 from .scene import Scene
 
@@ -243,7 +243,7 @@ def _parser() -> argparse.ArgumentParser:
                     "third-person view with every cluster coloured by its fate).")
     p.add_argument("--out", type=Path, default=Path("demo"), metavar="DIR",
                    help="folder for the images, created if missing (default demo/)")
-    p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH",
+    p.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
                    help="image size in pixels (default 1280x720)")
     p.add_argument("--triangles", type=_triangles, default=1_000_000, metavar="N",
                    help=f"plant size in triangles, 2000..{MAX_TRIANGLES:,} (default "

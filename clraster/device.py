@@ -18,7 +18,6 @@ import re
 import threading
 import time
 import warnings
-import weakref
 from pathlib import Path
 
 import pyopencl as cl
@@ -51,14 +50,17 @@ def kernel_dir() -> Path:
 
 @functools.cache
 def kernel_source(stage: str) -> str:
-    """Source of ``kernels/<stage>.cl`` with ``#include "common.h"`` inlined.
+    """Source of ``kernels/<stage>.cl`` with ``#include "common.h"`` inlined, and in it the
+    constants and records generated from clraster/layout.py (`clraster.layout.inline_layout`).
 
     Inlining (rather than ``-I``) keeps every cache keyed on the full text, so an edited
     header can never be served from a stale binary.
     """
+    from .layout import inline_layout
+
     kdir = kernel_dir()
     text = (kdir / f"{stage}.cl").read_text()
-    header = (kdir / "common.h").read_text()
+    header = inline_layout((kdir / "common.h").read_text())
     return re.sub(r'^#include "common\.h"\s*$', lambda _m: header, text, flags=re.M)
 
 
@@ -188,11 +190,12 @@ def _default_context() -> cl.Context:
                         f"{_INSTALL_HINT}")
 
 
-#: Built programs per context, then per (stage, options). Keyed weakly by the context
-#: object: a Renderer made with its own context used to keep that context and its programs
-#: alive for the whole process (~9 MB each; 40 renderers grew RSS by 360 MB).
-_programs: weakref.WeakKeyDictionary[cl.Context, dict[tuple[str, tuple[str, ...]], cl.Program]] \
-    = weakref.WeakKeyDictionary()
+#: Built programs live on their context object, per (stage, options): a pyopencl Program
+#: keeps a reference to its Context, so any cache outside the context (a dict keyed by the
+#: context, even weakly) kept every context alive — ~9 MB per Renderer made with its own
+#: context (40 of them grew RSS by 360 MB). As an attribute, context → programs → context is
+#: an ordinary reference cycle that the garbage collector frees with the context.
+_CACHE_ATTR = "_clraster_programs"
 _lock = threading.Lock()
 
 
@@ -206,7 +209,10 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
         options = (*options, "-DCLRASTER_PORTABLE")
     key = (stage, tuple(options))
     with _lock:
-        per_ctx = _programs.setdefault(ctx, {})
+        per_ctx = getattr(ctx, _CACHE_ATTR, None)
+        if per_ctx is None:
+            per_ctx = {}
+            setattr(ctx, _CACHE_ATTR, per_ctx)
         prg = per_ctx.get(key)
         if prg is None:
             prg = cl.Program(ctx, kernel_source(stage)).build(options=list(options))
@@ -214,8 +220,32 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
         return prg
 
 
-def wait(queue: cl.CommandQueue) -> None:
+def clear_program_cache(ctx: cl.Context) -> None:
+    """Forget the programs built for ``ctx`` (the next `program` call rebuilds them)."""
+    with _lock:
+        if hasattr(ctx, _CACHE_ATTR):
+            delattr(ctx, _CACHE_ATTR)
+
+
+#: (marker event, objects the device may still write) of waits that were interrupted: OpenCL
+#: cannot cancel a running kernel, so host memory it writes (USE_HOST_PTR frame arrays) must
+#: outlive it — freeing it as the exception unwinds let the kernel write into freed memory
+#: (a segfault after Ctrl-C). Pruned as the events complete.
+_in_flight: list[tuple[cl.Event, object]] = []
+
+
+def device_busy() -> bool:
+    """True while work abandoned by an interrupted `wait` may still be running."""
+    _in_flight[:] = [(ev, keep) for ev, keep in _in_flight
+                     if ev.command_execution_status > 0]   # queued/submitted/running
+    return bool(_in_flight)
+
+
+def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     """Block until everything enqueued on ``queue`` has run, interruptibly.
+
+    ``keep``: host memory the enqueued commands use (e.g. the frame's arrays); if the wait
+    is interrupted, it is kept alive until the device is done with it.
 
     ``queue.finish()`` waits inside one C call: the GIL is released, but Python runs its
     signal handlers only when the call returns, so Ctrl-C during a long frame took effect
@@ -228,12 +258,16 @@ def wait(queue: cl.CommandQueue) -> None:
     queue.flush()
     delay = 2e-5
     complete = cl.command_execution_status.COMPLETE
-    while True:
-        status = ev.command_execution_status
-        if status == complete:
-            return
-        if status < 0:   # the command failed: let pyopencl raise its error
-            ev.wait()
-            return
-        time.sleep(delay)
-        delay = min(2.0 * delay, 1e-3)
+    try:
+        while True:
+            status = ev.command_execution_status
+            if status == complete:
+                return
+            if status < 0:   # the command failed: let pyopencl raise its error
+                ev.wait()
+                return
+            time.sleep(delay)
+            delay = min(2.0 * delay, 1e-3)
+    except BaseException:   # KeyboardInterrupt: the device goes on regardless
+        _in_flight.append((ev, keep))
+        raise

@@ -15,6 +15,7 @@ import numpy as np
 from .clusters import clusters_of
 from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
 from .inputs import view_projection
+from .precision import check_depth_range
 
 
 @dataclass(frozen=True)
@@ -222,6 +223,7 @@ def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: b
 
     vp = view_projection(camera, width, height)
     scene, pool = cache.scene_and_pool(target)
+    check_depth_range(camera, width, height, scene)
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
                          keep_cone_culled=keep_cone_culled)
     return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp), vp)

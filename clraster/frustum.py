@@ -40,6 +40,7 @@ from .bvh import (
     classify_extremes,
     sphere_extremes,
 )
+from .inputs import check_mat4
 
 __all__ = [
     "DEFAULT_MARGIN", "PLANE_NAMES", "Visibility", "check_view_proj", "classify_aabbs",
@@ -58,16 +59,7 @@ def check_view_proj(view_proj: npt.ArrayLike) -> np.ndarray:
     Raises:
         ValueError: not convertible to a real (4, 4) matrix, or not finite.
     """
-    try:
-        vp = np.array(view_proj, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"view_proj must be a 4×4 real matrix; could not convert "
-                         f"{type(view_proj).__name__} ({exc})") from exc
-    if vp.shape != (4, 4):
-        raise ValueError(f"view_proj must have shape (4, 4), got shape {vp.shape}")
-    if not np.all(np.isfinite(vp)):
-        raise ValueError("view_proj contains NaN or Inf")
-    return vp
+    return check_mat4(view_proj, "view_proj")
 
 
 def raw_planes(vp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,13 +141,24 @@ def eye_and_flip(vp: np.ndarray) -> tuple[np.ndarray, bool]:
     Raises:
         ValueError: as `eye_from_view_proj`.
     """
-    c = _cofactor_eye(vp)
-    scale = float(np.prod(np.linalg.norm(vp[[0, 1, 3]], axis=1)))
+    # Move the world origin to (about) the eye first: the rows' norms grow with the camera's
+    # distance from the origin, and so the degeneracy test below refused every camera
+    # farther than ~1e6 units (georeferenced scenes). The least-squares point of the x, y
+    # and w rows is the eye of a perspective view and a point of the view axis of an
+    # orthographic one; a translation leaves the answer's meaning unchanged.
+    p3 = vp[[0, 1, 3]]
+    p0 = np.linalg.lstsq(p3[:, :3], -p3[:, 3], rcond=None)[0]
+    if not np.all(np.isfinite(p0)):
+        p0 = np.zeros(3)
+    vp0 = vp.copy()
+    vp0[:, 3] = vp[:, :3] @ p0 + vp[:, 3]
+    c = _cofactor_eye(vp0)
+    scale = float(np.prod(np.linalg.norm(vp0[[0, 1, 3]], axis=1)))
     if not np.linalg.norm(c) > 1e-12 * scale:
         raise ValueError("view_proj has linearly dependent x, y and w rows: it has no eye "
                          "point or viewing direction (a degenerate projection)")
     if abs(c[3]) > 1e-12 * np.linalg.norm(c):
-        return np.append(c[:3] / c[3], 1.0), bool(c[3] > 0.0)
+        return np.append(c[:3] / c[3] + p0, 1.0), bool(c[3] > 0.0)
     d = c[:3] / np.linalg.norm(c[:3])
     return np.append(d, 0.0), bool(np.dot(vp[2, :3], d) < 0.0)
 

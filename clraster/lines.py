@@ -2,7 +2,7 @@
 
 Used to draw a camera's view frustum (`frustum_segments`) and wireframe overlays
 (`mesh_edges` + `overlay`) over frames of the triangle renderer. The OpenCL path is
-`LineRenderer` / `render_lines` (kernels/lines.cl); `clraster.reference.lines.render_lines`
+`LineRenderer` / `render_lines` (kernels/lines.cl); the twin's `reference.lines.render_lines`
 is its NumPy twin with bit-identical outputs.
 
 Conventions (the triangle pipeline's): world → clip ``c = M · [x y z 1]ᵀ`` in float32 with
@@ -54,7 +54,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_size
+from .inputs import check_mat4, check_size
+from .layout import (
+    LS_ACCEPTED,
+    LS_ACCEPTED_DEGENERATE,
+    LS_CLIPPED,
+    LS_CLIPPED_AWAY,
+    LS_CLIPPED_DEGENERATE,
+    LS_INVALID,
+    LS_REJECTED,
+)
 from .mesh import Mesh
 
 if TYPE_CHECKING:
@@ -63,14 +72,7 @@ if TYPE_CHECKING:
 __all__ = ["LineFrame", "LineRenderer", "frustum_segments", "mesh_edges", "overlay",
            "render_lines"]
 
-# Segment status codes (kernels/lines.cl LS_*).
-LS_ACCEPTED = 0  #: trivially accepted, rasterized
-LS_CLIPPED = 1  #: clipped, something left, rasterized
-LS_INVALID = 2  #: an endpoint (or its clip position) is NaN/Inf
-LS_REJECTED = 3  #: trivially rejected: both endpoints outside one plane
-LS_CLIPPED_AWAY = 4  #: clipped, nothing inside the view volume
-LS_ACCEPTED_DEGENERATE = 5  #: trivially accepted, an endpoint at w < FLT_MIN
-LS_CLIPPED_DEGENERATE = 6  #: clipped, an endpoint at w < FLT_MIN
+# Segment status codes LS_* (kernels/lines.cl) are defined in clraster/layout.py, imported above.
 
 #: Segment indices are int32 in ``line_id``, and 0xFFFFFFFF clears the resolve buffer.
 MAX_SEGMENTS = int(np.iinfo(np.int32).max)
@@ -163,20 +165,7 @@ def check_view_proj(view_proj: Any, width: int, height: int) -> np.ndarray:
     ``view_projection(width, height)``, e.g. `clraster.Camera`), validated."""
     if hasattr(view_proj, "view_projection"):
         view_proj = view_proj.view_projection(width, height)
-    try:
-        m = np.asarray(view_proj)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"view_proj must be a (4, 4) matrix or a clraster.Camera; could not "
-                         f"convert {type(view_proj).__name__} ({exc})") from exc
-    if m.dtype.kind not in "iuf":
-        raise ValueError(f"view_proj must be a real (4, 4) matrix (projection @ view) or a "
-                         f"clraster.Camera, got dtype {m.dtype}")
-    if m.shape != (4, 4):
-        raise ValueError(f"view_proj must have shape (4, 4) (projection @ view), got shape "
-                         f"{m.shape}")
-    m = m.astype(np.float64)
-    if not np.all(np.isfinite(m)):
-        raise ValueError("view_proj must be finite; it contains NaN or Inf")
+    m = check_mat4(view_proj, "view_proj (projection @ view, or a clraster.Camera)")
     with np.errstate(over="ignore"):
         m32 = m.astype(np.float32)
     if not np.all(np.isfinite(m32)):
@@ -255,7 +244,7 @@ class LineRenderer:
 
         Returns:
             A `LineFrame`. See the module docstring for the rules; results are deterministic
-            and identical to `clraster.reference.lines.render_lines`.
+            and identical to the twin's `reference.lines.render_lines`.
 
         Raises:
             ValueError: wrong shapes or dtypes, non-finite view_proj or depth_bias, NaN in

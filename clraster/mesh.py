@@ -118,7 +118,8 @@ class Mesh:
 
         Raises:
             FileNotFoundError: `path` does not exist.
-            ValueError: trimesh cannot read it, or it holds no triangle mesh.
+            ValueError: trimesh cannot read it, or it holds no triangle (a point cloud, a
+                lines-only OBJ, a 2-D drawing, a glTF with no mesh).
         """
         import trimesh
 
@@ -133,6 +134,12 @@ class Mesh:
         if not isinstance(tm, trimesh.Trimesh):
             raise ValueError(f"{str(p)!r} holds no triangle mesh (trimesh read a "
                              f"{type(tm).__name__})")
+        if len(tm.faces) == 0:
+            # trimesh's force="mesh" turns points, lines and empty scenes into a Trimesh
+            # with no face: rendering it would give a blank image without a word
+            raise ValueError(f"{str(p)!r} holds no triangles ({len(tm.vertices):,} vertices, "
+                             f"0 faces): it is a point cloud, lines or an empty scene; "
+                             f"clraster renders triangle meshes")
         return cls.from_trimesh(tm)
 
     @classmethod

@@ -24,25 +24,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import numpy as np
 import numpy.typing as npt
 
+# the enum is shared with the NumPy twin, so it lives in the lower layer (clraster.boxes)
+from .boxes import Occlusion, box_geometry
+
 __all__ = ["Occlusion", "OcclusionQuery", "QueryResult", "query", "sphere_boxes"]
-
-
-class Occlusion(IntEnum):
-    """Result of the Hi-Z test of one bounding volume (as Intel MOC's CullingResult)."""
-
-    #: Possibly visible: the box crosses the near plane, has non-finite corners, or some
-    #: pixel it may cover has depth-buffer content at or behind its nearest point.
-    VISIBLE = 0
-    #: Provably hidden: no pixel centre it can cover has a depth-buffer value at or beyond
-    #: its nearest depth (or it covers no pixel centre at all).
-    OCCLUDED = 1
-    #: All 8 corners outside one plane of the view frustum (by more than float32 error).
-    VIEW_CULLED = 2
 
 
 @dataclass(frozen=True)
@@ -132,7 +121,6 @@ class OcclusionQuery:
         import pyopencl as cl
 
         from .inputs import mvp_matrix
-        from .reference.query import box_geometry
 
         d = _check_depth(depth)
         lo, hi = _check_boxes(boxes_min, boxes_max)
@@ -154,9 +142,8 @@ class OcclusionQuery:
             timings["pyramid"] = _ms(pyr.events)
             timings["hiz test"] = _ms([ev])
         pool, fd = box_geometry(lo, hi, vp)
-        samples, evs = self.query_stage.run(q, pool, fd, k, dbuf, w, h)
-        for name, e in evs.items():
-            timings[name] = _ms(e)
+        samples, stage_ms = self.query_stage.run(q, pool, fd, k, dbuf, w, h)
+        timings.update(stage_ms)
         q.finish()
         timings["total (host)"] = (time.perf_counter() - t0) * 1e3
         return QueryResult(samples, hiz, timings)

@@ -9,36 +9,17 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from .config import RasterConfig, guard_band_factors
+from .config import RasterConfig
 from .device import check_process, default_context
-from .drawlist import PlanCache, key_boxes, plan_frame, subset
+from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .frustum import eye_from_view_proj
 from .inputs import check_cull, check_flag, check_size
-from .occlusion import Occlusion
-from .stages.bin import BinStage
-from .stages.geometry import GeometryStage
+from .params import FrameParams, FrameTotals
+from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
-from .stages.raster import RasterOutput, RasterStage
-from .stages.setup import SetupStage
-from .stages.vertex import VertexStage
-
-#: First frame of occlusion culling: at least this many of the nearest clusters (or 1/8 of
-#: those that survive frustum culling, if more) are drawn before the first pyramid.
-OCCLUSION_FIRST_CLUSTERS = 256
-
-
-def eye_position(view_proj: np.ndarray) -> np.ndarray | None:
-    """World eye point of a perspective view-projection, None for an orthographic one."""
-    e = eye_from_view_proj(view_proj)
-    return None if abs(e[3]) < 1e-300 else e[:3] / e[3]
-
-
-def view_direction(view_proj: np.ndarray) -> np.ndarray:
-    """World direction the view looks along (normal of the near plane), unit length."""
-    n = view_proj[3, :3] + view_proj[2, :3]
-    return n / np.linalg.norm(n)
+from .stages.raster import RasterOutput
+from .twophase import OcclusionHistory, two_phase
 
 
 class Renderer:
@@ -72,17 +53,10 @@ class Renderer:
                              f"{dev.max_mem_alloc_size / 2**20:.0f} MiB per buffer")
         self.queue = cl.CommandQueue(
             self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
-        self.vertex = VertexStage(self.context, self.config)
-        self.setup = SetupStage(self.context, self.config)
-        self.binning = BinStage(self.context, self.config)
-        self.raster = RasterStage(self.context, self.config)
-        self.geometry = GeometryStage(self.context)
+        self.chain = StageChain(self.context, self.config)
         self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
-        self._visible: np.ndarray | None = None   # occlusion: visible keys of last frame
-        self._visible_key: tuple | None = None
-        self._boxes: tuple | None = None   # occlusion: world boxes of every key, + rows
-        self._boxes_key: tuple | None = None
+        self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
 
     def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
                cones: bool = True, occlusion: bool = False, overdraw: bool = False,
@@ -137,132 +111,30 @@ class Renderer:
             if fates:
                 fr.fates = ClusterFates.from_plan(plan)
             return fr
-        self.geometry.upload_pool(self.queue, plan.pool)
-        timings = {"cull (host)": t_cull}
+        params = FrameParams.make(w, h, self.config, cull)
+        totals = FrameTotals(timings_ms={"cull (host)": t_cull})
+        occluded = None
         if not occlusion:
-            out, acc = self._pass(fd, cull, None, overdraw, timings)
+            out = self.chain.draw(self.queue, plan.pool, fd, params, totals,
+                                  overdraw=overdraw)
         else:
-            out, acc = self._two_phase(plan, cull, overdraw, timings, counts)
-        stats = FrameStats.from_counts(counts, np.concatenate(acc["status"]),
-                                       clip_pieces=acc["clip_pieces"],
-                                       binned_entries=acc["binned_entries"],
-                                       fragments_tested=acc["tested"],
-                                       fragments_passed=acc["passed"])
-        stats.timings_ms = timings
-        return Frame(out.depth, out.ids, out.bary, stats, overdraw=out.overdraw,
-                     fates=ClusterFates.from_plan(plan, acc.get("occluded")) if fates else None)
+            def draw(draws, into: RasterOutput | None) -> RasterOutput:
+                return self.chain.draw(self.queue, plan.pool, draws, params, totals,
+                                       into=into, overdraw=overdraw)
 
-    def _pass(self, fd, cull: str, into, overdraw: bool, timings: dict, acc: dict | None = None
-              ):
-        """Run vertex → setup → bin → raster over the draws ``fd``; accumulate counts and
-        device times into ``acc`` / ``timings``."""
-        w, h = self.width, self.height
-        acc = acc if acc is not None else {"status": [], "clip_pieces": 0,
-                                           "binned_entries": 0, "tested": 0, "passed": 0}
-        if fd.n_tris == 0:
-            if into is None:   # nothing to draw yet: a cleared frame to continue from
-                into = RasterOutput.allocate(self.context, w, h, overdraw)
-                into.clear()
-            return into, acc
-        q = self.queue
-        kx, ky = guard_band_factors(w, h)
-        self.geometry.upload_frame(q, fd)
-        geo = self.geometry.buffers
-        n_draws, m = fd.draws.shape[0], fd.n_tris
-        ev_v = self.vertex.run(q, geo, n_draws, fd.n_verts, kx, ky, w, h)
-        cb = self.vertex.buffers
-        p, ev_s = self.setup.run(q, cb.clip.buf, cb.outcode.buf, cb.win.buf, geo, n_draws, m,
-                                 w, h, cull, kx, ky)
-        sb = self.setup.buffers
-        e, ev_b = self.binning.run(q, sb.status.buf, sb.clip_count.buf, sb.clip_offset.buf,
-                                   sb.pieces.buf, sb.clip_pieces.buf, m, w, h)
-        bb = self.binning.buffers
-        out, tstats, ev_r = self.raster.run(q, sb.clip_bary.buf, bb.tile_start.buf,
-                                            bb.entries.buf, w, h, into=into,
-                                            overdraw=overdraw)
-        status = np.empty(m, np.uint8)
-        cl.enqueue_copy(q, status, sb.status.buf, is_blocking=True)
-        acc["status"].append(status)
-        acc["clip_pieces"] += p
-        acc["binned_entries"] += e
-        acc["tested"] += int(tstats[:, 0].sum())
-        acc["passed"] += int(tstats[:, 1].sum())
-        for k, evs in (("vertex", [ev_v]), ("setup", ev_s), ("bin", ev_b), ("raster", [ev_r])):
-            timings[k] = timings.get(k, 0.0) + _ms(evs)
-        return out, acc
+            res = two_phase(plan, self._occlusion, draw, self._hiz, totals, counts)
+            out, occluded = res.out, res.occluded_keys
+        return Frame(out.depth, out.ids, out.bary, totals.stats(counts), overdraw=out.overdraw,
+                     fates=ClusterFates.from_plan(plan, occluded) if fates else None)
 
-    def _two_phase(self, plan, cull: str, overdraw: bool, timings: dict, counts: dict):
-        """Two-phase occlusion culling (see `render`); returns (outputs, accumulated counts)
-        and adds the occlusion rows to ``counts``."""
+    def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray
+             ) -> tuple[np.ndarray, float]:
+        """Pyramid of ``out``'s depth and the Hi-Z test of boxes ``rows`` (float32 (6, K))
+        under ``vp32`` (float32 (16,)): `Occlusion` codes uint8 (K,) and device ms."""
         w, h = self.width, self.height
-        pool, fd, scene = plan.pool, plan.frame, plan.scene
-        d = fd.draws
-        keys = pool.instance_key_base[d["instance"]] + (
-            d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
-        # the scene object itself is kept and compared with `is` (not its id(), which a
-        # new scene can reuse once the old one is freed), with its version
-        version = getattr(scene, "version", 0)
-        if self._boxes_key is None or not (self._boxes_key[0] is scene
-                                           and self._boxes_key[1] == version):
-            wlo, whi, wbounded = key_boxes(pool, scene)
-            # + the boxes in the Hi-Z test's layout, float32 (6, K), gathered per frame
-            self._boxes = (wlo, whi, wbounded,
-                           np.ascontiguousarray(np.vstack([wlo.T, whi.T]).astype(np.float32)))
-            self._boxes_key = (scene, version)
-        wlo, whi, wbounded, box_rows = self._boxes
-        bounded = wbounded[keys]
-        rows = np.take(box_rows, keys, axis=1)
-        vp32 = plan.view_proj.astype(np.float32).reshape(-1)
-        hist = self._visible if (self._visible_key is not None
-                                 and self._visible_key[0] is scene
-                                 and self._visible_key[1] == version) else None
-        first = hist[keys] if hist is not None else None
-        if first is None or not first.any():
-            # first frame, or a camera cut (none of last frame's visible clusters is in
-            # view): the nearest clusters, front to back, up to a budget
-            vp_inv_eye = eye_position(plan.view_proj)
-            centre = 0.5 * (wlo[keys] + whi[keys])
-            dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
-                else centre @ view_direction(plan.view_proj)
-            budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)
-            first = np.zeros(d.size, bool)
-            first[np.argsort(dist, kind="stable")[:budget]] = True
-        first |= ~bounded
-        out, acc = self._pass(subset(pool, fd, first), cull, None, overdraw, timings)
-        rest = ~first
-        t0 = time.perf_counter()
-        verdict = np.zeros(d.size, np.uint8)
-        if rest.any():
-            pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
-            verdict[rest], ev = self.pyramid.enqueue_test_rows(
-                self.queue, pyr, np.compress(rest, rows, axis=1), vp32, w, h)
-            timings["pyramid+test"] = _ms([*pyr.events, ev] if ev else pyr.events)
-        second = rest & (verdict == Occlusion.VISIBLE)
-        occluded = rest & ~second
-        out, acc = self._pass(subset(pool, fd, second), cull, out, overdraw, timings, acc)
-        # visibility for the next frame: everything drawn whose box is not hidden in the
-        # final depth buffer
-        drawn = first | second
         pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
-        vis = np.zeros(d.size, bool)
-        if drawn.any():
-            v2, _ = self.pyramid.enqueue_test_rows(self.queue, pyr,
-                                                   np.compress(drawn, rows, axis=1), vp32,
-                                                   w, h)
-            vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
-        total_keys = int(pool.instance_key_base[-1])
-        self._visible = np.zeros(total_keys, bool)
-        self._visible[keys[vis]] = True
-        self._visible_key = (scene, version)
-        timings["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 - timings.get(
-            "pyramid+test", 0.0)
-        counts["clusters_occlusion_culled"] = int(occluded.sum())
-        counts["triangles_occlusion_culled"] = int(
-            pool.clusters[d["cluster"][occluded], 1].sum(dtype=np.int64))
-        counts["clusters_phase1"] = int(first.sum())
-        counts["clusters_phase2"] = int(second.sum())
-        acc["occluded"] = keys[occluded]
-        return out, acc
+        verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h)
+        return verdict, _ms([*pyr.events, ev] if ev else pyr.events)
 
 
 def _ms(events: list[cl.Event]) -> float:

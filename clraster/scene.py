@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,9 +29,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from .inputs import check_mat4
 from .mesh import Mesh
 
-__all__ = ["Instance", "Scene"]
+__all__ = ["Instance", "Scene", "SceneWarning"]
 
 log = logging.getLogger(__name__)
 
@@ -41,21 +43,24 @@ MAX_TRANSFORM_COND = 1e8
 MAX_SCENE_FACES = (1 << 31) - 1
 
 
+class SceneWarning(UserWarning):
+    """Part of a scene file was skipped (e.g. nodes scaled to zero)."""
+
+
+def _zero_scale(transform: np.ndarray) -> bool:
+    """True if the 3×3 part of ``transform`` collapses space to a point (all-zero
+    scale), the way glTF files hide nodes."""
+    lin = np.asarray(transform, np.float64)[:3, :3]
+    return bool(np.all(np.isfinite(lin)) and np.abs(lin).max() == 0.0)
+
+
 def _check_transform(value: npt.ArrayLike | None, what: str) -> np.ndarray:
     """`value` as a validated, read-only float64 (4, 4) affine matrix (identity if None)."""
     if value is None:
         out = np.eye(4)
         out.flags.writeable = False
         return out
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{what} must be a 4×4 real matrix; could not convert "
-                         f"{type(value).__name__} ({exc})") from exc
-    if arr.shape != (4, 4):
-        raise ValueError(f"{what} must have shape (4, 4), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{what} contains NaN or Inf; transforms must be finite")
+    arr = check_mat4(value, what)
     if np.max(np.abs(arr[3] - (0.0, 0.0, 0.0, 1.0))) > 1e-12:
         raise ValueError(f"{what} is not affine: its last row is {arr[3].tolist()}, expected "
                          f"[0, 0, 0, 1] (projective object transforms are not supported)")
@@ -204,7 +209,8 @@ class Scene:
         Raises:
             FileNotFoundError: `path` does not exist.
             ValueError: trimesh cannot read it, it holds no triangle mesh, or a node's
-                transform is invalid.
+                transform is invalid. Nodes whose transform scales to zero (a common way to
+                hide a node) are skipped with a `SceneWarning` instead.
         """
         import trimesh
 
@@ -224,11 +230,17 @@ class Scene:
         scene = cls()
         meshes: dict[str, Mesh] = {}
         skipped = 0
+        hidden: list[str] = []
         for node in loaded.graph.nodes_geometry:
             transform, geom_name = loaded.graph[node]
             geom = loaded.geometry.get(geom_name)
             if not isinstance(geom, trimesh.Trimesh):
                 skipped += 1
+                continue
+            if _zero_scale(transform):
+                # scale 0 is a common way to hide a node (glTF animations, editors): it
+                # draws nothing, so skip it rather than refuse the file
+                hidden.append(str(node))
                 continue
             mesh = meshes.get(geom_name)
             if mesh is None:
@@ -239,6 +251,10 @@ class Scene:
                 raise ValueError(f"{str(p)!r}, node {node!r}: {exc}") from exc
         if skipped:
             log.info("%s: skipped %d node(s) without a triangle mesh", p, skipped)
+        if hidden:
+            warnings.warn(f"{str(p)!r}: skipped {len(hidden)} node(s) scaled to zero (hidden, "
+                          f"they draw nothing): {', '.join(hidden[:5])}"
+                          f"{', ...' if len(hidden) > 5 else ''}", SceneWarning, stacklevel=2)
         if scene.n_instances == 0:
             raise ValueError(f"{str(p)!r} holds no triangle mesh")
         return scene

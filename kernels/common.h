@@ -1,7 +1,11 @@
 /* clraster — types and constants shared by every stage.
  *
- * Mirrors clraster/config.py (outcode bits, status codes, piece flags, PIECE_DTYPE). Change
- * both together. Stage sources say `#include "common.h"`; the host inlines this file.
+ * The constants and records the host shares with the kernels (outcode bits, status codes,
+ * piece flags, Piece, Draw, WinVert, LineRec...) are not written here: clraster/layout.py is
+ * their one source, and the host puts its generated C (clraster.layout.c_header) in place of
+ * the `#include "layout.h"` line below (there is no layout.h file). tests/test_layout.py
+ * checks that the compiler sees the same values, sizes and offsets as NumPy. Stage sources
+ * say `#include "common.h"`; the host inlines this file (clraster.device.kernel_source).
  *
  * Every float expression here is written out operation by operation and FP contraction is
  * off, so the NumPy twin (clraster/reference), doing the same IEEE float32 operations in the
@@ -18,78 +22,33 @@
 #ifndef TILE_LOG2
 #error "TILE_LOG2 must be defined (see clraster/config.py RasterConfig.build_options)"
 #endif
-#ifndef SUBPIXEL_BITS
-#define SUBPIXEL_BITS 8
-#endif
+#include "layout.h"   /* generated from clraster/layout.py: SUBPIXEL_BITS, OC_*, ST_*, PF_*... */
 
 #define TILE_SIZE (1 << TILE_LOG2)
 #define SUB_ONE (1 << SUBPIXEL_BITS)          /* 256: one pixel in 24.8 fixed point */
 #define SUB_HALF (1 << (SUBPIXEL_BITS - 1))   /* pixel centres sit at +0.5 */
 
-/* Outcode bits (vertex stage). Bits 0..5 are the classic 6-bit frustum outcode; 6..9 say the
- * vertex is outside the guard band (x/y clipping needed); bit 10 marks NaN/Inf. */
-#define OC_X_NEG 1
-#define OC_X_POS 2
-#define OC_Y_NEG 4
-#define OC_Y_POS 8
-#define OC_Z_NEG 16
-#define OC_Z_POS 32
-#define OC_FRUSTUM 63
-#define OC_GB_X_NEG 64
-#define OC_GB_X_POS 128
-#define OC_GB_Y_NEG 256
-#define OC_GB_Y_POS 512
-#define OC_INVALID 1024
-#define OC_W_NONPOS 2048   /* w <= 0: no window position; never set alone on a drawn vertex */
-#define OC_NEEDS_CLIP (OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | OC_GB_Y_POS)
-
-/* Per-triangle status (triangle setup). */
-#define ST_RASTER 0
-#define ST_CLIPPED 1
-#define ST_INVALID 2
-#define ST_TRIVIAL_REJECT 3
-#define ST_BACKFACE 4
-#define ST_DEGENERATE 5
-#define ST_NO_SAMPLE 6
-
-#define PF_SWAPPED 1
-#define PF_CLIPPED 2
-#define PF_INDEX_SHIFT 2   /* clipped pieces: flags >> 2 = index into the clipped-bary buffer */
-
-#define CULL_NONE 0
-#define CULL_BACK 1
-#define CULL_FRONT 2
-
-#define MAX_CLIP_VERTICES 9
-
-/* One triangle setup record: 64 bytes. Window coordinates are 24.8 fixed point with y down
- * (row 0 at the top) and the vertex order makes the doubled area positive. bb_min/bb_max are
- * the inclusive pixel ranges of pixel centres inside the bounding box, clamped to the
- * viewport, packed x | y << 16. See config.PIECE_DTYPE. */
-typedef struct {
-    int x[3];
-    int y[3];
-    int bb_min;
-    int bb_max;
-    float z0, dz10, dz20, inv_area;
-    int id;
-    int flags;
-    float r1, r2;   /* w0/w1, w0/w2: perspective correction of screen-space weights */
-} Piece;
-
-/* Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
- * and setup stages run one work-item per (draw, local vertex) and (draw, local triangle):
- * work-item g serves draw g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1). */
-#define CLUSTER_LOG2 7
-#define CLUSTER_MAX (1 << CLUSTER_LOG2)
-
-/* One drawn cluster of one instance (config.DRAW_DTYPE). vert_base / tri_base: where its
+/* Records (typedefs generated from the clraster.layout dtypes named in brackets):
+ *
+ * Piece [PIECE_DTYPE]: one triangle setup record, 64 bytes. Window coordinates are 24.8
+ * fixed point with y down (row 0 at the top) and the vertex order makes the doubled area
+ * positive. bb_min/bb_max are the inclusive pixel ranges of pixel centres inside the bounding
+ * box, clamped to the viewport, packed x | y << 16. r1, r2 = w0/w1, w0/w2: perspective
+ * correction of screen-space weights.
+ *
+ * Draw [DRAW_DTYPE]: one drawn cluster of one instance. vert_base / tri_base: where its
  * vertices / triangles start in this frame's vertex and triangle streams; face_base: triangle
- * id of the instance's face 0. */
-typedef struct {
-    int cluster, instance, vert_base, tri_base, face_base, flags, pad0, pad1;
-} Draw;
-#define DRAW_INSIDE 1   /* cluster inside the frustum by a margin: no clip tests needed */
+ * id of the instance's face 0; flags: DRAW_INSIDE = cluster inside the frustum by a margin,
+ * no clip tests needed.
+ *
+ * Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
+ * and setup stages run one work-item per (draw, local vertex) and (draw, local triangle):
+ * work-item g serves draw g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1).
+ *
+ * WinVert [WINVERT_DTYPE]: a vertex after the viewport transform (viewport_vertex below).
+ *
+ * LineRec [LINE_DTYPE]: one set-up line segment (lines.cl).
+ */
 
 /* Round to nearest, ties to even (rint). On PoCL, __builtin_rintf is LLVM's rint intrinsic,
  * one roundss on x86; PoCL's OpenCL rint() is a software routine that is not inlined and
@@ -129,11 +88,10 @@ inline uint frustum_outcode(float4 c)
     return oc;
 }
 
-/* A vertex after the viewport transform: 24.8 fixed-point window x/y (y down), window depth
- * (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the guard band
- * and per clipped vertex in setup.cl, with this one function, so both are bit-identical. */
-typedef struct { int x, y; float z, iw; } WinVert;
-
+/* A vertex after the viewport transform (WinVert): 24.8 fixed-point window x/y (y down),
+ * window depth (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the
+ * guard band and per clipped vertex in setup.cl, with this one function, so both are
+ * bit-identical. */
 inline WinVert viewport_vertex(float4 c, float hw, float hh)
 {
     WinVert v;

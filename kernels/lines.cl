@@ -64,27 +64,12 @@
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
-/* Segment status (clraster/lines.py LS_*). */
-#define LS_ACCEPTED 0              /* trivially accepted, rasterized */
-#define LS_CLIPPED 1               /* clipped, something left, rasterized */
-#define LS_INVALID 2               /* an endpoint (or its clip position) is NaN/Inf */
-#define LS_REJECTED 3              /* trivially rejected: both outside one plane */
-#define LS_CLIPPED_AWAY 4          /* clipped, nothing inside the view volume */
-#define LS_ACCEPTED_DEGENERATE 5   /* trivially accepted, an endpoint at w < FLT_MIN */
-#define LS_CLIPPED_DEGENERATE 6    /* clipped, an endpoint at w < FLT_MIN */
-
-#define ZMIN_CLEAR 0xFFFFFFFFu
-#define IDMIN_CLEAR 0xFFFFFFFFu
-
-/* One set-up segment (clraster/reference/lines.py LINE_DTYPE), 32 bytes: 24.8 fixed-point
- * window endpoints in canonical order along the major axis (xs/ys the start), the start's
- * window depth and (end − start) depth. Only status is meaningful unless status is
- * LS_ACCEPTED or LS_CLIPPED. */
-typedef struct {
-    int xs, ys, xe, ye;
-    float zs, dz;
-    int status, pad;
-} LineRec;
+/* Segment status LS_* (accepted, clipped, invalid, rejected, clipped away, accepted /
+ * clipped but degenerate), the resolve buffers' clear values ZMIN_CLEAR / IDMIN_CLEAR
+ * (0xFFFFFFFFu) and LineRec come from clraster/layout.py (common.h). LineRec is one set-up
+ * segment (clraster.layout.LINE_DTYPE), 32 bytes: 24.8 fixed-point window endpoints in
+ * canonical order along the major axis (xs/ys the start), the start's window depth and
+ * (end − start) depth. Only status is meaningful unless status is LS_ACCEPTED or LS_CLIPPED. */
 
 /* Clipping order: near, far, left, right, bottom, top (near first: it is the plane that
  * removes w <= 0, where the other planes' distances are least meaningful). */

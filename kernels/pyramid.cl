@@ -17,11 +17,10 @@
  */
 #include "common.h"
 
-/* Levels made per launch: each work-item reduces a (1 << PYR_LOG2)² block of its source
- * level through PYR_LOG2 levels in private memory (the footprint of a level-(s+j) texel,
- * j <= PYR_LOG2, lies inside one aligned block), so 1080p takes 2 launches, 16384² 3.
- * The private scratch is (block/2)² floats = 4 KiB. */
-#define PYR_LOG2 6
+/* Levels made per launch, PYR_LOG2 (clraster/layout.py, 6): each work-item reduces a
+ * (1 << PYR_LOG2)² block of its source level through PYR_LOG2 levels in private memory (the
+ * footprint of a level-(s+j) texel, j <= PYR_LOG2, lies inside one aligned block), so 1080p
+ * takes 2 launches, 16384² 3. The private scratch is (block/2)² floats = 4 KiB. */
 #define PYR_HALF (1 << (PYR_LOG2 - 1))
 
 /* Farthest of two depths, written as a comparison so the twin's np.where matches it bit for
@@ -98,10 +97,8 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
 
 /* ---- Occlusion test --------------------------------------------------------------------
  *
- * Results (clraster.occlusion.Occlusion). */
-#define OCC_VISIBLE 0
-#define OCC_OCCLUDED 1
-#define OCC_VIEW_CULLED 2
+ * Results OCC_VISIBLE, OCC_OCCLUDED, OCC_VIEW_CULLED (clraster.occlusion.Occlusion; values
+ * from clraster/layout.py). */
 
 /* Error model. What the renderer draws for a box is some content inside it (or, for the
  * exact query, the box's own triangles): vertices whose float32 clip positions are the exact
@@ -115,17 +112,18 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
  * Since clip = VP · [p, 1] is affine, a content point's float clip position lies in the
  * convex hull of the corners' error boxes [c − e, c + e]; x/w, y/w and z/w are monotone in
  * each of x, y, z and w on w > 0, so their extremes over that hull are at error-box corners,
- * which is what the bounds below take. */
-#define HIZ_EPS 3.814697265625e-06f           /* 2^-18 = 64u */
-/* Window depth of a drawn fragment is a convex combination of its piece's vertex depths
+ * which is what the bounds below take. HIZ_EPS = 2^-18 = 64u.
+ * (HIZ_EPS, HIZ_DEPTH_SLACK and HIZ_PIXEL_SLACK are defined in clraster/layout.py.)
+ *
+ * Window depth of a drawn fragment is a convex combination of its piece's vertex depths
  * (barycentrics of a covered pixel are >= 0) up to float rounding: the viewport transform
  * (3 roundings of values <= 1) and the interpolation z0 + l1·dz10 + l2·dz20 (l from a
  * rounded int→float and 1/area, l1 + l2 may exceed 1 by a few u): ~20u absolute. 2^-18
- * (64u) is subtracted from the box's nearest depth. */
-#define HIZ_DEPTH_SLACK 3.814697265625e-06f   /* 2^-18 */
-/* Window x/y of a vertex: rounded (~3 ulp of |x_win| <= 2^14 px on screen: < 0.01 px) and
- * then snapped to 1/256 px by rint (<= 1/512 px). 1/16 px covers both several times. */
-#define HIZ_PIXEL_SLACK 0.0625f
+ * (64u) is subtracted from the box's nearest depth: HIZ_DEPTH_SLACK = 2^-18.
+ *
+ * Window x/y of a vertex: rounded (~3 ulp of |x_win| <= 2^14 px on screen: < 0.01 px) and
+ * then snapped to 1/256 px by rint (<= 1/512 px). 1/16 px covers both several times:
+ * HIZ_PIXEL_SLACK = 0.0625. */
 
 /* One work-item per 8 boxes, in float8 lanes (written as vectors because PoCL's implicit
  * vectorization across work-items gave up on this kernel: LLVM's SLP pass packed pairs of

@@ -20,7 +20,7 @@
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
-#define BOX_TRIS 12
+/* BOX_TRIS (12, clraster/layout.py): box b is faces BOX_TRIS·b .. BOX_TRIS·b + 11. */
 
 __kernel void query_tiles(__global const int *tile_start, __global const Piece *entries,
                           const int width, const int height, const int tiles_x,

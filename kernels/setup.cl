@@ -13,7 +13,8 @@
  */
 #include "common.h"
 
-#define POLY_MAX 16   /* > 3 + 6: float rounding can make a clipped polygon a hair non-convex */
+/* POLY_MAX (clraster/layout.py, 16) > 3 + 6: float rounding can make a clipped polygon a hair
+ * non-convex. */
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
@@ -46,9 +47,28 @@ inline double plane_dist(int p, double4 v, double kx, double ky)
  * (not on the 1/256-snapped area, which can flip for sub-pixel triangles) is what lets the
  * cluster normal-cone test be conservative: it culls only clusters whose every triangle
  * faces away by a margin far above float32 rounding. Returns ST_RASTER (keep),
- * ST_BACKFACE or ST_DEGENERATE (det exactly 0: edge-on). */
+ * ST_BACKFACE or ST_DEGENERATE (det exactly 0: edge-on).
+ *
+ * Each vertex is first scaled by a power of two that brings max(|x|, |y|, |w|) near [1, 2):
+ * a positive factor per column keeps the sign of det, and a power of two is exact, so for
+ * ordinary inputs det is the same number times 2^k (same sign, same zero test). Without it
+ * the triple product under- or overflowed float32 for scenes at extreme scales (a mesh
+ * scaled by 1e-15: 5,711 of 5,856 faces "degenerate"; a projection times 1e13: NaN). */
+inline float4 unit_scale(float4 v)
+{
+    /* 2^(127 - E) from the biased exponent E of m, as bits (not ldexp/ilogb, which
+     * Oclgrind evaluates differently): E = 0 (zero, subnormal) gives 2^127, E = 254 is
+     * clamped to 2^-126 so the factor itself stays a normal float. */
+    float m = fmax(fmax(fabs(v.x), fabs(v.y)), fabs(v.w));
+    int k = clamp(254 - (int)((as_uint(m) >> 23) & 0xffu), 1, 254);
+    return v * as_float((uint)k << 23);
+}
+
 inline int facing(float4 a, float4 b, float4 c, int cull)
 {
+    a = unit_scale(a);
+    b = unit_scale(b);
+    c = unit_scale(c);
     float det = (a.x * (b.y * c.w - b.w * c.y) - a.y * (b.x * c.w - b.w * c.x))
                 + a.w * (b.x * c.y - b.y * c.x);
     if (det == 0.0f) return ST_DEGENERATE;

@@ -1,11 +1,31 @@
-"""Bad input: non-finite geometry is dropped and counted (never an exception), malformed
-arguments raise ValueError with the same behaviour in the OpenCL renderer and the twin, and
-a renderer that refused an input still renders correctly afterwards.
+"""Bad input, the whole catalogue in one place, with the outcome each case must have.
+
+| input | outcome |
+|---|---|
+| NaN/Inf vertices, clip positions beyond float32 | dropped, counted in stats.invalid |
+| empty meshes | an empty frame |
+| malformed meshes, sizes, lenses, cameras, cull, tile sizes | ValueError, twin too |
+| non-bool flags (occlusion="no", frustum=1), cull=[] | ValueError naming the option |
+| a file with no triangle (points, lines, DXF, GLB of points) | ValueError: no triangles |
+| a glTF node scaled to zero | skipped with a SceneWarning; the rest renders |
+| a camera ~1e6–1e7 from the origin (georeferenced) | accepted and rendered |
+| a mesh scaled by 1e-15 / 1e15, a projection scaled by 1e±13 | the same image as unscaled |
+| near so small that float32 depth collapses (1e-30, 1e-7/1e7) | PrecisionWarning naming near |
+| PYOPENCL_CTX: the Oclgrind simulator / nothing | SimulatorWarning / NoDeviceError |
+| CLI: --ids/--depth not .npy, a folder, no extension | exit 1 before rendering |
+| CLI: out of memory, Ctrl-C | one line, exit 1 / exit 130 (tests/test_processes.py) |
+
+A renderer that refused an input still renders correctly afterwards. Threads, fork and leaks:
+tests/test_processes.py.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -15,6 +35,7 @@ from conftest import (
     MatrixCamera,
     assert_frames_equal,
     get_renderer,
+    load_shared_mesh,
     perspective,
     render_both,
     render_ref,
@@ -217,3 +238,243 @@ def test_renderer_still_good_after_errors():
     a = r.render(GOOD, NDC_CAMERA, cull="none")
     assert_frames_equal(a, render_ref(GOOD, NDC_CAMERA, W, H), "after errors")
     assert a.mask.sum() > 20
+
+
+# --- options that must be booleans ---------------------------------------------------------
+
+@pytest.mark.parametrize("kw", [dict(occlusion="no"), dict(frustum=1), dict(cones=None),
+                                dict(overdraw="yes"), dict(fates=[])])
+def test_flags_must_be_bool(kw):
+    (name,) = kw
+    with pytest.raises(ValueError, match=f"{name} must be True or False"):
+        get_renderer(W, H).render(GOOD, NDC_CAMERA, cull="none", **kw)
+
+
+@pytest.mark.parametrize("cull", [[], {}, ("back",)])
+def test_unhashable_cull(cull):
+    both_raise(cull=cull, match="cull must be one of")
+
+
+# --- files with no triangle ----------------------------------------------------------------
+
+def _no_triangle_files(tmp_path):
+    import trimesh
+
+    pts = np.random.default_rng(0).random((10, 3))
+    files = {}
+    files["points.ply"] = tmp_path / "points.ply"
+    trimesh.PointCloud(pts).export(files["points.ply"])
+    files["lines.obj"] = tmp_path / "lines.obj"
+    files["lines.obj"].write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2\nl 2 3\n")
+    files["line.dxf"] = tmp_path / "line.dxf"
+    files["line.dxf"].write_text("0\nSECTION\n2\nENTITIES\n0\nLINE\n8\n0\n10\n0.0\n20\n0.0\n"
+                                 "30\n0.0\n11\n1.0\n21\n1.0\n31\n0.0\n0\nENDSEC\n0\nEOF\n")
+    files["points.glb"] = tmp_path / "points.glb"
+    trimesh.Scene([trimesh.PointCloud(pts)]).export(files["points.glb"])
+    return files
+
+
+@pytest.mark.parametrize("name", ["points.ply", "lines.obj", "line.dxf", "points.glb"])
+def test_load_file_without_triangles(tmp_path, name):
+    from clraster.scene import Scene
+
+    path = _no_triangle_files(tmp_path)[name]
+    with pytest.raises(ValueError, match="holds no triangle"):
+        Mesh.load(path)
+    with pytest.raises(ValueError, match="holds no triangle"):
+        Scene.load(path)
+
+
+def test_cli_file_without_triangles_writes_nothing(tmp_path, capsys):
+    from clraster.cli import main
+
+    path = _no_triangle_files(tmp_path)["points.ply"]
+    out = tmp_path / "x.png"
+    rc = main(["render", str(path), "--size", "32x24", "--out", str(out),
+               "--eye", "0,0,3", "--target", "0,0,0"])
+    assert rc == 1 and not out.exists()
+    err = capsys.readouterr().err
+    assert "holds no triangles" in err and "camera" not in err
+
+
+def test_gltf_node_scaled_to_zero_is_skipped(tmp_path):
+    import trimesh
+
+    from clraster.scene import Scene, SceneWarning
+
+    box = trimesh.creation.box()
+    tms = trimesh.Scene()
+    tms.add_geometry(box, node_name="shown", geom_name="box")
+    hide = np.diag([0.0, 0.0, 0.0, 1.0])
+    hide[:3, 3] = (5.0, 0.0, 0.0)
+    tms.add_geometry(box, node_name="hidden", geom_name="box", transform=hide)
+    path = tmp_path / "hidden.glb"
+    tms.export(path)
+    with pytest.warns(SceneWarning, match="scaled to zero.*hidden"):
+        scene = Scene.load(path)
+    assert scene.n_instances == 1
+    cam = Camera.look_at((3, 2, 4), (0, 0, 0), near=0.1, far=20)
+    a = get_renderer(W, H).render(scene, cam)
+    b = get_renderer(W, H).render(Mesh.from_trimesh(box), cam)
+    np.testing.assert_array_equal(a.triangle_id, b.triangle_id)
+    assert a.mask.sum() > 10
+
+
+# --- far from the origin -------------------------------------------------------------------
+
+PYRAMID_V = np.array([[-10, 0, -10], [10, 0, -10], [10, 0, 10], [-10, 0, 10], [0, 8, 0]],
+                     np.float64)
+PYRAMID_F = [[0, 2, 1], [0, 3, 2], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+
+
+@pytest.mark.parametrize("offset", [(4.5e5, 12.0, 5.3e6), (-2e7, 0.0, 3e6), (1e6, 1e6, 1e6)])
+def test_camera_far_from_origin(offset):
+    """Georeferenced coordinates (UTM: ~1e6 m) used to be refused as "not invertible"; the
+    image must match the same scene centred at the origin up to the float32 rounding of the
+    far-off vertices (exact rendering far out: the precision issue)."""
+    o = np.array(offset)
+    cam = Camera.look_at(o + (30, 20, 30), o + (0, 2, 0), near=0.5, far=500)
+    np.testing.assert_allclose(cam.eye, o + (30, 20, 30), rtol=0, atol=1e-6)
+    view = cam.view.copy()
+    same = Camera.from_matrices(view, cam.projection(W, H))   # a rigid view, raw matrices
+    np.testing.assert_allclose(same.eye, cam.eye, rtol=0, atol=1e-6)
+    r = get_renderer(64, 48)
+    far = r.render(Mesh(PYRAMID_V + o, PYRAMID_F), cam)
+    near = r.render(Mesh(PYRAMID_V, PYRAMID_F),
+                    Camera.look_at((30, 20, 30), (0, 2, 0), near=0.5, far=500))
+    assert near.mask.sum() > 200
+    assert (far.triangle_id == near.triangle_id).mean() > 0.97
+
+
+def test_singular_view_still_refused():
+    with pytest.raises(ValueError, match="not invertible"):
+        Camera.from_matrices(np.diag([1.0, 1.0, 0.0, 1.0]), np.eye(4))
+
+
+# --- float32 limits: scale-invariant where possible, a warning where not -----------------
+
+def test_extreme_scales_render_like_unit_scale():
+    """The facing determinant is homogeneous: scaling the scene (or the projection) must not
+    change the image; in float32 the raw triple product underflowed at 1e-15 (5,711 of 5,856
+    faces "degenerate") and overflowed for a projection × 1e13."""
+    spot = load_shared_mesh("spot.ply")
+    w, h = 96, 72
+    lo, hi = spot.bounds()
+    base_cam = Camera.framing(lo, hi, aspect=w / h)
+    base = render_both(spot, base_cam, w, h, cull="back")
+    assert base[0].mask.sum() > 500
+    small = Mesh(spot.vertices.astype(np.float64) * 1e-15, spot.faces)
+    cam = Camera.framing(lo * 1e-15, hi * 1e-15, aspect=w / h)
+    for fr in render_both(small, cam, w, h, cull="back"):
+        assert fr.stats.degenerate == base[0].stats.degenerate
+        np.testing.assert_array_equal(fr.triangle_id, base[0].triangle_id)
+    vp = base_cam.view_projection(w, h)
+    for k in (1e13, 1e-13, 1e30):
+        for fr in render_both(spot, MatrixCamera(vp * k), w, h, cull="back"):
+            np.testing.assert_array_equal(fr.triangle_id, base[0].triangle_id)
+
+
+@pytest.mark.parametrize("near, far", [(1e-30, 100.0), (1e-7, 1e7)])
+def test_depth_collapse_warns(near, far):
+    from clraster.precision import PrecisionWarning
+
+    spot = load_shared_mesh("spot.ply")
+    cam = Camera.look_at((1.5, 1.0, 2.5), (0, 0.1, 0), near=near, far=far)
+    with pytest.warns(PrecisionWarning, match="larger near plane"):
+        get_renderer(W, H).render(spot, cam)
+    with pytest.warns(PrecisionWarning, match="larger near plane"):
+        reference.render(spot, cam, W, H)
+
+
+@pytest.mark.filterwarnings("error::UserWarning")
+@pytest.mark.parametrize("near, far", [(0.1, 100.0), (1e-3, 1e5), (1e-5, 10.0)])
+def test_ordinary_depth_range_does_not_warn(near, far):
+    spot = load_shared_mesh("spot.ply")
+    cam = Camera.look_at((1.5, 1.0, 2.5), (0, 0.1, 0), near=near, far=far)
+    assert get_renderer(W, H).render(spot, cam).mask.any()
+
+
+# --- device selection ----------------------------------------------------------------------
+
+def _device_probe(env_value: str) -> subprocess.CompletedProcess:
+    code = ("import warnings, sys\n"
+            "warnings.simplefilter('always')\n"
+            "from clraster.device import default_context\n"
+            "try:\n"
+            "    print(default_context().devices[0].platform.name)\n"
+            "except Exception as e:\n"
+            "    print(type(e).__name__, e); sys.exit(3)\n")
+    env = dict(os.environ, PYOPENCL_CTX=env_value)
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+
+
+def test_pyopencl_ctx_selecting_simulator_warns():
+    import pyopencl as cl
+
+    names = [p.name for p in cl.get_platforms()]
+    idx = [i for i, n in enumerate(names) if "oclgrind" in n.lower()]
+    if not idx:
+        pytest.skip("Oclgrind is not installed")
+    res = _device_probe(str(idx[0]))
+    assert res.returncode == 0, res.stderr
+    assert "SimulatorWarning" in res.stderr and "1000x slower" in res.stderr
+
+
+def test_pyopencl_ctx_garbage_names_the_platforms():
+    res = _device_probe("no-such-platform:7")
+    assert res.returncode == 3
+    assert "NoDeviceError" in res.stdout and "platforms here are" in res.stdout
+    assert "Zen" not in res.stdout   # the unrelated LLVM hint is gone
+
+
+# --- command line: output paths and errors ----------------------------------------------------
+
+@pytest.mark.parametrize("extra, what", [
+    (["--ids", "{d}/ids"], "must end in .npy"),
+    (["--depth", "{d}/depth.png"], "must end in .npy"),
+    (["--ids", "{d}"], "is a folder"),
+    (["--depth", "{d}/missing/depth.npy"], "does not exist"),
+])
+def test_cli_output_paths_checked_before_rendering(tmp_path, capsys, extra, what):
+    from clraster.cli import main
+
+    out = tmp_path / "x.png"
+    args = ["render", "example", "--size", "32x24", "--out", str(out)]
+    rc = main(args + [e.format(d=tmp_path) for e in extra])
+    err = capsys.readouterr().err
+    assert rc == 1 and what in err
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_cli_out_without_extension(tmp_path, capsys):
+    from clraster.cli import main
+
+    rc = main(["render", "example", "--size", "32x24", "--out", str(tmp_path / "image")])
+    assert rc == 1 and "no file extension" in capsys.readouterr().err
+
+
+def test_cli_npy_written_where_told(tmp_path):
+    from clraster.cli import main
+
+    ids, depth = tmp_path / "ids.npy", tmp_path / "d.NPY"
+    assert main(["render", "example", "--size", "32x24", "--out", str(tmp_path / "x.png"),
+                 "--ids", str(ids), "--depth", str(depth)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.NPY", "ids.npy", "x.png"]
+    assert np.load(ids).shape == (24, 32) and np.load(depth).dtype == np.float32
+
+
+def test_cli_memory_error_is_one_line(monkeypatch, capsys):
+    """Out of memory (host or a device buffer past its limit) is a message, not a
+    traceback; MemoryError is what GrowBuffer raises for an oversized device buffer."""
+    from clraster import cli
+    from clraster.renderer import Renderer
+
+    def oom(*_a, **_k):
+        raise MemoryError("this frame needs a 5,063 MiB bin list")
+
+    monkeypatch.setattr(Renderer, "render", oom)
+    rc = cli.main(["render", "example", "--size", "32x24", "--out", "/tmp/unused.png"])
+    err = capsys.readouterr().err
+    assert rc == 1 and err.count("\n") == 1 and "5,063 MiB" in err and "--size" in err

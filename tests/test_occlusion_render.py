@@ -37,6 +37,12 @@ truly invisible clusters of the draw list that a second frame culls
 
 A regression test pins a fixed bug: the occlusion state (world boxes of the clusters, last
 visible set) must follow the scene object, not its id(), which a new scene can reuse.
+
+The NumPy twin runs the same two-phase schedule (`clraster.twophase`) with its own pyramid and
+Hi-Z test: one `clraster.reference.Renderer` fed the same camera path as one OpenCL
+`Renderer` gives the same frames (ids and depth exactly) and the same counts, occlusion rows
+(clusters/triangles occlusion-culled, phase 1, phase 2) included — on random scenes and
+instance grids of real meshes, along paths with camera cuts (the first-frame fallback).
 """
 
 from __future__ import annotations
@@ -47,9 +53,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MatrixCamera, get_renderer, window_mesh
+from conftest import (
+    MatrixCamera,
+    assert_frames_equal,
+    get_renderer,
+    load_shared_mesh,
+    window_mesh,
+)
 
 from clraster import Camera, Mesh, RasterConfig, Renderer
+from clraster import reference as twin
 from clraster.scene import Scene
 from clraster.scenes import (
     instance_grid,
@@ -813,3 +826,160 @@ def test_occlusion_efficiency_plant_100k():
     assert not (s["culled"] & ~s["box_invisible"]).any()
     print("\nplant(100_000) 320x240, corridor:\n" + bench.report(m))
     assert 0.0 <= m["efficiency"] <= 1.0
+
+
+# -- 6. the NumPy twin runs the same schedule ---------------------------------------------
+
+def check_twin_path(target, cameras, *, size=SIZE, cull="back", tile_log2: int = 4,
+                    context: str = "") -> list:
+    """One OpenCL renderer and one twin renderer (`clraster.reference.Renderer`), both with
+    occlusion culling, fed ``cameras`` in order: every frame equal (ids and depth exactly,
+    barycentrics within 1e-5) with equal counts, occlusion rows included. Returns the
+    OpenCL frames."""
+    config = RasterConfig(tile_log2=tile_log2)
+    r = Renderer(*size, config=config)
+    t = twin.Renderer(*size, config=config)
+    frames = []
+    for k, cam in enumerate(cameras):
+        a = r.render(target, cam, cull=cull, occlusion=True)
+        b = t.render(target, cam, cull=cull, occlusion=True)
+        assert_frames_equal(a, b, f"{context} frame {k} (OpenCL vs twin)")
+        frames.append(a)
+    return frames
+
+
+#: x offset of the second site of `two_sites`: far enough that a camera on one site sees
+#: nothing of the other (far plane 80).
+SITE_DX = 200.0
+
+
+def two_sites(a: Scene, b: Scene) -> Scene:
+    """Scene ``a`` at the origin and scene ``b`` moved by SITE_DX along x."""
+    t = np.eye(4)
+    t[0, 3] = SITE_DX
+    return Scene([(i.mesh, i.transform) for i in a.instances]
+                 + [(i.mesh, t @ i.transform) for i in b.instances])
+
+
+def site_path(n: int, radius: float, site: int) -> list:
+    """n cameras orbiting 30 degrees around the centre of site 0 or 1, looking at it."""
+    centre = np.array([SITE_DX * site, 0.0, 0.0])
+    return orbit(centre, centre + (0.0, 0.3 * radius, radius), n, 30.0, near=0.05,
+                 far=6.0 * radius)
+
+
+@pytest.fixture()
+def fallbacks(monkeypatch):
+    """Counts the first-frame fallbacks of the two-phase schedule (both renderers): a list
+    that grows by one per fallback (a first frame or a camera cut)."""
+    import clraster.twophase as twophase
+
+    calls: list[int] = []
+    real = twophase.eye_position
+
+    def spy(view_proj):
+        calls.append(1)
+        return real(view_proj)
+
+    monkeypatch.setattr(twophase, "eye_position", spy)
+    return calls
+
+
+@pytest.mark.parametrize("cull", ["back", "none"])
+@pytest.mark.parametrize("seed", range(3))
+def test_twin_random_scene_path_with_cuts(seed, cull, fallbacks):
+    """Two random scenes far apart; the camera path looks at the first, cuts to the second
+    (none of last frame's visible clusters is drawn: the nearest-first fallback) and back."""
+    # no degenerate instances: a cluster with non-finite vertices is drawn from every
+    # viewpoint (it has no box to cull), so it would carry the history across the cut
+    scene = two_sites(random_scene(seed, 64, extent=4.0, mirrors=seed == 1, degenerate=False),
+                      random_scene(seed + 10, 64, extent=4.0, degenerate=False))
+    cams = site_path(3, 12.0, 0) + site_path(2, 12.0, 1) + site_path(2, 12.0, 0)[1:]
+    frames = check_twin_path(scene, cams, cull=cull, context=f"seed {seed} {cull}")
+    assert len(fallbacks) == 2 * 3   # frame 0 and the two cuts, on both sides
+    assert sum(f.stats.clusters_occlusion_culled for f in frames) > 0
+
+
+def test_twin_big_random_scene_first_frame():
+    """More clusters than the first-frame budget: phase 1 is the nearest 256, the rest are
+    Hi-Z tested on the first frame — on both sides alike."""
+    scene = random_scene(1, 400, extent=7.0, mirrors=True)
+    cam = Camera.look_at((0.0, 1.0, 24.0), (0.0, 0.0, 0.0), fov_y=50.0, near=0.1, far=80.0)
+    (f1, _) = check_twin_path(scene, [cam, cam], context="400 instances")
+    assert 256 <= f1.stats.clusters_phase1 < f1.stats.clusters_drawn
+
+
+def test_twin_orthographic_path():
+    scene = random_scene(2, 32)
+    cams = [ortho_camera((-12.0 + 4 * k, 4.0, 12.0), (0.0, 0.0, 0.0), 6.0, SIZE[0] / SIZE[1],
+                         0.5, 40.0) for k in range(4)]
+    check_twin_path(scene, cams, context="ortho")
+
+
+@pytest.mark.parametrize("name", ["spot.ply", "stanford_bunny.ply"])
+def test_twin_real_mesh_grids_path_with_cuts(name, fallbacks):
+    """Instance grids of a real mesh (copies hide each other) at two sites; an orbit around
+    the first, a cut to the second and back; odd size and 8 px tiles."""
+    mesh = load_shared_mesh(name)
+    lo, hi = mesh.bounds()
+    mesh_size = float(np.max(np.asarray(hi) - lo))
+    grid = instance_grid(mesh, 4, 1, 4, spacing=1.3)
+    # scale the grid to ~6 units across, centred, so both sites share the camera paths
+    glo, ghi = grid.bounds()
+    s = 6.0 / float(np.max(np.asarray(ghi) - glo))
+    t = np.diag([s, s, s, 1.0])
+    t[:3, 3] = -s * (np.asarray(glo) + ghi) / 2
+    grid = Scene([(i.mesh, t @ i.transform) for i in grid.instances])
+    scene = two_sites(grid, grid)
+    cams = site_path(3, 9.0, 0) + site_path(2, 9.0, 1) + site_path(2, 9.0, 0)[1:]
+    frames = check_twin_path(scene, cams, size=(101, 67), tile_log2=3,
+                             context=f"{name} ({mesh_size:.3g} units)")
+    assert len(fallbacks) == 2 * 3
+    assert sum(f.stats.clusters_occlusion_culled for f in frames) > 0
+
+
+def test_twin_bare_mesh_target():
+    """A bare Mesh target (each renderer makes and keeps a scene for it) over a path: the
+    history carries from frame to frame on both sides."""
+    mesh = load_shared_mesh("spot.ply")
+    lo, hi = mesh.bounds()
+    centre = (np.asarray(lo) + hi) / 2
+    path = orbit(centre, centre + (0.0, 0.5, 2.5), 4, 90.0, near=0.05, far=20.0)
+    frames = check_twin_path(mesh, path, size=(80, 60), context="spot mesh")
+    assert all(f.stats.clusters_phase1 > 0 for f in frames)
+
+
+def test_twin_render_function_is_a_first_frame():
+    """`clraster.reference.render(..., occlusion=True)` keeps no history: it equals a fresh
+    OpenCL renderer's first occlusion frame, and the same image as without occlusion."""
+    scene = random_scene(4, 400, extent=7.0)
+    cam = Camera.look_at((0.0, 1.0, 24.0), (0.0, 0.0, 0.0), fov_y=50.0, near=0.1, far=80.0)
+    a = occ_renderer().render(scene, cam, occlusion=True)
+    b = twin.render(scene, cam, *SIZE, occlusion=True)
+    assert_frames_equal(a, b, "first frame")
+    assert b.stats.clusters_phase1 >= 256
+    off = twin.render(scene, cam, *SIZE)
+    assert_same_image(b, off, "twin occlusion on vs off")
+
+
+def test_camera_cut_close_ups_of_one_mesh():
+    """The reported crash: the dragon's head in close-up, then its tail — none of the
+    clusters visible in the first frame is drawn in the second, and the first phase was
+    empty ("AssertionError: a first pass always has triangles", then on every later frame
+    of that view, even after a plain frame). Each frame must equal the frame without
+    occlusion culling."""
+    mesh = load_shared_mesh("stanford_dragon_res2.ply")
+    lo, hi = mesh.bounds()
+    c = (np.asarray(lo) + hi) / 2
+    head = Camera.look_at(c + (-0.09, 0.05, 0.1), c + (-0.09, 0.05, 0.0), fov_y=10.0,
+                          near=0.01, far=10.0)
+    tail = Camera.look_at(c + (0.09, -0.02, 0.1), c + (0.09, -0.02, 0.0), fov_y=10.0,
+                          near=0.01, far=10.0)
+    r = Renderer(160, 120)
+    for k, cam in enumerate((head, tail, tail, head, tail)):
+        if k == 3:
+            r.render(mesh, tail)   # a plain frame between two cuts
+        on = r.render(mesh, cam, occlusion=True)
+        off = r.render(mesh, cam)
+        assert on.mask.sum() > 5000
+        assert_same_image(on, off, f"frame {k}")

@@ -46,6 +46,7 @@ from clraster.bench.spec import (
     mesh_path,
     parse_count,
 )
+from clraster.inputs import parse_size
 
 #: First line of ``clraster bench --help``.
 DESCRIPTION = ("Benchmark harness: the OpenCL pipeline vs its NumPy twin (and Mesa llvmpipe), "
@@ -118,16 +119,6 @@ class Progress:
 # Arguments
 # =======================================================================================
 
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"sizes must be positive, got {text!r}")
-    return w, h
-
-
 def _limit(text: str) -> int:
     """--twin-max-triangles: a count (20K, 6M) or 'none' (-1: no limit)."""
     if text.strip().lower() == "none":
@@ -176,10 +167,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of triangles,pixels,culling (default all)")
     p.add_argument("--scenes", type=_list, help="scenes of the triangles sweep (comma-"
                    f"separated; default {','.join(FULL_TRIANGLE_SCENES)})")
-    p.add_argument("--size", type=_size, help="image size of the triangles and culling "
+    p.add_argument("--size", type=parse_size, help="image size of the triangles and culling "
                                               "sweeps (default 1920x1080)")
     p.add_argument("--pixels-scene", help="scene of the pixels sweep (default dragon)")
-    p.add_argument("--sizes", type=lambda t: [_size(s) for s in _list(t)],
+    p.add_argument("--sizes", type=lambda t: [parse_size(s) for s in _list(t)],
                    help=f"sizes of the pixels sweep (default {','.join(FULL_PIXEL_SIZES)})")
     p.add_argument("--culling-scene", help="scene of the culling sweep (default "
                                            "plant:10.1M@inside, ≥ 10M triangles)")
@@ -228,7 +219,7 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.scenes = a.scenes or list(FULL_TRIANGLE_SCENES)
         a.size = a.size or (1920, 1080)
         a.pixels_scene = a.pixels_scene or "dragon"
-        a.sizes = a.sizes or [_size(s) for s in FULL_PIXEL_SIZES]
+        a.sizes = a.sizes or [parse_size(s) for s in FULL_PIXEL_SIZES]
         a.culling_scene = a.culling_scene or "plant:10.1M@inside"
         a.repeat = a.repeat or 5
         a.startup_scene = a.startup_scene or (

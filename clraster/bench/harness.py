@@ -21,9 +21,9 @@ noise hits both alike; medians. A frame's time is the wall time of ``render()`` 
 culling and the read-back of depth, ids and barycentrics included); per-stage times are
 the device times from OpenCL profiling events (``frame.stats.timings_ms``). The twin gets a
 time budget per configuration (``--twin-budget``): once spent, it stops after ≥ 1 timed run
-and the JSON says how many it made. The twin has no occlusion culling: in the occlusion
-configuration it renders the frustum mode (the same image). The OpenCL and twin images are
-compared (triangle ids identical, largest depth difference). The llvmpipe peer
+and the JSON says how many it made. The twin renders the same culling mode, occlusion
+culling included (it runs the same two-phase schedule, `clraster.twophase`). The OpenCL and
+twin images are compared (triangle ids identical, largest depth difference). The llvmpipe peer
 (`clraster.bench.peer_llvmpipe`) draws the whole scene with back-face culling once per
 (scene, size), on the same view-projection; its coverage is compared with clraster's.
 

@@ -5,8 +5,9 @@ Per configuration (:func:`run_config`): one Renderer, warm-up frames of the Open
 (occlusion gets ``--occlusion-warmup`` more, so its visible set from the previous frame is
 warm) and one of the twin, then ``--repeat`` rounds interleaved (OpenCL, twin, OpenCL, twin,
 ...), so machine noise hits both alike; medians. The twin gets a time budget per configuration
-(``--twin-budget``) and has no occlusion culling (:data:`~clraster.bench.spec.TWIN_MODE`). The
-llvmpipe peer (:class:`PeerRunner`) runs once per (scene, size).
+(``--twin-budget``) and renders the same culling mode (:data:`~clraster.bench.spec.TWIN_MODE`),
+through a `clraster.reference.Renderer` of its own, whose occlusion history its warm-up
+frame makes warm. The llvmpipe peer (:class:`PeerRunner`) runs once per (scene, size).
 
 The probes (:func:`measure_startup`, :func:`measure_memory`) each run a fresh Python process,
 ``python -m clraster.bench.cli --probe JSON``, whose body is :func:`probe`; it prints one
@@ -80,10 +81,9 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     w, h = cfg.width, cfg.height
     cam = sc.camera(w, h, cfg.scene.view)
     kw = MODES[cfg.mode]
-    # The twin's culling mode for this configuration: occlusion rows render the frustum
-    # mode on the twin (spec.TWIN_MODE), without the occlusion flag.
+    # The twin's culling mode for this configuration (spec.TWIN_MODE: the same one)
     twin_mode = TWIN_MODE[cfg.mode]
-    twin_kw = {k: v for k, v in MODES[twin_mode].items() if k != "occlusion"}
+    twin_kw = MODES[twin_mode]
     rec: dict[str, Any] = {
         "id": cfg.id, "sweeps": list(cfg.sweeps), "scene": sc.describe(cfg.scene),
         "triangles": sc.triangles, "size": [w, h], "pixels": w * h, "mode": cfg.mode,
@@ -110,8 +110,12 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     twin_spent = 0.0
     if twin_skip is None:
         note("twin warm-up")
+        # one twin Renderer per configuration, as on the OpenCL side: it keeps the scene's
+        # geometry pool and, in occlusion rows, last frame's visible set (warm after this
+        # warm-up frame; one is enough, as the camera does not move)
+        tw = clraster.reference.Renderer(w, h)
         t0 = time.perf_counter()
-        g = clraster.reference.render(sc.target, cam, w, h, cull=a.cull, **twin_kw)
+        g = tw.render(sc.target, cam, cull=a.cull, **twin_kw)
         twin_spent = time.perf_counter() - t0
         twin_warm_ms.append(twin_spent * 1e3)
 
@@ -128,7 +132,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
                 budget_hit = True
                 continue
             t0 = time.perf_counter()
-            g = clraster.reference.render(sc.target, cam, w, h, cull=a.cull, **twin_kw)
+            g = tw.render(sc.target, cam, cull=a.cull, **twin_kw)
             dt = time.perf_counter() - t0
             twin_spent += dt
             tw_ms.append(dt * 1e3)
@@ -355,9 +359,11 @@ def _probe_memory(task: dict) -> dict:
         for _ in range(2 if kw.get("occlusion") else 1):
             r.render(sc.target, cam, cull=task["cull"], **kw)
     else:
-        # the twin's mode, as in run_config: occlusion rows render the frustum mode
-        tkw = {k: v for k, v in MODES[TWIN_MODE[task["mode"]]].items() if k != "occlusion"}
-        clraster.reference.render(sc.target, cam, w, h, cull=task["cull"], **tkw)
+        # the twin's mode, as in run_config (two frames in occlusion mode, as above)
+        tkw = MODES[TWIN_MODE[task["mode"]]]
+        tw = clraster.reference.Renderer(w, h)
+        for _ in range(2 if tkw.get("occlusion") else 1):
+            tw.render(sc.target, cam, cull=task["cull"], **tkw)
     peak_render = _peak_rss_mib()
     peak = max(v for v in (peak_load, peak_render) if v is not None) \
         if (peak_load or peak_render) else None

@@ -182,8 +182,9 @@ def _md_configs(res: dict) -> list[str]:
             notes.append(f"- {c['id']}: llvmpipe error: {c['peer']['error']}")
         if c["twin"].get("skipped"):
             notes.append(f"- {c['id']}: {c['twin']['skipped']}")
-    L += ["", "[frustum] after a twin time: the twin has no occlusion culling and rendered the "
-          "frustum mode (same image). ⏱: the twin's time budget "
+    mixed = any(c["twin"].get("mode", c["mode"]) != c["mode"] for c in res["configs"])
+    L += ["", ("[frustum] after a twin time: the twin had no occlusion culling and rendered "
+               "the frustum mode (same image). " if mixed else "") + "⏱: the twin's time budget "
           f"({res['settings']['twin_budget_s']:g} s per configuration) was spent; (runs) is "
           "how many timed frames it made. Occlusion configurations are timed after "
           f"{res['settings']['warmup'] + res['settings']['occlusion_warmup']} warm-up frames "

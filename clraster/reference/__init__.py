@@ -2,8 +2,15 @@
 
 Each module mirrors one kernel file with the same inputs, outputs, integer rules and float32
 operation order (vertex ↔ kernels/vertex.cl, setup ↔ setup.cl, bin ↔ bin.cl, raster ↔
-raster.cl), so for the same input it produces the same triangle ids and depths. It is the
-test oracle and the benchmark baseline, vectorized throughout (no per-pixel Python loops).
+raster.cl, pyramid ↔ pyramid.cl, query ↔ query.cl), so for the same input it produces the
+same triangle ids and depths. It is the test oracle and the benchmark baseline, vectorized
+throughout (no per-pixel Python loops).
+
+`render` draws one frame; `Renderer` keeps what the OpenCL `clraster.Renderer` keeps between
+frames (the scene of a bare Mesh, the occlusion-culling history), so with ``occlusion=True``
+a sequence of frames follows the same two-phase schedule (`clraster.twophase`) as the OpenCL
+path. The twin imports only the lower layers (config, layout, drawlist, boxes, params,
+twophase...), never the OpenCL side.
 """
 
 from __future__ import annotations
@@ -12,57 +19,135 @@ import time
 
 import numpy as np
 
-from ..config import RasterConfig, guard_band_factors
-from ..drawlist import PlanCache, plan_frame
+from ..config import RasterConfig
+from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
-from ..inputs import check_cull, check_size
+from ..inputs import check_cull, check_flag, check_size
+from ..params import FrameParams, FrameTotals
+from ..twophase import OcclusionHistory, two_phase
 from . import bin as bin_
+from . import pyramid as pyramid_
 from . import raster as raster_
 from . import setup as setup_
 from . import vertex as vertex_
 
-__all__ = ["render"]
+__all__ = ["Renderer", "render"]
+
+#: The twin's frame buffers between passes: depth float32 (H, W), ids int32 (H, W),
+#: barycentrics float32 (H, W, 3).
+Images = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+class Renderer:
+    """The twin with a memory across frames, as `clraster.Renderer` has one: it keeps the
+    scene made from a bare Mesh and its geometry pool (so repeated frames of one target are
+    frames of the same scene), and the visibility history of two-phase occlusion culling
+    (`clraster.twophase.OcclusionHistory`), so a sequence of ``render(..., occlusion=True)``
+    calls runs the OpenCL renderer's schedule frame for frame and gives the same frames and
+    occlusion counts as one `clraster.Renderer` fed the same sequence.
+
+    Args:
+        width, height: image size in pixels. config: tile size used by binning (it never
+            changes the image).
+    """
+
+    def __init__(self, width: int, height: int, *, config: RasterConfig | None = None) -> None:
+        self.width, self.height = check_size(width, height)
+        self.config = config or RasterConfig()
+        self._plans = PlanCache()
+        self.history = OcclusionHistory()
+
+    def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
+               cones: bool = True, occlusion: bool = False) -> Frame:
+        """Render ``target`` (Mesh or Scene); arguments and outputs as `clraster.Renderer.
+        render` (no overdraw or fates)."""
+        check_cull(cull)
+        check_flag(occlusion, "occlusion")
+        w, h, config = self.width, self.height, self.config
+        t0 = time.perf_counter()
+        plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
+                          cache=self._plans)
+        t_cull = (time.perf_counter() - t0) * 1e3
+        pool, fd = plan.pool, plan.frame
+        counts = dict(plan.draw_list.counts)
+        if fd.n_tris == 0:
+            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
+        params = FrameParams.make(w, h, config, cull)
+        totals = FrameTotals(timings_ms={"cull (host)": t_cull})
+
+        def draw(draws: FrameDraws, into: Images | None) -> Images:
+            return draw_pass(pool, draws, params, config, totals, into)
+
+        if not occlusion:
+            depth, ids, bary = draw(fd, None)
+        else:
+            res = two_phase(plan, self.history, draw, _hiz(w, h), totals, counts)
+            depth, ids, bary = res.out
+        return Frame(depth, ids, bary, totals.stats(counts))
 
 
 def render(target, camera, width: int, height: int, *, cull: str = "back",
-           frustum: bool = True, cones: bool = True, config: RasterConfig | None = None
-           ) -> Frame:
+           frustum: bool = True, cones: bool = True, occlusion: bool = False,
+           config: RasterConfig | None = None) -> Frame:
     """Render ``target`` (Mesh or Scene) with the NumPy twin; same arguments and outputs as
     `Renderer.render` (the same culling code decides what is drawn).
 
     ``config`` only matters for the tile size used by binning; like on the device, it never
-    changes the image.
+    changes the image. ``occlusion``: two-phase occlusion culling with the OpenCL renderer's
+    schedule (`clraster.twophase`); this function keeps no history, so it renders what a
+    fresh `clraster.Renderer`'s first frame does (the nearest clusters first). For the
+    frames after that, keep a `Renderer` (this module's) across calls.
     """
-    width, height = check_size(width, height)
-    check_cull(cull)
-    config = config or RasterConfig()
-    t0 = time.perf_counter()
-    plan = plan_frame(target, camera, width, height, cull=cull, frustum=frustum, cones=cones,
-                      cache=PlanCache())
-    t_cull = (time.perf_counter() - t0) * 1e3
-    pool, fd = plan.pool, plan.frame
-    counts = plan.draw_list.counts
+    return Renderer(width, height, config=config).render(
+        target, camera, cull=cull, frustum=frustum, cones=cones, occlusion=occlusion)
+
+
+def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
+              totals: FrameTotals, into: Images | None = None) -> Images:
+    """The twin's stage chain over the draws ``fd`` of ``pool``: vertex → setup → bin →
+    raster into ``into`` (an earlier pass's images, not modified; None: clear), as
+    `clraster.stages.chain.StageChain.draw`. Adds the pass's counts and host times to
+    ``totals``; returns the new images."""
+    w, h = params.width, params.height
     if fd.n_tris == 0:
-        return Frame.empty(width, height, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
-    kx, ky = guard_band_factors(width, height)
-    t = {}
+        if into is not None:
+            return into
+        return (np.ones((h, w), np.float32), np.full((h, w), -1, np.int32),
+                np.zeros((h, w, 3), np.float32))
     t0 = time.perf_counter()
-    clip, oc, win = vertex_.transform_draws(pool, fd, kx, ky, width, height)
+    clip, oc, win = vertex_.transform_draws(pool, fd, params.kx, params.ky, w, h)
     t1 = time.perf_counter()
     tri_verts, ids = setup_.draw_triangles(pool, fd)
-    st = setup_.setup(clip, oc, win, tri_verts, ids, width, height, cull, kx, ky)
+    st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky)
     t2 = time.perf_counter()
     order = bin_.unified_order(st.status, st.clip_count, st.clip_offset)
     allp = np.concatenate([st.pieces, st.clip_pieces])
-    tile_start, entries = bin_.bin_pieces(allp, order, width, height, config)
+    tile_start, entries = bin_.bin_pieces(allp, order, w, h, config)
     t3 = time.perf_counter()
     depth, ids_img, bary, tested, passed = raster_.raster(st.clip_bary, tile_start, entries,
-                                                          width, height, config)
+                                                          w, h, config, into=into)
     t4 = time.perf_counter()
-    t = {"cull (host)": t_cull, "vertex": (t1 - t0) * 1e3, "setup": (t2 - t1) * 1e3,
-         "bin": (t3 - t2) * 1e3, "raster": (t4 - t3) * 1e3}
-    stats = FrameStats.from_counts(counts, st.status, clip_pieces=int(st.clip_pieces.size),
-                                   binned_entries=int(entries.size), fragments_tested=tested,
-                                   fragments_passed=passed)
-    stats.timings_ms = t
-    return Frame(depth, ids_img, bary, stats)
+    totals.status.append(st.status)
+    totals.clip_pieces += int(st.clip_pieces.size)
+    totals.binned_entries += int(entries.size)
+    totals.fragments_tested += tested
+    totals.fragments_passed += passed
+    for stage, ms in (("vertex", t1 - t0), ("setup", t2 - t1), ("bin", t3 - t2),
+                      ("raster", t4 - t3)):
+        totals.add_time(stage, ms * 1e3)
+    return depth, ids_img, bary
+
+
+def _hiz(width: int, height: int):
+    """The twin's Hi-Z step for `clraster.twophase.two_phase`: the NumPy pyramid of the
+    images' depth and the NumPy box test (twins of kernels/pyramid.cl)."""
+
+    def hiz(images: Images, rows: np.ndarray, vp32: np.ndarray
+            ) -> tuple[np.ndarray, float]:
+        t0 = time.perf_counter()
+        levels = pyramid_.build(images[0])
+        verdict = pyramid_.test_boxes(levels, rows[:3].T, rows[3:].T, vp32.reshape(4, 4),
+                                      width, height)
+        return verdict, (time.perf_counter() - t0) * 1e3
+
+    return hiz

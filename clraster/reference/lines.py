@@ -25,6 +25,7 @@ from ..config import (
     SUBPIXEL_BITS,
 )
 from ..inputs import check_size
+from ..layout import LINE_DTYPE, ZMIN_CLEAR
 from ..lines import (
     LS_ACCEPTED,
     LS_ACCEPTED_DEGENERATE,
@@ -50,15 +51,8 @@ SUB_HALF = 1 << (SUBPIXEL_BITS - 1)
 FLT_MIN = F32(np.finfo(np.float32).tiny)
 #: Clipping order of kernels/lines.cl LPLANE_BIT: near, far, left, right, bottom, top.
 PLANE_BITS = (OC_Z_NEG, OC_Z_POS, OC_X_NEG, OC_X_POS, OC_Y_NEG, OC_Y_POS)
-ZMIN_CLEAR = np.uint32(0xFFFFFFFF)
 #: Fragments per chunk of the raster (bounds the twin's memory, not its result).
 CHUNK_FRAGMENTS = 1 << 21
-
-#: Mirror of LineRec in kernels/lines.cl (32 bytes).
-LINE_DTYPE = np.dtype([("xs", np.int32), ("ys", np.int32), ("xe", np.int32), ("ye", np.int32),
-                       ("zs", np.float32), ("dz", np.float32), ("status", np.int32),
-                       ("pad", np.int32)])
-assert LINE_DTYPE.itemsize == 32
 
 
 def clip_positions(seg: np.ndarray, mvp: np.ndarray) -> np.ndarray:

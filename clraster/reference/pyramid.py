@@ -10,14 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..occlusion import Occlusion
+from ..boxes import Occlusion
+
+# Error-model constants of kernels/pyramid.cl (see the comments there for the derivation).
+from ..layout import HIZ_DEPTH_SLACK, HIZ_EPS, HIZ_PIXEL_SLACK
 
 F32 = np.float32
-
-#: Error-model constants of kernels/pyramid.cl (see the comments there for the derivation).
-HIZ_EPS = F32(2.0**-18)  #: relative clip-space error bound, per unit of Σ|m_rc · p_c|
-HIZ_DEPTH_SLACK = F32(2.0**-18)  #: subtracted from the box's nearest window depth
-HIZ_PIXEL_SLACK = F32(0.0625)  #: window-space widening of the box's screen rectangle, px
 
 
 def level_shapes(width: int, height: int) -> list[tuple[int, int]]:

@@ -106,21 +106,30 @@ def covered_fragments(tile_start: np.ndarray, entries: np.ndarray, width: int, h
 
 
 def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, width: int,
-           height: int, config: RasterConfig):
+           height: int, config: RasterConfig,
+           into: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
     """Rasterize binned pieces.
 
     Args:
         clip_bary: float32 (P, 3, 3) parent barycentrics of clipped pieces.
         tile_start: int32 (T + 1,). entries: PIECE_DTYPE (E,) records, tile-major.
+        into: (depth, ids, bary) of an earlier pass over the same image to continue from,
+            as raster_tiles with ``load``: their depth and ids take part in the depth test
+            as if drawn in this pass, and pixels nobody beats keep their values (two-phase
+            occlusion culling). Not modified. None: start from the clear values.
 
     Returns:
         depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3),
         fragments tested, fragments passed.
     """
     npx = width * height
-    zbuf = np.ones(npx, F32)
     win = np.full(npx, -1, np.int64)
-    wid = np.full(npx, -1, np.int64)  # winning id (−1: clear value)
+    if into is None:
+        zbuf = np.ones(npx, F32)
+        wid = np.full(npx, -1, np.int64)  # winning id (−1: clear value)
+    else:
+        zbuf = np.array(into[0], F32).reshape(npx)
+        wid = into[1].reshape(npx).astype(np.int64)
     tested = passed = 0
 
     for owner, pix, z, pc in covered_fragments(tile_start, entries, width, height, config):
@@ -152,8 +161,12 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         win[pix_ok[last]] = own_ok[last]
         wid[pix_ok[last]] = id_ok[last]
 
-    ids = np.full(npx, -1, np.int32)
-    bary = np.zeros((npx, 3), F32)
+    if into is None:
+        ids = np.full(npx, -1, np.int32)
+        bary = np.zeros((npx, 3), F32)
+    else:   # the earlier pass's winners stay where nothing of this pass beat them
+        ids = into[1].reshape(npx).astype(np.int32)
+        bary = np.array(into[2], F32).reshape(npx, 3)
     hit = np.nonzero(win >= 0)[0]
     if hit.size:
         pc = entries[win[hit]]

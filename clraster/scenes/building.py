@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
+from ..inputs import check_int, check_size
 from ..mesh import Mesh
 from ..scene import Scene
-from ._checks import _check_int, _check_size
 from .dimensions import (
     BAND,
     CLEAR,
@@ -418,8 +418,8 @@ def plant(n_triangles: int = 1_000_000, *, seed: int = 0) -> Scene:
         ValueError: n_triangles not an integer or below 2000 (the smallest building, one
             storey of two rooms, needs about 1,500), seed not a non-negative integer.
     """
-    n = _check_int(n_triangles, "n_triangles", _MIN_TRIANGLES)
-    seed = _check_int(seed, "seed", 0)
+    n = check_int(n_triangles, "n_triangles", _MIN_TRIANGLES)
+    seed = check_int(seed, "seed", 0)
     rng = np.random.default_rng([seed, n])
     s = _tessellation(n)
     catalog = {name: make(s) for name, make in CATALOG.items()}
@@ -541,7 +541,7 @@ def plant_inside_camera(scene: Scene, width: int, height: int, *, storey: int = 
     The layout is recovered from ``scene.bounds()``, so the scene must come from
     :func:`plant` (ValueError otherwise); width and height must be positive integers.
     """
-    w, h = _check_size(width, height)
+    w, h = check_size(width, height)
     lo, hi, storeys, bands = _plant_dims(scene)
     if not 0 <= storey < storeys or not 0 <= band < bands:
         raise ValueError(f"storey must be in [0, {storeys}) and band in [0, {bands}) for "
@@ -557,6 +557,6 @@ def plant_inside_camera(scene: Scene, width: int, height: int, *, storey: int = 
 def plant_overview_camera(scene: Scene, width: int, height: int) -> Camera:
     """Third-person camera outside a :func:`plant` scene that frames the whole building,
     seen from above its south-west (high z, low x) corner; fov 45°, see Camera.framing."""
-    w, h = _check_size(width, height)
+    w, h = check_size(width, height)
     lo, hi = scene.bounds()
     return Camera.framing(lo, hi, direction=(-0.8, 0.7, 1.3), fov_y=45.0, aspect=w / h)

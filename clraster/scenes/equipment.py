@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..inputs import check_int
 from ..mesh import Mesh
-from ._checks import _check_int
 from .dimensions import CLEAR, STOREY
 from .primitives import (
     Y_TO_X,
@@ -411,5 +411,5 @@ def plant_catalog(tessellation: int = 12) -> dict[str, Mesh]:
     the origin on the floor (the lamp hangs below its origin; ``pipe`` is the unit
     cylinder, radius 1 from y = 0 to 1; ``cable_tray`` is 1 m long along +x).
     """
-    s = _check_int(tessellation, "tessellation", 3)
+    s = check_int(tessellation, "tessellation", 3)
     return {name: make(s) for name, make in CATALOG.items()}

@@ -8,9 +8,9 @@ import math
 import numpy as np
 
 from ..camera import Camera
+from ..inputs import check_int, check_size
 from ..mesh import Mesh
 from ..scene import Scene
-from ._checks import _check_int, _check_size
 from .primitives import boxes, cylinders, torus, translation, uv_sphere
 
 __all__ = ["grid_camera", "instance_grid", "random_scene"]
@@ -31,9 +31,9 @@ def instance_grid(mesh: Mesh, nx: int, ny: int = 1, nz: int = 1, *,
         ValueError: counts not positive integers, spacing not finite and > 0, or a mesh
             without finite referenced vertices (see Mesh.bounds).
     """
-    nx = _check_int(nx, "nx", 1)
-    ny = _check_int(ny, "ny", 1)
-    nz = _check_int(nz, "nz", 1)
+    nx = check_int(nx, "nx", 1)
+    ny = check_int(ny, "ny", 1)
+    nz = check_int(nz, "nz", 1)
     spacing = float(spacing)
     if not (math.isfinite(spacing) and spacing > 0.0):
         raise ValueError(f"spacing must be finite and > 0 (a multiple of the mesh size), "
@@ -55,7 +55,7 @@ def instance_grid(mesh: Mesh, nx: int, ny: int = 1, nz: int = 1, *,
 def grid_camera(scene: Scene, width: int, height: int) -> Camera:
     """A camera that frames the whole scene (e.g. an :func:`instance_grid`) from above
     and to the front-right, fov 45° (see Camera.framing)."""
-    w, h = _check_size(width, height)
+    w, h = check_size(width, height)
     lo, hi = scene.bounds()
     return Camera.framing(lo, hi, direction=(1.0, 0.8, 1.6), fov_y=45.0, aspect=w / h)
 
@@ -105,12 +105,12 @@ def random_scene(seed: int, n_instances: int = 16, *, extent: float = 5.0,
     determinant < 0, so its faces are seen clockwise from outside in world space); the
     scene is otherwise the same as without. Same arguments, same scene.
     """
-    seed = _check_int(seed, "seed", 0)
-    n_instances = _check_int(n_instances, "n_instances", 1)
+    seed = check_int(seed, "seed", 0)
+    n_instances = check_int(n_instances, "n_instances", 1)
     extent = float(extent)
     if not (math.isfinite(extent) and extent >= 0.0):
         raise ValueError(f"extent must be finite and >= 0, got {extent}")
-    n_meshes = max(1, n_instances // 2) if n_meshes is None else _check_int(
+    n_meshes = max(1, n_instances // 2) if n_meshes is None else check_int(
         n_meshes, "n_meshes", 1)
     rng = np.random.default_rng(seed)
     pool = [_random_mesh(rng) for _ in range(n_meshes)]

@@ -9,7 +9,9 @@ import pyopencl as cl
 
 from ..config import PIECE_DTYPE, RasterConfig
 from ..device import program, wait
+from ..params import FrameParams
 from ._buffers import GrowBuffer
+from .setup import SetupBuffers
 
 
 @dataclass
@@ -21,6 +23,7 @@ class BinBuffers:
     overflow: int32 (1,) set when E would not fit an int32.
     entries: PIECE_DTYPE (E,) copies of the setup records, tile-major, submission order
     within a tile.
+    n_entries: E of the last run.
     """
 
     counts: GrowBuffer
@@ -28,6 +31,7 @@ class BinBuffers:
     tile_start: GrowBuffer
     overflow: GrowBuffer
     entries: GrowBuffer
+    n_entries: int = 0
 
 
 class BinStage:
@@ -39,16 +43,18 @@ class BinStage:
         self.config = config
         self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))
 
-    def run(self, queue: cl.CommandQueue, status: cl.Buffer, clip_count: cl.Buffer,
-            clip_offset: cl.Buffer, pieces: cl.Buffer, clip_pieces: cl.Buffer, m: int,
-            width: int, height: int) -> tuple[int, list[cl.Event]]:
-        """Bin the pieces of ``m`` triangles. Returns (E = entries, profiling events)."""
+    def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams
+            ) -> tuple[BinBuffers, list[cl.Event]]:
+        """Bin the pieces of setup's ``n_tris`` triangles into per-tile lists. Returns the
+        buffers (n_entries = E) and the profiling events."""
         b = self.buffers
-        tiles_x, tiles_y = self.config.tiles(width, height)
-        n_tiles = tiles_x * tiles_y
+        m = setup.n_tris
+        width, height = params.width, params.height
+        tiles_x, n_tiles = params.tiles_x, params.n_tiles
         chunks = max(1, min(self.config.bin_chunks, m))
         counts = b.counts.ensure(4 * chunks * n_tiles)
-        common = (status, clip_count, clip_offset, pieces, clip_pieces, np.uint32(m),
+        common = (setup.status.buf, setup.clip_count.buf, setup.clip_offset.buf,
+                  setup.pieces.buf, setup.clip_pieces.buf, np.uint32(m),
                   np.uint32(chunks), np.int32(tiles_x), np.int32(n_tiles), counts)
         ev = [self.k_count(queue, (chunks,), (1,), *common)]
         ev.append(self.k_offsets(queue, (n_tiles,), None, np.uint32(chunks),
@@ -69,4 +75,5 @@ class BinStage:
         e = int(head[0])
         entries = b.entries.ensure(PIECE_DTYPE.itemsize * e, "bin list")
         ev.append(self.k_scatter(queue, (chunks,), (1,), *common, tile_start, entries))
-        return e, ev
+        b.n_entries = e
+        return b, ev

@@ -16,7 +16,9 @@ class GeometryBuffers:
     """Scene → vertex/setup boundary (see drawlist.GeometryPool for shapes and dtypes).
 
     positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
-    draws: DRAW_DTYPE (D,) and mvps: float32 (I, 16), uploaded every frame.
+    draws: DRAW_DTYPE (D,) and mvps: float32 (I, 16), uploaded for every pass.
+    n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
+    uploaded last (drawlist.FrameDraws).
     """
 
     positions: GrowBuffer
@@ -26,6 +28,9 @@ class GeometryBuffers:
     face_ids: GrowBuffer
     draws: GrowBuffer
     mvps: GrowBuffer
+    n_draws: int = 0
+    n_verts: int = 0
+    n_tris: int = 0
 
 
 class GeometryStage:
@@ -46,9 +51,13 @@ class GeometryStage:
         queue.finish()
         self._pool = pool
 
-    def upload_frame(self, queue: cl.CommandQueue, fd: FrameDraws) -> None:
+    def upload_frame(self, queue: cl.CommandQueue, fd: FrameDraws) -> GeometryBuffers:
+        """Upload the draw records of ``fd`` (a frame's draws, or any subset of them);
+        returns the buffers, the vertex and setup stages' input."""
         b = self.buffers
         for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps)):
             buf = gb.ensure(arr.nbytes)
             if arr.nbytes:
                 cl.enqueue_copy(queue, buf, arr, is_blocking=True)
+        b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
+        return b

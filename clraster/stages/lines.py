@@ -15,11 +15,12 @@ import pyopencl as cl
 
 from ..config import RasterConfig
 from ..device import program
+from ..layout import LINE_DTYPE, ZMIN_CLEAR
 from ._buffers import GrowBuffer
 
 #: Work-group size of the three kernels (PoCL compiles one specialization per local size).
 LOCAL_SIZE = 64
-_CLEAR = np.array([0xFFFFFFFF], np.uint32)
+_CLEAR = np.array([ZMIN_CLEAR], np.uint32)  # ZMIN_CLEAR == IDMIN_CLEAR: both resolve buffers
 
 
 @dataclass
@@ -27,7 +28,7 @@ class LineBuffers:
     """Device buffers, N segments, H × W image.
 
     positions: float32 (N, 2, 3) world endpoints. mvp: float32 (16,) row-major matrix.
-    records: LINE_DTYPE (N,) set-up segments (reference.lines.LINE_DTYPE, 32 bytes).
+    records: LINE_DTYPE (N,) set-up segments (clraster.layout.LINE_DTYPE, 32 bytes).
     counts: int32 (N, 2) fragments / fragments passed per segment.
     depth_in: float32 (H, W) input depth buffer (4 bytes when none is given).
     zmin: uint32 (H, W) minimum depth bits per pixel (0xFFFFFFFF: none).
@@ -67,7 +68,7 @@ class LineStage:
         b = self.buffers
         pos = b.positions.ensure(segments.nbytes, "segment buffer")
         mbuf = b.mvp.ensure(64)
-        rec = b.records.ensure(32 * n, "segment setup buffer")
+        rec = b.records.ensure(LINE_DTYPE.itemsize * n, "segment setup buffer")
         counts = b.counts.ensure(8 * n, "segment count buffer")
         zmin = b.zmin.ensure(4 * npix, "depth resolve buffer")
         idmin = b.idmin.ensure(4 * npix, "id resolve buffer")
@@ -86,8 +87,7 @@ class LineStage:
         self.k_depth(queue, gsize, lsize, rec, nn, w, h, dbuf, has, np.float32(bias), zmin,
                      counts)
         self.k_id(queue, gsize, lsize, rec, nn, w, h, dbuf, has, np.float32(bias), zmin, idmin)
-        recs = np.empty(n, np.dtype([("pos", np.int32, 6), ("status", np.int32),
-                                     ("pad", np.int32)]))
+        recs = np.empty(n, LINE_DTYPE)
         cnt = np.empty((n, 2), np.int32)
         zb = np.empty((height, width), np.uint32)
         ib = np.empty((height, width), np.uint32)

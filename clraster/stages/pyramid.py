@@ -16,10 +16,9 @@ import pyopencl as cl
 
 from ..config import RasterConfig
 from ..device import program
+from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
 
-#: Levels made per launch of pyramid_reduce (kernels/pyramid.cl PYR_LOG2).
-PYR_LOG2 = 6
 #: Boxes per test call: the kernel indexes its (6, K) box array with int32.
 MAX_TEST_BOXES = 1 << 28
 #: Work-group size of the box test (one work-item per 8 boxes).

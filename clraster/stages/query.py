@@ -1,8 +1,8 @@
 """Exact occlusion queries, host side (kernels/query.cl).
 
-The boxes (reference.query.box_geometry: 12 triangles per box, clusters of 10 boxes drawn in
-box order) go through this stage's own copies of the renderer's geometry, vertex, setup
-(cull "none") and binning stages — the same kernels and programs, separate buffers, so a
+The boxes (clraster.boxes.box_geometry: 12 triangles per box, clusters of 10 boxes drawn in
+box order) go through this stage's own `StageChain` of geometry, vertex, setup (cull "none")
+and binning stages — the same kernels and programs as the renderer's, separate buffers, so a
 query never disturbs a renderer's state — and then one work-item per tile walks the tile's
 list read-only against the depth buffer (query_tiles).
 """
@@ -14,14 +14,13 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig, guard_band_factors
+from ..boxes import BoxGeometry
+from ..config import RasterConfig
 from ..device import program
 from ..drawlist import FrameDraws
+from ..params import FrameParams, FrameTotals
 from ._buffers import GrowBuffer
-from .bin import BinStage
-from .geometry import GeometryStage
-from .setup import SetupStage
-from .vertex import VertexStage
+from .chain import StageChain
 
 
 @dataclass
@@ -34,51 +33,39 @@ class QueryBuffers:
 
 
 class QueryStage:
-    """Draws boxes through vertex → setup → bin and counts their passing samples."""
+    """Draws boxes through vertex → setup → bin (its own `StageChain`) and counts their
+    passing samples."""
 
     def __init__(self, ctx: cl.Context, config: RasterConfig | None = None) -> None:
         self.config = config or RasterConfig()
         self.kernel = cl.Kernel(program(ctx, "query", self.config.build_options()),
                                 "query_tiles")
-        self.geometry = GeometryStage(ctx)
-        self.vertex = VertexStage(ctx, self.config)
-        self.setup = SetupStage(ctx, self.config)
-        self.binning = BinStage(ctx, self.config)
+        self.chain = StageChain(ctx, self.config, raster=False)
         self.buffers = QueryBuffers(GrowBuffer(ctx), GrowBuffer(ctx))
 
-    def run(self, queue: cl.CommandQueue, pool, fd: FrameDraws, n_boxes: int,
+    def run(self, queue: cl.CommandQueue, pool: BoxGeometry, fd: FrameDraws, n_boxes: int,
             depth_buf: cl.Buffer, width: int, height: int
-            ) -> tuple[np.ndarray, dict[str, list[cl.Event]]]:
+            ) -> tuple[np.ndarray, dict[str, float]]:
         """Count samples passed for the ``n_boxes`` boxes of (pool, fd) — from
-        `clraster.reference.query.box_geometry` — against the float32 (H, W) depth buffer
+        `clraster.boxes.box_geometry` — against the float32 (H, W) depth buffer
         ``depth_buf``; blocking.
 
-        Returns int64 (n_boxes,) counts and the profiling events per stage.
+        Returns int64 (n_boxes,) counts and the device milliseconds per stage (vertex,
+        setup, bin, query).
         """
-        kx, ky = guard_band_factors(width, height)
-        n_draws, m = fd.draws.shape[0], fd.n_tris
-        self.geometry.upload_pool(queue, pool)
-        self.geometry.upload_frame(queue, fd)
-        geo = self.geometry.buffers
-        ev_v = self.vertex.run(queue, geo, n_draws, fd.n_verts, kx, ky, width, height)
-        cb = self.vertex.buffers
-        _p, ev_s = self.setup.run(queue, cb.clip.buf, cb.outcode.buf, cb.win.buf, geo, n_draws,
-                                  m, width, height, "none", kx, ky)
-        sb = self.setup.buffers
-        _e, ev_b = self.binning.run(queue, sb.status.buf, sb.clip_count.buf,
-                                    sb.clip_offset.buf, sb.pieces.buf, sb.clip_pieces.buf, m,
-                                    width, height)
-        bb = self.binning.buffers
+        params = FrameParams.make(width, height, self.config, "none")
+        totals = FrameTotals()
+        bins = self.chain.bin(queue, pool, fd, params, totals)
         b = self.buffers
         samples = b.samples.ensure(4 * n_boxes)
         flag = b.order_error.ensure(4)
         zero = np.zeros(1, np.uint32)
         ev_f = [cl.enqueue_fill_buffer(queue, samples, zero, 0, 4 * n_boxes),
                 cl.enqueue_fill_buffer(queue, flag, zero, 0, 4)]
-        tiles_x, tiles_y = self.config.tiles(width, height)
-        ev_q = self.kernel(queue, (tiles_x * tiles_y,), (1,), bb.tile_start.buf,
-                           bb.entries.buf, np.int32(width), np.int32(height),
-                           np.int32(tiles_x), depth_buf, samples, flag)
+        ev_q = self.kernel(queue, (params.n_tiles,), (1,), bins.tile_start.buf,
+                           bins.entries.buf, np.int32(width), np.int32(height),
+                           np.int32(params.tiles_x), depth_buf, samples, flag)
+        totals.add_events("query", ev_f + [ev_q])
         out = np.empty(n_boxes, np.uint32)
         err = np.zeros(1, np.int32)
         cl.enqueue_copy(queue, out, samples, is_blocking=False)
@@ -86,5 +73,5 @@ class QueryStage:
         if err[0]:
             raise RuntimeError("occlusion query: a tile list is not in box order; the box "
                                "geometry must be drawn box after box (a bug in clraster)")
-        return out.astype(np.int64), {"vertex": [ev_v], "setup": ev_s, "bin": ev_b,
-                                      "query": ev_f + [ev_q]}
+        totals.settle()   # the blocking read above waited for everything before it
+        return out.astype(np.int64), totals.timings_ms

@@ -9,7 +9,10 @@ import pyopencl as cl
 
 from ..config import RasterConfig
 from ..device import program, wait
+from ..params import FrameParams
 from ._buffers import GrowBuffer
+from .bin import BinBuffers
+from .setup import SetupBuffers
 
 
 def host_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
@@ -40,10 +43,11 @@ class RasterStage:
         self.buffers = FrameBuffers(GrowBuffer(ctx))
         self.ctx = ctx
 
-    def run(self, queue: cl.CommandQueue, clip_bary: cl.Buffer, tile_start: cl.Buffer,
-            entries: cl.Buffer, width: int, height: int, *, into: RasterOutput | None = None,
+    def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
+            params: FrameParams, *, into: RasterOutput | None = None,
             overdraw: bool = False) -> tuple[RasterOutput, np.ndarray, cl.Event]:
-        """Rasterize the binned pieces.
+        """Rasterize the binned pieces (bins; the parent barycentrics of clipped pieces come
+        from setup.clip_bary).
 
         Args:
             into: outputs of an earlier pass over the same image to continue from (its
@@ -55,21 +59,22 @@ class RasterStage:
             the outputs (complete and readable on return), tile stats (T, 2) int64
             (fragments tested / passed per tile) and the profiling event.
         """
-        tiles_x, tiles_y = self.config.tiles(width, height)
-        n_tiles = tiles_x * tiles_y
+        width, height = params.width, params.height
+        tiles_x, n_tiles = params.tiles_x, params.n_tiles
         load = into is not None
         if into is None:
             into = RasterOutput.allocate(self.ctx, width, height, overdraw)
         elif overdraw and into.overdraw is None:
             raise ValueError("overdraw was not counted in the earlier pass")
         want = into.overdraw is not None
-        ev = self.kernel(queue, (n_tiles,), (1,), clip_bary, tile_start, entries,
+        ev = self.kernel(queue, (n_tiles,), (1,), setup.clip_bary.buf, bins.tile_start.buf,
+                         bins.entries.buf,
                          np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
                          self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
                          np.int32(want), into.bufs[3] if want else into.bufs[1])
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
-        wait(queue)
+        wait(queue, keep=into)
         tstats = np.empty((n_tiles, 2), np.int64)
         cl.enqueue_copy(queue, tstats, self.buffers.tile_stats.buf)
         into.sync(queue)

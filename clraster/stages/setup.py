@@ -8,9 +8,12 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import CLUSTER_MAX, CULL_MODES, PIECE_DTYPE, RasterConfig
+from ..config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
 from ..device import program, wait
+from ..params import FrameParams
 from ._buffers import GrowBuffer
+from .geometry import GeometryBuffers
+from .vertex import ClipBuffers
 
 
 @dataclass
@@ -25,6 +28,7 @@ class SetupBuffers:
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
+    n_tris, n_clip_pieces: M and P of the last run.
     """
 
     pieces: GrowBuffer
@@ -34,6 +38,8 @@ class SetupBuffers:
     clip_total: GrowBuffer
     clip_pieces: GrowBuffer
     clip_bary: GrowBuffer
+    n_tris: int = 0
+    n_clip_pieces: int = 0
 
 
 #: Ranges of the clip-count scan (one work-item each); a few per core is plenty.
@@ -50,20 +56,23 @@ class SetupStage:
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))
         self.partial = GrowBuffer(ctx)
 
-    def run(self, queue: cl.CommandQueue, clip: cl.Buffer, outcode: cl.Buffer,
-            win: cl.Buffer, geo, n_draws: int, m: int, width: int, height: int, cull: str,
-            kx: np.float32, ky: np.float32) -> tuple[int, list[cl.Event]]:
-        """Set up the ``m`` triangles of ``n_draws`` draws (geo: GeometryBuffers).
-        Returns (P = clipped pieces, profiling events)."""
+    def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
+            params: FrameParams) -> tuple[SetupBuffers, list[cl.Event]]:
+        """Set up the ``geo.n_tris`` triangles of the uploaded draws (geo) over the vertex
+        stage's outputs (verts). Returns the buffers (n_clip_pieces = P) and the profiling
+        events."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize
+        n_draws, m = geo.n_draws, geo.n_tris
+        clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
+        kx, ky = params.kx, params.ky
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
                      geo.face_ids.buf)
-        size = np.int32(width), np.int32(height)
+        size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
         ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
-                           np.int32(CULL_MODES[cull]), np.float32(kx), np.float32(ky),
+                           np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            b.pieces.ensure(rec * m, "setup buffer"), b.status.ensure(m),
                            b.clip_count.ensure(4 * m))]
         total = np.zeros(1, np.int32)
@@ -86,4 +95,5 @@ class SetupStage:
         else:  # the kernels still need valid buffer arguments downstream
             b.clip_pieces.ensure(rec)
             b.clip_bary.ensure(36)
-        return p, ev
+        b.n_tris, b.n_clip_pieces = m, p
+        return b, ev

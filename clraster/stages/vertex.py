@@ -10,7 +10,9 @@ import pyopencl as cl
 
 from ..config import CLUSTER_MAX, RasterConfig
 from ..device import program
+from ..params import FrameParams
 from ._buffers import GrowBuffer
+from .geometry import GeometryBuffers
 
 
 @dataclass
@@ -20,11 +22,13 @@ class ClipBuffers:
     clip: float32 (N, 4) clip-space positions. outcode: uint16 (N,) outcode bits
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
     win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
+    n_verts: N of the last run.
     """
 
     clip: GrowBuffer
     outcode: GrowBuffer
     win: GrowBuffer
+    n_verts: int = 0
 
 
 class VertexStage:
@@ -32,14 +36,18 @@ class VertexStage:
         self.kernel = cl.Kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
         self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx))
 
-    def run(self, queue: cl.CommandQueue, geo, n_draws: int, n_verts: int,
-            kx: np.float32, ky: np.float32, width: int, height: int) -> cl.Event:
-        """Transform the vertices of ``n_draws`` draws (geo: GeometryBuffers) into a vertex
-        stream of ``n_verts`` entries."""
+    def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
+            ) -> tuple[ClipBuffers, list[cl.Event]]:
+        """Transform the vertices of the uploaded draws (geo) into a vertex stream of
+        ``geo.n_verts`` entries. Returns the buffers and the profiling events."""
         b = self.buffers
-        return self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,),
-                           geo.positions.buf,
-                           geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
-                           np.uint32(n_draws), geo.mvps.buf, np.float32(kx), np.float32(ky),
-                           np.int32(width), np.int32(height), b.clip.ensure(16 * n_verts),
-                           b.outcode.ensure(2 * n_verts), b.win.ensure(16 * n_verts))
+        n_draws, n_verts = geo.n_draws, geo.n_verts
+        ev = self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,),
+                         geo.positions.buf,
+                         geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
+                         np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
+                         np.float32(params.ky), np.int32(params.width), np.int32(params.height),
+                         b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
+                         b.win.ensure(16 * n_verts))
+        b.n_verts = n_verts
+        return b, [ev]

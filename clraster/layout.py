@@ -1,0 +1,268 @@
+"""Constants and record layouts shared by the host (Python) and the kernels (OpenCL C).
+
+This module is their one source. `c_header` turns it into C text — a ``#define`` per shared
+constant and a ``typedef struct`` per record dtype — which `clraster.device.kernel_source`
+puts in place of the ``#include "layout.h"`` line of ``kernels/common.h``, so every kernel
+is built with exactly these values; no kernel file spells any of them out by hand.
+tests/test_layout.py builds a probe kernel through the same path and compares what the
+compiler sees (sizeof, offsetof, the value of every define) with the values here.
+
+Records are NumPy structured dtypes with no implicit padding: every field sits at a multiple
+of its scalar size and the record size is a multiple of the largest one, so the packed NumPy
+layout and the C compiler's layout are the same (`c_header` refuses any other dtype).
+
+Tunables (tile size, chunk counts) are not here: they are `clraster.config.RasterConfig`
+fields and reach the kernels as ``-D`` build options. This module imports nothing from
+clraster, so every layer may import it.
+"""
+
+from __future__ import annotations
+
+import re
+import textwrap
+
+import numpy as np
+
+# ---- Fixed point -------------------------------------------------------------------------
+
+#: Vertices snap to 1/256 pixel, as D3D11 requires (a rule, not a tunable: see config).
+SUBPIXEL_BITS = 8
+SUBPIXEL_ONE = 1 << SUBPIXEL_BITS
+#: Triangles clipped by near, far and 4 guard-band planes have at most 3 + 6 vertices.
+MAX_CLIP_VERTICES = 9
+#: Vertex slots of the clipper's polygon (kernels/setup.cl, reference/setup.py). More than
+#: 3 + 6: float rounding can make a clipped polygon a hair non-convex.
+POLY_MAX = 16
+
+# ---- Vertex stage ------------------------------------------------------------------------
+
+# Outcode bits written by the vertex stage. Bits 0..5 are the classic 6-bit frustum outcode;
+# 6..9 say the vertex is outside the guard band (x/y clipping needed); bit 10 marks NaN/Inf.
+OC_X_NEG, OC_X_POS, OC_Y_NEG, OC_Y_POS, OC_Z_NEG, OC_Z_POS = 1, 2, 4, 8, 16, 32
+OC_FRUSTUM = 63
+OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG, OC_GB_Y_POS = 64, 128, 256, 512
+OC_INVALID = 1024
+#: w <= 0: the vertex has no window position; never set alone on a drawn vertex.
+OC_W_NONPOS = 2048
+#: Planes that force a triangle through the clipper: near, far and the four guard-band planes.
+OC_NEEDS_CLIP = OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | OC_GB_Y_POS
+
+# ---- Triangle setup ----------------------------------------------------------------------
+
+# Per-triangle status written by triangle setup.
+ST_RASTER = 0  #: unclipped, one setup record at its own slot, sent to binning
+ST_CLIPPED = 1  #: went through the clipper; 0..7 pieces in the clipped-piece buffer
+ST_INVALID = 2  #: a vertex is NaN/Inf (or its clip position is): dropped and counted
+ST_TRIVIAL_REJECT = 3  #: all three vertices outside one frustum plane
+ST_BACKFACE = 4  #: culled by the cull mode
+ST_DEGENERATE = 5  #: zero area after the fixed-point snap
+ST_NO_SAMPLE = 6  #: bounding box holds no pixel centre: covers nothing (exact, not a guess)
+STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "degenerate",
+                "no_sample")
+
+# Piece flags.
+PF_SWAPPED = 1  #: vertices 1 and 2 were swapped to make the window-space area positive
+PF_CLIPPED = 2  #: made by the clipper; parent barycentrics live in the clipped-bary buffer
+PF_INDEX_SHIFT = 2  #: clipped pieces: flags >> 2 is their index in the clipped-bary buffer
+
+# Cull modes (the setup kernel's `cull` argument).
+CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
+CULL_MODES = {"none": CULL_NONE, "back": CULL_BACK, "front": CULL_FRONT}
+
+# ---- Clusters and draws ------------------------------------------------------------------
+
+#: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
+#: and setup kernels run one work-item per (draw, local vertex) and (draw, local triangle):
+#: work-item g serves draw g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1).
+CLUSTER_LOG2 = 7
+CLUSTER_MAX = 1 << CLUSTER_LOG2
+DRAW_INSIDE = 1  #: draw flag: cluster inside the frustum by a margin, no clip tests needed
+
+# ---- Depth pyramid and occlusion ---------------------------------------------------------
+
+#: Levels made per launch of pyramid_reduce (kernels/pyramid.cl): each work-item reduces a
+#: (1 << PYR_LOG2)² block of its source level through PYR_LOG2 levels in private memory.
+PYR_LOG2 = 6
+
+# Results of the Hi-Z box test (the values of `clraster.occlusion.Occlusion`).
+OCC_VISIBLE, OCC_OCCLUDED, OCC_VIEW_CULLED = 0, 1, 2
+
+# Error model of the box test (kernels/pyramid.cl has the derivation).
+HIZ_EPS = np.float32(2.0**-18)  #: relative clip-space error bound, per unit of Σ|m_rc · p_c|
+HIZ_DEPTH_SLACK = np.float32(2.0**-18)  #: subtracted from the box's nearest window depth
+HIZ_PIXEL_SLACK = np.float32(0.0625)  #: window-space widening of the box's screen rectangle, px
+
+#: Triangles per box of the exact occlusion query: box b is faces 12b .. 12b+11 (triangle id
+#: // 12 is the box; kernels/query.cl, reference/query.py box_geometry).
+BOX_TRIS = 12
+
+# ---- Lines -------------------------------------------------------------------------------
+
+# Segment status codes (kernels/lines.cl, clraster.lines).
+LS_ACCEPTED = 0  #: trivially accepted, rasterized
+LS_CLIPPED = 1  #: clipped, something left, rasterized
+LS_INVALID = 2  #: an endpoint (or its clip position) is NaN/Inf
+LS_REJECTED = 3  #: trivially rejected: both endpoints outside one plane
+LS_CLIPPED_AWAY = 4  #: clipped, nothing inside the view volume
+LS_ACCEPTED_DEGENERATE = 5  #: trivially accepted, an endpoint at w < FLT_MIN
+LS_CLIPPED_DEGENERATE = 6  #: clipped, an endpoint at w < FLT_MIN
+
+#: Clear value of the lines' resolve buffers: zmin holds depth bits (non-negative floats order
+#: like uints; all ones is above every depth, so a fragment at depth 1.0 still counts) and
+#: idmin segment indices; all ones means "none" in both.
+ZMIN_CLEAR = np.uint32(0xFFFFFFFF)
+IDMIN_CLEAR = np.uint32(0xFFFFFFFF)
+
+# ---- Records -----------------------------------------------------------------------------
+
+#: One drawn (instance, cluster) pair (C ``Draw``). cluster: global cluster index in the
+#: geometry pool; vert_base / tri_base: first vertex / triangle slot of the draw in this
+#: frame's streams; face_base: triangle id of the instance's face 0; flags: DRAW_INSIDE.
+DRAW_DTYPE = np.dtype([("cluster", np.int32), ("instance", np.int32), ("vert_base", np.int32),
+                       ("tri_base", np.int32), ("face_base", np.int32), ("flags", np.int32),
+                       ("pad", np.int32, 2)])
+assert DRAW_DTYPE.itemsize == 32
+
+#: One triangle setup record, 64 bytes (one cache line) (C ``Piece``).
+#: x, y: 24.8 fixed-point window coordinates (y down, row 0 at top), oriented so that the
+#: window-space doubled area is > 0. bb_min/bb_max: inclusive pixel range of the pixel centres
+#: in the bounding box, clamped to the viewport, packed as x | y << 16. Depth at a pixel is
+#: z0 + l1*dz10 + l2*dz20 with l_i = E_i * inv_area. r1 = w0/w1, r2 = w0/w2 give the
+#: perspective correction of the piece's screen-space weights.
+PIECE_DTYPE = np.dtype([
+    ("x", np.int32, 3), ("y", np.int32, 3),
+    ("bb_min", np.int32), ("bb_max", np.int32),
+    ("z0", np.float32), ("dz10", np.float32), ("dz20", np.float32), ("inv_area", np.float32),
+    ("id", np.int32), ("flags", np.int32), ("r1", np.float32), ("r2", np.float32),
+])
+assert PIECE_DTYPE.itemsize == 64
+
+#: A vertex after the viewport transform (C ``WinVert``): 24.8 fixed-point window x, y
+#: (y down), window depth z = (z/w + 1)/2 and iw = 1/w.
+WINVERT_DTYPE = np.dtype([("x", np.int32), ("y", np.int32), ("z", np.float32),
+                          ("iw", np.float32)])
+
+#: One set-up line segment (C ``LineRec``), 32 bytes: 24.8 fixed-point window endpoints in
+#: canonical order along the major axis (xs/ys the start), the start's window depth zs and
+#: (end − start) depth dz. Only status (LS_*) is meaningful unless status is LS_ACCEPTED or
+#: LS_CLIPPED.
+LINE_DTYPE = np.dtype([("xs", np.int32), ("ys", np.int32), ("xe", np.int32), ("ye", np.int32),
+                       ("zs", np.float32), ("dz", np.float32), ("status", np.int32),
+                       ("pad", np.int32)])
+assert LINE_DTYPE.itemsize == 32
+
+# ---- What the kernels get ----------------------------------------------------------------
+
+#: Every constant the kernels see, as (comment, names) groups, in header order. Each name is
+#: a module attribute here and a ``#define`` of the same name in C.
+C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("24.8 fixed point: vertices snap to 1/256 pixel", ("SUBPIXEL_BITS",)),
+    ("Outcode bits (vertex stage). Bits 0..5 are the classic 6-bit frustum outcode; 6..9 say "
+     "the vertex is outside the guard band (x/y clipping needed); bit 10 marks NaN/Inf; "
+     "OC_W_NONPOS: w <= 0, no window position (never set alone on a drawn vertex)",
+     ("OC_X_NEG", "OC_X_POS", "OC_Y_NEG", "OC_Y_POS", "OC_Z_NEG", "OC_Z_POS", "OC_FRUSTUM",
+      "OC_GB_X_NEG", "OC_GB_X_POS", "OC_GB_Y_NEG", "OC_GB_Y_POS", "OC_INVALID", "OC_W_NONPOS",
+      "OC_NEEDS_CLIP")),
+    ("Per-triangle status (triangle setup)",
+     ("ST_RASTER", "ST_CLIPPED", "ST_INVALID", "ST_TRIVIAL_REJECT", "ST_BACKFACE",
+      "ST_DEGENERATE", "ST_NO_SAMPLE")),
+    ("Piece flags; clipped pieces: flags >> PF_INDEX_SHIFT = index into the clipped-bary buffer",
+     ("PF_SWAPPED", "PF_CLIPPED", "PF_INDEX_SHIFT")),
+    ("Cull modes", ("CULL_NONE", "CULL_BACK", "CULL_FRONT")),
+    ("Clipping: vertices of a clipped triangle (3 + 6 planes) and of the clipper's polygon",
+     ("MAX_CLIP_VERTICES", "POLY_MAX")),
+    ("Clusters (meshlets): at most CLUSTER_MAX triangles and vertices; draw flags",
+     ("CLUSTER_LOG2", "CLUSTER_MAX", "DRAW_INSIDE")),
+    ("Depth pyramid: levels per launch; Hi-Z test results and error model (pyramid.cl)",
+     ("PYR_LOG2", "OCC_VISIBLE", "OCC_OCCLUDED", "OCC_VIEW_CULLED", "HIZ_EPS",
+      "HIZ_DEPTH_SLACK", "HIZ_PIXEL_SLACK")),
+    ("Exact occlusion queries: triangles per box", ("BOX_TRIS",)),
+    ("Line segment status; clear value of the lines' resolve buffers",
+     ("LS_ACCEPTED", "LS_CLIPPED", "LS_INVALID", "LS_REJECTED", "LS_CLIPPED_AWAY",
+      "LS_ACCEPTED_DEGENERATE", "LS_CLIPPED_DEGENERATE", "ZMIN_CLEAR", "IDMIN_CLEAR")),
+)
+
+#: Every record the kernels see: C struct name -> name of its dtype here, in header order.
+C_RECORDS: dict[str, str] = {
+    "Piece": "PIECE_DTYPE",
+    "Draw": "DRAW_DTYPE",
+    "WinVert": "WINVERT_DTYPE",
+    "LineRec": "LINE_DTYPE",
+}
+
+_C_TYPES = {
+    np.dtype(np.int8): "char", np.dtype(np.uint8): "uchar",
+    np.dtype(np.int16): "short", np.dtype(np.uint16): "ushort",
+    np.dtype(np.int32): "int", np.dtype(np.uint32): "uint",
+    np.dtype(np.int64): "long", np.dtype(np.uint64): "ulong",
+    np.dtype(np.float32): "float", np.dtype(np.float64): "double",
+}
+
+#: The line of kernels/common.h that `inline_layout` replaces with `c_header()`.
+LAYOUT_INCLUDE = re.compile(r'^#include "layout\.h".*$', re.M)
+
+
+def c_literal(value: object) -> str:
+    """C literal of a constant: Python int -> decimal, np.uint32 -> hex with ``u``,
+    np.float32 -> its shortest round-trip decimal with ``f`` (exact: the value is a float32)."""
+    if isinstance(value, np.uint32):
+        return f"0x{int(value):X}u"
+    if isinstance(value, np.float32):
+        text = repr(float(value))
+        assert np.float32(text) == value and ("." in text or "e" in text), text
+        return text + "f"
+    if isinstance(value, int) and not isinstance(value, bool) and -2**31 <= value < 2**31:
+        return str(value)
+    raise TypeError(f"no C literal for {value!r} ({type(value).__name__}); use a Python int, "
+                    f"np.uint32 or np.float32")
+
+
+def c_struct(name: str, dtype: np.dtype) -> str:
+    """``typedef struct { ... } name;`` with the fields of ``dtype``, in order.
+
+    Raises ValueError when the dtype's packed layout is not what a C compiler would give it
+    (a gap, a field off its natural alignment, trailing padding, unknown or nested types)."""
+    lines = []
+    offset, largest = 0, 1
+    for field in dtype.names:
+        fdt, at = dtype.fields[field][:2]
+        base, shape = fdt.subdtype if fdt.subdtype else (fdt, ())
+        if base not in _C_TYPES or len(shape) > 1:
+            raise ValueError(f"{name}.{field}: dtype {fdt} has no C equivalent here")
+        if at != offset or offset % base.itemsize:
+            raise ValueError(f"{name}.{field} at offset {at}: fields must follow each other "
+                             f"with no gap, each at a multiple of its scalar size "
+                             f"({base.itemsize}), as a C compiler would place them")
+        offset += fdt.itemsize
+        largest = max(largest, base.itemsize)
+        dims = f"[{shape[0]}]" if shape else ""
+        lines.append(f"    {_C_TYPES[base]} {field}{dims};")
+    if dtype.itemsize != offset or offset % largest:
+        raise ValueError(f"{name}: {dtype.itemsize} bytes does not end where a C struct of "
+                         f"these fields would ({offset} rounded up to {largest})")
+    return "typedef struct {\n" + "\n".join(lines) + f"\n}} {name};"
+
+
+def c_header() -> str:
+    """The generated part of kernels/common.h: every `C_DEFINES` constant and `C_RECORDS`
+    struct, with a comment per group."""
+    g = globals()
+    out = ["/* ---- Generated by clraster.layout.c_header() from clraster/layout.py; edit the "
+           "values there. ---- */"]
+    for comment, names in C_DEFINES:
+        out.append("/* " + "\n * ".join(textwrap.wrap(comment + ". */", 93)))
+        out.extend(f"#define {n} {c_literal(g[n])}" for n in names)
+    for name, var in C_RECORDS.items():
+        out.append(f"/* clraster.layout.{var}, {g[var].itemsize} bytes. */")
+        out.append(c_struct(name, g[var]))
+    out.append("/* ---- End of generated part. ---- */")
+    return "\n".join(out) + "\n"
+
+
+def inline_layout(common_h: str) -> str:
+    """kernels/common.h text with its ``#include "layout.h"`` line replaced by `c_header`."""
+    text, n = LAYOUT_INCLUDE.subn(lambda _m: c_header().rstrip("\n"), common_h, count=1)
+    if n != 1:
+        raise ValueError('kernels/common.h has no `#include "layout.h"` line for the '
+                         'generated constants (clraster.layout.c_header)')
+    return text

@@ -1,0 +1,99 @@
+"""What every stage of one frame reads (`FrameParams`) and what the passes of a frame add up
+(`FrameTotals`); plain data shared by the OpenCL stage chain and the NumPy twin.
+
+A frame may run the stage chain (geometry → vertex → setup → bin → raster) several times
+into the same frame buffers — the two phases of occlusion culling today, bounded batches of
+draws later — so the per-frame parameters are built once and passed to every pass, and the
+counts and timings of the passes accumulate in one `FrameTotals`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import CULL_MODES, RasterConfig, guard_band_factors
+from .frame import FrameStats
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """Per-frame parameters of every stage, built once per frame (`make`).
+
+    width, height: image size in pixels. cull: "none", "back" or "front" (cull mode of
+    triangle setup). kx, ky: float32 clip-space guard-band factors
+    (`config.guard_band_factors`: the x/y clipping planes are ±k·w). tiles_x, tiles_y:
+    tiles covering the image at the config's tile size.
+    """
+
+    width: int
+    height: int
+    cull: str
+    kx: np.float32
+    ky: np.float32
+    tiles_x: int
+    tiles_y: int
+
+    @classmethod
+    def make(cls, width: int, height: int, config: RasterConfig, cull: str = "back"
+             ) -> FrameParams:
+        kx, ky = guard_band_factors(width, height)
+        tiles_x, tiles_y = config.tiles(width, height)
+        return cls(int(width), int(height), cull, kx, ky, tiles_x, tiles_y)
+
+    @property
+    def n_tiles(self) -> int:
+        return self.tiles_x * self.tiles_y
+
+    @property
+    def cull_mode(self) -> int:
+        """The cull mode as the kernels read it (config.CULL_MODES)."""
+        return CULL_MODES[self.cull]
+
+
+@dataclass
+class FrameTotals:
+    """Counts and timings summed over the passes of one frame.
+
+    status: uint8 (M_pass,) per-triangle setup status of each pass, in pass order.
+    clip_pieces, binned_entries, fragments_tested, fragments_passed: sums over the passes.
+    timings_ms: stage → milliseconds, in first-seen order (the caller may put host stages,
+    e.g. "cull (host)", in first). pending: stage → OpenCL profiling events not yet added to
+    timings_ms (`settle` adds them once they are complete).
+    """
+
+    status: list[np.ndarray] = field(default_factory=list)
+    clip_pieces: int = 0
+    binned_entries: int = 0
+    fragments_tested: int = 0
+    fragments_passed: int = 0
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    pending: dict[str, list] = field(default_factory=dict)
+
+    def add_time(self, stage: str, ms: float) -> None:
+        self.timings_ms[stage] = self.timings_ms.get(stage, 0.0) + ms
+
+    def add_events(self, stage: str, events: list) -> None:
+        """Keep ``events`` (OpenCL profiling events; None entries are skipped) of ``stage``
+        until `settle`; their times are known only once they are complete."""
+        self.pending.setdefault(stage, []).extend(e for e in events if e is not None)
+
+    def settle(self) -> None:
+        """Add the device times of the pending events to timings_ms; call once they are
+        complete (after a blocking read or a wait on their queue)."""
+        for stage, events in self.pending.items():
+            self.add_time(stage, sum((e.profile.end - e.profile.start) for e in events)
+                          * 1e-6)
+        self.pending.clear()
+
+    def stats(self, counts: dict[str, int]) -> FrameStats:
+        """The frame's `FrameStats` from the culling counts (cull.DrawList.counts plus the
+        occlusion rows) and these totals; timings included."""
+        status = np.concatenate(self.status) if self.status else np.zeros(0, np.uint8)
+        s = FrameStats.from_counts(counts, status, clip_pieces=self.clip_pieces,
+                                   binned_entries=self.binned_entries,
+                                   fragments_tested=self.fragments_tested,
+                                   fragments_passed=self.fragments_passed)
+        s.timings_ms = dict(self.timings_ms)
+        return s

@@ -1,0 +1,97 @@
+"""The stage chain, written once: geometry → vertex → setup → bin (→ raster).
+
+Each stage's ``run`` takes the upstream stage's buffers object and the frame's
+`clraster.params.FrameParams`, and returns its own buffers object (each dataclass documents
+its fields' sizes and dtypes) with its profiling events. `StageChain` runs them in order over
+any set of draws — a whole frame, one phase of occlusion culling (`clraster.twophase`), the
+boxes of an occlusion query (`clraster.stages.query`), or a bounded batch of a streamed frame
+— and adds each pass's counts and device times to the frame's `clraster.params.FrameTotals`,
+so a frame drawn in several passes into the same frame buffers reports the sums.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from ..config import RasterConfig
+from ..drawlist import FrameDraws
+from ..params import FrameParams, FrameTotals
+from .bin import BinBuffers, BinStage
+from .geometry import GeometryStage
+from .raster import RasterOutput, RasterStage
+from .setup import SetupStage
+from .vertex import VertexStage
+
+
+class StageChain:
+    """One set of stages (and so one set of device buffers) run in pipeline order.
+
+    Args:
+        ctx: the OpenCL context. config: tunables (tile size, bin chunks).
+        raster: also make the raster stage (`draw`); an occlusion query only bins.
+
+    The buffers are reused from pass to pass and grown geometrically; a pass overwrites the
+    previous pass's stage buffers (not the frame buffers it rasterizes into).
+    """
+
+    def __init__(self, ctx: cl.Context, config: RasterConfig, *, raster: bool = True) -> None:
+        self.context = ctx
+        self.config = config
+        self.geometry = GeometryStage(ctx)
+        self.vertex = VertexStage(ctx, config)
+        self.setup = SetupStage(ctx, config)
+        self.binning = BinStage(ctx, config)
+        self.raster = RasterStage(ctx, config) if raster else None
+
+    def bin(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
+            totals: FrameTotals) -> BinBuffers:
+        """Run geometry upload → vertex → setup → bin over the draws ``fd`` of ``pool`` (a
+        `drawlist.GeometryPool` or `clraster.boxes.BoxGeometry`; uploaded only when it is a
+        different object from last time). Adds the clipped pieces, binned entries and the
+        stages' events (pending, see `FrameTotals.settle`) to ``totals``.
+
+        Returns the bin buffers (tile lists); the setup buffers stay in ``self.setup``.
+        The last stages may still be running: read the outputs through the same queue.
+        """
+        self.geometry.upload_pool(queue, pool)
+        geo = self.geometry.upload_frame(queue, fd)
+        verts, ev_v = self.vertex.run(queue, geo, params)
+        setup, ev_s = self.setup.run(queue, geo, verts, params)
+        bins, ev_b = self.binning.run(queue, setup, params)
+        totals.clip_pieces += setup.n_clip_pieces
+        totals.binned_entries += bins.n_entries
+        totals.add_events("vertex", ev_v)
+        totals.add_events("setup", ev_s)
+        totals.add_events("bin", ev_b)
+        return bins
+
+    def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
+             totals: FrameTotals, *, into: RasterOutput | None = None,
+             overdraw: bool = False) -> RasterOutput:
+        """`bin`, then rasterize into ``into`` (the frame buffers of an earlier pass of the
+        same frame, whose depth and ids take part in the depth test) or, when None, into
+        fresh cleared frame buffers. Adds the setup status of every triangle, the fragment
+        counts and the device times (settled) to ``totals``.
+
+        Returns the frame buffers, complete and readable. With no triangles in ``fd``
+        nothing runs: ``into`` is returned as it is, or fresh cleared buffers.
+        """
+        if fd.n_tris == 0:
+            if into is None:   # nothing to draw yet: a cleared frame to continue from
+                into = RasterOutput.allocate(self.context, params.width, params.height,
+                                             overdraw)
+                into.clear()
+            return into
+        bins = self.bin(queue, pool, fd, params, totals)
+        setup = self.setup.buffers
+        out, tstats, ev_r = self.raster.run(queue, setup, bins, params, into=into,
+                                            overdraw=overdraw)
+        status = np.empty(setup.n_tris, np.uint8)
+        cl.enqueue_copy(queue, status, setup.status.buf, is_blocking=True)
+        totals.status.append(status)
+        totals.fragments_tested += int(tstats[:, 0].sum())
+        totals.fragments_passed += int(tstats[:, 1].sum())
+        totals.add_events("raster", [ev_r])
+        totals.settle()   # the raster waited for the queue: every event is complete
+        return out

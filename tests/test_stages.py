@@ -1,0 +1,146 @@
+"""Stage-level differential tests: each OpenCL stage's output buffers against the NumPy twin's.
+
+The whole-frame comparisons (test_differential.py) say *that* a frame differs; these say
+*where*: random triangle soups (tests/random_scenes.py: slivers, specks, huge and
+near-crossing triangles, w = 0 vertices, degenerate ones, duplicates, a clipped grid) go
+through the OpenCL `StageChain` (geometry → vertex → setup → bin) and through the twin's
+vertex, setup and bin functions over the very same draw records, and the stage boundaries
+are compared record by record, in pipeline order, so the first failing assertion names the
+stage:
+
+* vertex → setup: clip-space positions and outcodes of every stream vertex (exact), window
+  positions of the vertices that need no clipping (exact);
+* setup → bin: status of every triangle, clip_count / clip_offset, the setup record of every
+  unclipped survivor, the clipped pieces and their parent barycentrics (all exact, bytes);
+* bin → raster: tile_start and every tile list (exact, bytes: same records, same order).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+from conftest import MatrixCamera
+from random_scenes import Lens, random_soup, random_view, to_world
+
+from clraster import Mesh, RasterConfig
+from clraster.config import OC_INVALID, OC_NEEDS_CLIP, OC_W_NONPOS, PIECE_DTYPE, ST_RASTER
+from clraster.device import default_context
+from clraster.drawlist import PlanCache, plan_frame
+from clraster.params import FrameParams, FrameTotals
+from clraster.reference import bin as ref_bin
+from clraster.reference import setup as ref_setup
+from clraster.reference import vertex as ref_vertex
+from clraster.stages.chain import StageChain
+
+#: (seed, (width, height), tile_log2, cull, lens): sizes on both sides of powers of two,
+#: tiles that do not divide the image, every cull mode, near planes from 0.01 to 2.
+CASES = [
+    (1, (64, 48), 4, "back", Lens(60.0, 0.5, 1000.0)),
+    (2, (65, 33), 3, "none", Lens(90.0, 0.01, 10.0)),
+    (3, (127, 129), 5, "front", Lens(20.0, 2.0, 1000.0)),
+    (4, (31, 17), 4, "back", Lens(150.0, 0.5, 10.0)),
+    (5, (200, 120), 6, "none", Lens(60.0, 0.01, 1000.0)),
+    (6, (96, 64), 4, "back", Lens(90.0, 0.5, 1000.0)),
+]
+TRIS = 3000
+
+
+@pytest.fixture(scope="module")
+def device():
+    ctx = default_context()
+    queue = cl.CommandQueue(ctx, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    return ctx, queue
+
+
+def _read(queue, gb, dtype, n: int, shape=()) -> np.ndarray:
+    """The first ``n`` records of a stage buffer (a GrowBuffer) as a host array."""
+    out = np.zeros((n, *shape), dtype)
+    if out.nbytes:
+        cl.enqueue_copy(queue, out, gb.buf, is_blocking=True)
+    return out
+
+
+def _first_diff(a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
+    """Number of differing records (compared as bytes) and their indices."""
+    ab = np.ascontiguousarray(a).view(np.uint8).reshape(a.shape[0], -1)
+    bb = np.ascontiguousarray(b).view(np.uint8).reshape(b.shape[0], -1)
+    bad = np.nonzero(np.any(ab != bb, axis=1))[0]
+    return bad.size, bad
+
+
+def _assert_records(stage: str, what: str, got: np.ndarray, want: np.ndarray) -> None:
+    assert got.shape == want.shape, f"{stage}: {what} has {got.shape} records, twin {want.shape}"
+    n, bad = _first_diff(got, want)
+    if n:
+        i = int(bad[0])
+        raise AssertionError(f"{stage}: {what} differs in {n} of {got.shape[0]} records; "
+                             f"first at {i}: OpenCL {got[i]!r} vs twin {want[i]!r}")
+
+
+@pytest.mark.parametrize("seed, size, tile_log2, cull, lens", CASES)
+def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
+    ctx, queue = device
+    w, h = size
+    rng = np.random.default_rng(seed)
+    v, f, _ = random_soup(rng, TRIS, w, h, lens)
+    view = random_view(rng) if seed % 2 else np.eye(4)
+    cam = MatrixCamera(lens.projection(w / h) @ view)
+    mesh = Mesh(to_world(v, view), f)
+    config = RasterConfig(tile_log2=tile_log2)
+    plan = plan_frame(mesh, cam, w, h, cull=cull, frustum=False, cones=False,
+                      cache=PlanCache())
+    pool, fd = plan.pool, plan.frame
+    params = FrameParams.make(w, h, config, cull)
+
+    chain = StageChain(ctx, config, raster=False)
+    bins = chain.bin(queue, pool, fd, params, FrameTotals())
+    queue.finish()
+    verts, setup = chain.vertex.buffers, chain.setup.buffers
+    n, m = fd.n_verts, fd.n_tris
+    assert (verts.n_verts, setup.n_tris) == (n, m)
+
+    # -- vertex → setup ---------------------------------------------------------------------
+    clip, oc, win = ref_vertex.transform_draws(pool, fd, params.kx, params.ky, w, h)
+    got_oc = _read(queue, verts.outcode, np.uint16, n)
+    _assert_records("vertex", "outcode", got_oc, oc)
+    _assert_records("vertex", "clip position", _read(queue, verts.clip, np.float32, n, (4,)),
+                    clip)
+    plain = (oc & (OC_NEEDS_CLIP | OC_INVALID | OC_W_NONPOS)) == 0
+    _assert_records("vertex", "window position (unclipped vertices)",
+                    _read(queue, verts.win, win.dtype, n)[plain], win[plain])
+
+    # -- setup → bin ------------------------------------------------------------------------
+    tri_verts, ids = ref_setup.draw_triangles(pool, fd)
+    st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, cull, params.kx, params.ky)
+    _assert_records("setup", "status", _read(queue, setup.status, np.uint8, m), st.status)
+    _assert_records("setup", "clip_count", _read(queue, setup.clip_count, np.int32, m),
+                    st.clip_count)
+    _assert_records("setup", "clip_offset", _read(queue, setup.clip_offset, np.int32, m),
+                    st.clip_offset)
+    live = st.status == ST_RASTER
+    _assert_records("setup", "setup record (unclipped)",
+                    _read(queue, setup.pieces, PIECE_DTYPE, m)[live], st.pieces[live])
+    p = setup.n_clip_pieces
+    assert p == st.clip_pieces.size, f"setup: {p} clipped pieces, twin {st.clip_pieces.size}"
+    _assert_records("setup", "clipped piece", _read(queue, setup.clip_pieces, PIECE_DTYPE, p),
+                    st.clip_pieces)
+    _assert_records("setup", "clipped piece barycentrics",
+                    _read(queue, setup.clip_bary, np.float32, p, (3, 3)), st.clip_bary)
+
+    # -- bin → raster -----------------------------------------------------------------------
+    order = ref_bin.unified_order(st.status, st.clip_count, st.clip_offset)
+    allp = np.concatenate([st.pieces, st.clip_pieces])
+    tile_start, entries = ref_bin.bin_pieces(allp, order, w, h, config)
+    _assert_records("bin", "tile_start",
+                    _read(queue, bins.tile_start, np.int32, params.n_tiles + 1), tile_start)
+    assert bins.n_entries == entries.size, f"bin: {bins.n_entries} entries, twin {entries.size}"
+    got = _read(queue, bins.entries, PIECE_DTYPE, bins.n_entries)
+    n_bad, bad = _first_diff(got, entries)
+    if n_bad:   # name the tile whose list differs first
+        t = int(np.searchsorted(tile_start, bad[0], side="right")) - 1
+        s0, s1 = int(tile_start[t]), int(tile_start[t + 1])
+        _assert_records("bin", f"list of tile {t} (x {t % params.tiles_x}, "
+                        f"y {t // params.tiles_x})", got[s0:s1], entries[s0:s1])
+    # the soup really reached every boundary (not vacuous)
+    assert live.any() and p > 0 and entries.size > 0, (int(live.sum()), p, entries.size)
