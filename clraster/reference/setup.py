@@ -69,13 +69,10 @@ def plane_dist(p: int, v: np.ndarray, kx: F32, ky: F32) -> np.ndarray:
 
 def facing(c: np.ndarray, cull: int) -> np.ndarray:
     """Facing of clip-space triangles c float32 (K, 3, 4) from det[x y w], as facing() in
-    setup.cl: ST_RASTER (keep), ST_BACKFACE or ST_DEGENERATE (det == 0) per triangle.
-    Each vertex is scaled first by the power of two that brings max(|x|, |y|, |w|) into
-    [1, 2) (unit_scale in setup.cl, the same bits: exact, sign-preserving, no under/overflow)."""
-    with np.errstate(all="ignore"):
-        m = np.abs(c[..., [0, 1, 3]]).max(axis=-1).astype(np.float32)   # (K, 3)
-        k = np.clip(254 - ((m.view(np.uint32) >> 23) & 0xFF).astype(np.int64), 1, 254)
-        c = c * (k.astype(np.uint32) << 23).view(np.float32)[..., None]
+    setup.cl: ST_RASTER (keep), ST_BACKFACE or ST_DEGENERATE (det == 0) per triangle. The
+    determinant is taken in float64 (as the kernel does in double): exact products, no
+    under- or overflow at any scene scale."""
+    c = c.astype(np.float64)
     a, b, d = c[:, 0], c[:, 1], c[:, 2]
     with np.errstate(all="ignore"):
         det = ((a[:, 0] * (b[:, 1] * d[:, 3] - b[:, 3] * d[:, 1])
