@@ -50,6 +50,41 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     return p
 
 
+
+def ortho(left, right, bottom, top, near, far) -> np.ndarray:
+    """glOrtho, written out here independently of clraster (float64)."""
+    m = np.eye(4)
+    m[0, 0] = 2.0 / (right - left)
+    m[1, 1] = 2.0 / (top - bottom)
+    m[2, 2] = -2.0 / (far - near)
+    m[0, 3] = -(right + left) / (right - left)
+    m[1, 3] = -(top + bottom) / (top - bottom)
+    m[2, 3] = -(far + near) / (far - near)
+    return m
+
+
+def assert_same_image(on, off, context: str, what: str = "culling") -> None:
+    """Two frames of the same view that must be the same image (``what`` on vs off: culling,
+    occlusion culling, batching...): ids and depth identical, barycentrics within 1e-6. The
+    message names the first differing pixel."""
+    diff = on.triangle_id != off.triangle_id
+    if diff.any():
+        ys, xs = np.nonzero(diff)
+        y, x = int(ys[0]), int(xs[0])
+        raise AssertionError(
+            f"{context}: {what} changed {int(diff.sum())} triangle id(s); first at "
+            f"(x={x}, y={y}): on {int(on.triangle_id[y, x])} vs off {int(off.triangle_id[y, x])}"
+            f" (depth {on.depth[y, x]!r} vs {off.depth[y, x]!r})")
+    bad = on.depth != off.depth
+    if bad.any():
+        ys, xs = np.nonzero(bad)
+        y, x = int(ys[0]), int(xs[0])
+        raise AssertionError(f"{context}: {what} changed depth at {int(bad.sum())} pixel(s); "
+                             f"first at (x={x}, y={y}): {on.depth[y, x]!r} vs "
+                             f"{off.depth[y, x]!r}")
+    err = np.abs(on.barycentrics.astype(np.float64) - off.barycentrics)
+    assert err.size == 0 or err.max() <= 1e-6, f"{context}: barycentrics differ by {err.max()}"
+
 #: Identity clip matrix: vertices are clip-space (x, y, z) with w = 1, i.e. NDC directly.
 NDC_CAMERA = MatrixCamera(np.eye(4))
 

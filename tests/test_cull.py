@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ortho
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -44,18 +45,6 @@ def translation(x, y, z) -> np.ndarray:
     t = np.eye(4)
     t[:3, 3] = (x, y, z)
     return t
-
-
-def ortho(left, right, bottom, top, near, far) -> np.ndarray:
-    """glOrtho, written out here."""
-    m = np.eye(4)
-    m[0, 0] = 2 / (right - left)
-    m[1, 1] = 2 / (top - bottom)
-    m[2, 2] = -2 / (far - near)
-    m[0, 3] = -(right + left) / (right - left)
-    m[1, 3] = -(top + bottom) / (top - bottom)
-    m[2, 3] = -(far + near) / (far - near)
-    return m
 
 
 def cube_mesh(half: float = 0.5) -> Mesh:

@@ -33,7 +33,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MatrixCamera, assert_frames_equal, get_renderer, perspective
+from conftest import (
+    MatrixCamera,
+    assert_frames_equal,
+    assert_same_image,
+    get_renderer,
+    ortho,
+    perspective,
+)
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
@@ -68,29 +75,6 @@ def check_partition(s) -> None:
     assert s.clusters_total == (s.clusters_frustum_culled + s.clusters_cone_culled
                                 + s.clusters_drawn), s.counts()
     assert 0 <= s.instances_frustum_culled + s.instances_empty <= s.instances_total
-
-
-def assert_same_image(on, off, context: str) -> None:
-    """Culling on vs off: ids and depth identical, barycentrics within 1e-6 where ids agree
-    (they agree everywhere once the first check passes)."""
-    diff = on.triangle_id != off.triangle_id
-    if diff.any():
-        ys, xs = np.nonzero(diff)
-        y, x = int(ys[0]), int(xs[0])
-        raise AssertionError(
-            f"{context}: culling changed {int(diff.sum())} triangle id(s); first at "
-            f"(x={x}, y={y}): on {int(on.triangle_id[y, x])} vs off {int(off.triangle_id[y, x])}"
-            f" (depth {on.depth[y, x]!r} vs {off.depth[y, x]!r})")
-    bad = on.depth != off.depth
-    if bad.any():
-        ys, xs = np.nonzero(bad)
-        y, x = int(ys[0]), int(xs[0])
-        raise AssertionError(f"{context}: culling changed depth at {int(bad.sum())} pixel(s); "
-                             f"first at (x={x}, y={y}): {on.depth[y, x]!r} vs "
-                             f"{off.depth[y, x]!r}")
-    same = ~diff
-    err = np.abs(on.barycentrics[same].astype(np.float64) - off.barycentrics[same])
-    assert err.size == 0 or err.max() <= 1e-6, f"{context}: barycentrics differ by {err.max()}"
 
 
 def compare_culling(scene, camera, size, cull, context: str, tile_log2: int = 4):
@@ -145,17 +129,6 @@ def view_towards(eye, point, ndc=(0.0, 0.0), *, fov_y: float, aspect: float,
     view[:3, :3] = r.T
     view[:3, 3] = -r.T @ np.asarray(eye, np.float64)
     return view
-
-
-def ortho(left, right, bottom, top, near, far) -> np.ndarray:
-    m = np.eye(4)
-    m[0, 0] = 2.0 / (right - left)
-    m[1, 1] = 2.0 / (top - bottom)
-    m[2, 2] = -2.0 / (far - near)
-    m[0, 3] = -(right + left) / (right - left)
-    m[1, 3] = -(top + bottom) / (top - bottom)
-    m[2, 3] = -(far + near) / (far - near)
-    return m
 
 
 def _instance_centre_radius(scene: Scene, i: int) -> tuple[np.ndarray, float]:

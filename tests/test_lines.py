@@ -19,7 +19,7 @@ from fractions import Fraction
 
 import numpy as np
 import pytest
-from conftest import NDC_CAMERA, MatrixCamera, perspective, window_mesh
+from conftest import NDC_CAMERA, MatrixCamera, ortho, perspective, window_mesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -470,17 +470,6 @@ def test_nan_and_inf_counted():
 # -- differential ---------------------------------------------------------------------------
 
 SIZES = [(1, 1), (8, 6), (17, 33), (64, 48), (255, 3), (3, 257)]
-
-
-def ortho(left, right, bottom, top, near, far):
-    """glOrtho, written out here (float64)."""
-    m = np.zeros((4, 4))
-    m[0, 0], m[1, 1], m[2, 2] = 2 / (right - left), 2 / (top - bottom), -2 / (far - near)
-    m[0, 3] = -(right + left) / (right - left)
-    m[1, 3] = -(top + bottom) / (top - bottom)
-    m[2, 3] = -(far + near) / (far - near)
-    m[3, 3] = 1.0
-    return m
 
 
 @st.composite

@@ -56,6 +56,7 @@ import pytest
 from conftest import (
     MatrixCamera,
     assert_frames_equal,
+    assert_same_image,
     get_renderer,
     load_shared_mesh,
     window_mesh,
@@ -94,27 +95,6 @@ def reference(target, camera, size=SIZE, cull="back", overdraw=False, **kw):
     """The frame without occlusion culling (the session's shared renderer, which never
     renders with occlusion)."""
     return get_renderer(*size).render(target, camera, cull=cull, overdraw=overdraw, **kw)
-
-
-def assert_same_image(on, off, context: str) -> None:
-    """Occlusion on vs off: ids and depth identical, barycentrics within 1e-6."""
-    diff = on.triangle_id != off.triangle_id
-    if diff.any():
-        ys, xs = np.nonzero(diff)
-        y, x = int(ys[0]), int(xs[0])
-        raise AssertionError(
-            f"{context}: occlusion culling changed {int(diff.sum())} triangle id(s); first "
-            f"at (x={x}, y={y}): on {int(on.triangle_id[y, x])} vs off "
-            f"{int(off.triangle_id[y, x])} (depth {on.depth[y, x]!r} vs {off.depth[y, x]!r})")
-    bad = on.depth != off.depth
-    if bad.any():
-        ys, xs = np.nonzero(bad)
-        y, x = int(ys[0]), int(xs[0])
-        raise AssertionError(
-            f"{context}: depth differs at {int(bad.sum())} pixel(s); first at (x={x}, y={y}):"
-            f" {on.depth[y, x]!r} vs {off.depth[y, x]!r}")
-    np.testing.assert_allclose(on.barycentrics, off.barycentrics, rtol=0, atol=1e-6,
-                               err_msg=f"{context}: barycentrics")
 
 
 def check_stats(on, off, context: str) -> None:
