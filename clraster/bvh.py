@@ -30,7 +30,8 @@ NaN bounds compare false both ways: they are never culled and never INSIDE.
 Public API beyond the tree, for the frustum and draw-list code: the classification
 primitives (`box_extremes`, `sphere_extremes`, `classify_extremes`, `dense_rows`,
 `dense_row_states`, `box_magnitudes`), the argument checks they share (`check_planes`,
-`check_mask`, `check_boxes`) and two index helpers (`concat_ranges`, `argsort_distinct`).
+`check_mask`; boxes: `clraster.inputs.check_boxes`) and two index helpers
+(`concat_ranges`, `argsort_distinct`).
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ from enum import IntEnum
 import numpy as np
 import numpy.typing as npt
 
+from .inputs import check_boxes
+
 __all__ = [
     "ALL_PLANES", "BVH", "DEFAULT_MARGIN", "INSIDE", "INTERSECTING", "OUTSIDE", "Visibility",
-    "argsort_distinct", "box_extremes", "box_magnitudes", "check_boxes", "check_mask",
+    "argsort_distinct", "box_extremes", "box_magnitudes", "check_mask",
     "check_planes", "classify_extremes", "concat_ranges", "dense_row_states", "dense_rows",
     "sphere_extremes",
 ]
@@ -230,20 +233,6 @@ def check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
                          f"0..63, got {m.dtype} {m.shape}")
     return m.astype(np.uint8)
 
-
-def check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """Box bounds as float64 (K, 3) each (an empty 1-D input is read as (0, 3)). Raises
-    ValueError unless both have shape (K, 3); values (NaN, order) are not checked."""
-    lo = np.asarray(mins, dtype=np.float64)
-    hi = np.asarray(maxs, dtype=np.float64)
-    if lo.ndim == 1 and lo.size == 0:
-        lo = lo.reshape(0, 3)
-    if hi.ndim == 1 and hi.size == 0:
-        hi = hi.reshape(0, 3)
-    if lo.ndim != 2 or lo.shape[1] != 3 or hi.shape != lo.shape:
-        raise ValueError(f"box mins and maxs must both have shape (K, 3), got {lo.shape} and "
-                         f"{hi.shape}")
-    return lo, hi
 
 
 def box_magnitudes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

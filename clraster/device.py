@@ -271,3 +271,9 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     except BaseException:   # KeyboardInterrupt: the device goes on regardless
         _in_flight.append((ev, keep))
         raise
+
+
+def event_ms(events) -> float:
+    """Sum of the device execution times of profiling ``events`` (None entries skipped), in
+    milliseconds; the queue must have been made with PROFILING_ENABLE."""
+    return sum((e.profile.end - e.profile.start) for e in events if e is not None) * 1e-6

@@ -34,13 +34,12 @@ from .bvh import (
     Visibility,
     box_extremes,
     box_magnitudes,
-    check_boxes,
     check_mask,
     check_planes,
     classify_extremes,
     sphere_extremes,
 )
-from .inputs import check_mat4
+from .inputs import check_boxes, check_mat4
 
 __all__ = [
     "DEFAULT_MARGIN", "PLANE_NAMES", "Visibility", "check_view_proj", "classify_aabbs",

@@ -78,11 +78,9 @@ def _check_depth(depth: npt.ArrayLike) -> np.ndarray:
 
 def _check_boxes(boxes_min: npt.ArrayLike, boxes_max: npt.ArrayLike
                  ) -> tuple[np.ndarray, np.ndarray]:
-    lo = np.ascontiguousarray(np.asarray(boxes_min, np.float32))
-    hi = np.ascontiguousarray(np.asarray(boxes_max, np.float32))
-    if lo.ndim != 2 or lo.shape[1] != 3 or lo.shape != hi.shape:
-        raise ValueError(f"boxes_min and boxes_max must both be (K, 3), got {lo.shape} and "
-                         f"{hi.shape}")
+    from .inputs import check_boxes
+
+    lo, hi = check_boxes(boxes_min, boxes_max, np.float32, names=("boxes_min", "boxes_max"))
     if lo.shape[0] > (1 << 27) // 12:
         raise ValueError(f"{lo.shape[0]:,} boxes in one query; at most {(1 << 27) // 12:,}")
     return lo, hi
@@ -120,6 +118,7 @@ class OcclusionQuery:
         """See `query`."""
         import pyopencl as cl
 
+        from .device import event_ms
         from .inputs import mvp_matrix
 
         d = _check_depth(depth)
@@ -139,8 +138,8 @@ class OcclusionQuery:
         if pyramid:
             pyr = self.pyramid.build(q, dbuf, w, h)
             hiz, ev = self.pyramid.enqueue_test(q, pyr, lo, hi, vp, w, h)
-            timings["pyramid"] = _ms(pyr.events)
-            timings["hiz test"] = _ms([ev])
+            timings["pyramid"] = event_ms(pyr.events)
+            timings["hiz test"] = event_ms([ev])
         pool, fd = box_geometry(lo, hi, vp)
         samples, stage_ms = self.query_stage.run(q, pool, fd, k, dbuf, w, h)
         timings.update(stage_ms)
@@ -187,7 +186,3 @@ def query(renderer_or_context, depth: npt.ArrayLike, boxes_min: npt.ArrayLike,
                              f"{type(renderer_or_context).__name__}") from None
         oq = OcclusionQuery(ctx, cfg)
     return oq(depth, boxes_min, boxes_max, camera, pyramid=pyramid)
-
-
-def _ms(events) -> float:
-    return sum((e.profile.end - e.profile.start) for e in events if e is not None) * 1e-6

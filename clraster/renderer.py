@@ -10,7 +10,7 @@ import numpy as np
 import pyopencl as cl
 
 from .config import RasterConfig
-from .device import check_process, default_context
+from .device import check_process, default_context, event_ms
 from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
@@ -134,9 +134,4 @@ class Renderer:
         w, h = self.width, self.height
         pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
         verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h)
-        return verdict, _ms([*pyr.events, ev] if ev else pyr.events)
-
-
-def _ms(events: list[cl.Event]) -> float:
-    """Sum of device execution times of ``events`` in milliseconds."""
-    return sum((ev.profile.end - ev.profile.start) for ev in events) * 1e-6
+        return verdict, event_ms([*pyr.events, ev] if ev else pyr.events)

@@ -16,6 +16,7 @@ import pyopencl as cl
 
 from ..config import RasterConfig
 from ..device import program
+from ..inputs import check_boxes
 from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
 
@@ -173,7 +174,7 @@ class PyramidStage:
         if (int(width), int(height)) != (pyramid.width, pyramid.height):
             raise ValueError(f"the pyramid is {pyramid.width}x{pyramid.height}, not "
                              f"{width}x{height}")
-        lo, hi, vp = check_boxes(mins, maxs, view_proj)
+        lo, hi, vp = check_test_inputs(mins, maxs, view_proj)
         return self.enqueue_test_rows(queue, pyramid, np.vstack([lo.T, hi.T]), vp, width,
                                       height)
 
@@ -207,13 +208,9 @@ class PyramidStage:
         return res[:k], ev
 
 
-def check_boxes(mins, maxs, view_proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def check_test_inputs(mins, maxs, view_proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Validated contiguous float32 (K, 3), (K, 3) and (16,) copies of the test inputs."""
-    lo = np.ascontiguousarray(np.asarray(mins, np.float32))
-    hi = np.ascontiguousarray(np.asarray(maxs, np.float32))
-    if lo.ndim != 2 or lo.shape[1] != 3 or lo.shape != hi.shape:
-        raise ValueError(f"box mins and maxs must both be (K, 3), got {lo.shape} and "
-                         f"{hi.shape}")
+    lo, hi = check_boxes(mins, maxs, np.float32)
     vp = np.ascontiguousarray(np.asarray(view_proj, np.float32).reshape(-1))
     if vp.shape != (16,):
         raise ValueError(f"view_proj must be a (4, 4) matrix, got {vp.size} values")
