@@ -17,7 +17,7 @@ import argparse
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -273,20 +273,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print(f"clraster: error: --repeat must be >= 1, got {args.repeat}", file=sys.stderr)
         return 2
+    return run_guarded("clraster", lambda: _render(args))
+
+
+def run_guarded(prog: str, command: Callable[[], int]) -> int:
+    """Run a command's body; the errors a user can cause or fix become one line on stderr
+    and an exit code (see the module docstring), never a traceback."""
+    from .device import ForkedProcessError, device_busy
+
     try:
-        return _render(args)
-    except (ValueError, OSError, NoDeviceError) as exc:
+        return command()
+    except (ValueError, OSError, NoDeviceError, ForkedProcessError) as exc:
         # Bad mesh, camera, output path or no OpenCL device: a message, not a traceback.
-        print(f"clraster: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     except MemoryError as exc:
-        print(f"clraster: error: out of memory ({exc or 'host memory'}); render a smaller "
-              f"image (--size) or a smaller mesh", file=sys.stderr)
+        print(f"{prog}: error: out of memory ({exc or 'host memory'}); render a smaller "
+              f"image (--size) or a smaller scene", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("clraster: interrupted", file=sys.stderr)
-        from .device import device_busy
-
+        print(f"{prog}: interrupted", file=sys.stderr)
         if device_busy():
             # a kernel cannot be cancelled: rather than wait for it (seconds) or tear the
             # interpreter down under it, leave now

@@ -47,7 +47,6 @@ from .annotate import (
     ui_scale,
 )
 from .camera import Camera
-from .device import NoDeviceError
 from .fates import Fate
 from .inputs import parse_size
 from .mesh import Mesh
@@ -369,11 +368,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return int(exc.code or 0)
-    try:
-        return _run(args)
-    except (ValueError, OSError, NoDeviceError) as exc:
-        print(f"clraster demo: error: {exc}", file=sys.stderr)
-        return 1
+    from .cli import run_guarded
+
+    return run_guarded("clraster demo", lambda: _run(args))
 
 
 if __name__ == "__main__":
