@@ -1,14 +1,17 @@
 """Command-line interface.
 
 - ``clraster render MESH --size WxH --out image.png``: render one mesh (this module).
+- ``clraster render MESH --views cameras.json --out DIR``: render one view per camera of a
+  camera list file into DIR (`clraster.batch.render_views`; file format in `clraster.views`).
 - ``clraster demo ...``: the built-in plant demo with the culling inspector
   (`clraster.demo.main`).
 - ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
   docs in the repository's ``bench/`` folder).
 
 Exit codes: 0 success; 1 the mesh, camera or output could not be used, or memory ran out
-(one line on stderr, no traceback); 2 bad command-line arguments (argparse's usage message);
-130 interrupted (Ctrl-C).
+(one line on stderr, no traceback), or with --views some views failed (a summary line on
+stderr says how many and where their messages are); 2 bad command-line arguments
+(argparse's usage message); 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -83,6 +86,48 @@ def _positive(text: str) -> float:
     return v
 
 
+def _outputs(text: str) -> tuple[str, ...]:
+    from .batch import check_outputs
+
+    try:
+        return check_outputs(tuple(t.strip() for t in text.split(",") if t.strip()))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+#: single-view options that mean nothing with --views (dest → option)
+_SINGLE_VIEW = {"eye": "--eye", "target": "--target", "near": "--near", "far": "--far",
+                "depth": "--depth", "ids": "--ids", "wireframe": "--wireframe",
+                "reference": "--reference"}
+
+
+def _render_views(args: argparse.Namespace) -> int:
+    from .batch import render_views
+    from .renderer import Renderer
+
+    if args.out.exists() and not args.out.is_dir():
+        raise ValueError(f"--out {str(args.out)!r} is a file; with --views give a folder")
+    if args.mesh == EXAMPLE:
+        from .examples import example_mesh
+
+        mesh = example_mesh()
+    else:
+        mesh = Mesh.load(args.mesh)
+    width, height = args.size
+    print(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
+    renderer = Renderer(width, height, config=RasterConfig(tile_log2=args.tile_log2))
+    summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
+                           progress=True if args.progress else None, cull=args.cull)
+    print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
+    if summary.failures:
+        for f in summary.failures:
+            print(f"clraster: view failed: {f.message}", file=sys.stderr)
+        print(f"clraster: {len(summary.failures)} of {summary.views} views failed; messages "
+              f"above and in {summary.failures_file}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="clraster", description="Tile-based software rasterizer on CPU OpenCL (PoCL).")
@@ -100,7 +145,20 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
                    help="image size in pixels (default 1280x720)")
     r.add_argument("--out", type=Path, required=True, metavar="PNG",
-                   help="shaded image to write (any format imageio writes)")
+                   help="shaded image to write (any format imageio writes); with --views, "
+                        "the folder the views' files go to (created if missing)")
+    many = r.add_argument_group(
+        "many views", "--views renders one file set per camera of a JSON camera list "
+                      "(look-at or matrices entries; see clraster.views) into the --out "
+                      "folder: view_00000_depth.npy, view_00000_ids.npy, ... A re-run skips "
+                      "views whose files all exist; a broken camera fails only its view.")
+    many.add_argument("--views", type=Path, metavar="JSON",
+                      help="camera list file; --out is then a folder")
+    many.add_argument("--outputs", type=_outputs, default=("depth", "ids"),
+                      metavar="LIST", help="comma-separated outputs per view out of depth, "
+                                           "ids, bary, shaded (default depth,ids)")
+    many.add_argument("--progress", action="store_true",
+                      help="show a progress bar on stderr even when it is not a terminal")
     cam = r.add_argument_group(
         "camera", "OpenGL conventions: right-handed world, the camera looks from EYE "
                   "towards TARGET (down its −Z). Vectors are x,y,z; write --eye=-1,2,3 "
@@ -272,6 +330,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.repeat < 1:
         parser.print_usage(sys.stderr)
         print(f"clraster: error: --repeat must be >= 1, got {args.repeat}", file=sys.stderr)
+        return 2
+    if args.views is not None:
+        given = [opt for dest, opt in _SINGLE_VIEW.items()
+                 if getattr(args, dest) is not None and getattr(args, dest) is not False]
+        if given or args.repeat != 1:
+            parser.print_usage(sys.stderr)
+            print(f"clraster: error: {', '.join(given or ['--repeat'])} cannot be used with "
+                  f"--views (the cameras come from the file, the outputs from --outputs)",
+                  file=sys.stderr)
+            return 2
+        return run_guarded("clraster", lambda: _render_views(args))
+    if args.progress or args.outputs != ("depth", "ids"):
+        parser.print_usage(sys.stderr)
+        print("clraster: error: --outputs and --progress need --views (one image: --out, "
+              "--depth, --ids)", file=sys.stderr)
         return 2
     return run_guarded("clraster", lambda: _render(args))
 

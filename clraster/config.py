@@ -92,16 +92,47 @@ class RasterConfig:
             binning; each chunk counts and scatters its own triangles per tile, so the
             per-tile lists keep submission order with no atomics. Memory is
             ``bin_chunks × tiles × 4`` bytes.
+        batch_triangles: a frame's draws go through the stage chain (vertex → setup →
+            bin → raster) in consecutive batches of at most this many triangles, each
+            rasterized into the same frame buffers (`clraster.streaming`), so the vertex,
+            setup and bin buffers are sized by the batch, never by the scene: at most 207
+            bytes per triangle of the budget (`StageChain.budget_bounds`). A draw (one
+            cluster, ≤ CLUSTER_MAX triangles) is the smallest unit, so values below
+            CLUSTER_MAX are refused. Never changes the image or the counts. Each extra pass
+            costs a few launches and waits, and the raster reloads the tiles it touches.
+            Default ``1 << 20``, measured (bench/README.md, "Streamed frames"): at 1920×1080
+            2**16 was clearly slower (dragon min 203 vs 106 ms; 5M plant outside 1418 vs
+            1041–1120 ms), 2**18 a little slower, 2**20 and 2**22 alike within the noise;
+            2**20 keeps the dragon (871K triangles) in one pass and bounds these buffers to
+            ~207 MiB, where 2**22 held 642 MiB on the plant.
+        batch_entries: the (piece, tile) entries of one pass's bin list, at most (clipped
+            pieces count against it too). A batch whose count step finds more is split and
+            drawn again in smaller batches (never truncated, never refused); a single draw
+            larger than this still goes through alone, and the buffers it grew are released
+            after the frame. Memory: 64 bytes per entry (the entries are copies of the
+            64-byte setup records, which the raster reads sequentially) plus 100 per
+            clipped piece. Default ``1 << 21`` (128 MiB of entries): ordinary scenes bin
+            ~0.5 entries per triangle (dragon 0.46, 5M plant 0.56 at 1080p), so a full
+            triangle batch needs ~2**19 and this never binds there (2**20..2**22 measured
+            alike); it splits only frames of huge overlapping triangles, whose passes are
+            raster work anyway. 2**22 would double the bound for no measured gain.
     """
 
     tile_log2: int = 4
     bin_chunks: int = 64
+    batch_triangles: int = 1 << 20
+    batch_entries: int = 1 << 21
 
     def __post_init__(self) -> None:
         if not 3 <= self.tile_log2 <= 6:
             raise ValueError(f"tile_log2 must be in 3..6 (8..64 px tiles), got {self.tile_log2}")
         if not 1 <= self.bin_chunks <= 4096:
             raise ValueError(f"bin_chunks must be in 1..4096, got {self.bin_chunks}")
+        for name, lo in (("batch_triangles", CLUSTER_MAX), ("batch_entries", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) \
+                    or not lo <= v < 2**31:
+                raise ValueError(f"{name} must be an integer in {lo}..2**31 - 1, got {v!r}")
 
     @property
     def tile_size(self) -> int:

@@ -2,9 +2,10 @@
 (`FrameTotals`); plain data shared by the OpenCL stage chain and the NumPy twin.
 
 A frame may run the stage chain (geometry → vertex → setup → bin → raster) several times
-into the same frame buffers — the two phases of occlusion culling today, bounded batches of
-draws later — so the per-frame parameters are built once and passed to every pass, and the
-counts and timings of the passes accumulate in one `FrameTotals`.
+into the same frame buffers — the two phases of occlusion culling, and within each the
+bounded batches of a streamed frame (`clraster.streaming`) — so the per-frame parameters
+are built once and passed to every pass, and the counts and timings of the passes
+accumulate in one `FrameTotals`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import CULL_MODES, RasterConfig, guard_band_factors
-from .frame import FrameStats
+from .frame import FrameStats, status_counts
 
 
 @dataclass(frozen=True)
@@ -56,20 +57,26 @@ class FrameParams:
 class FrameTotals:
     """Counts and timings summed over the passes of one frame.
 
-    status: uint8 (M_pass,) per-triangle setup status of each pass, in pass order.
+    status_counts: int64 (8,) triangles per setup status code (config.ST_*), summed over
+    the passes: counts, not per-triangle arrays, so a frame's host memory does not grow with
+    the triangles it draws.
     clip_pieces, binned_entries, fragments_tested, fragments_passed: sums over the passes.
     timings_ms: stage → milliseconds, in first-seen order (the caller may put host stages,
     e.g. "cull (host)", in first). pending: stage → OpenCL profiling events not yet added to
     timings_ms (`settle` adds them once they are complete).
     """
 
-    status: list[np.ndarray] = field(default_factory=list)
+    status_counts: np.ndarray = field(default_factory=lambda: np.zeros(8, np.int64))
     clip_pieces: int = 0
     binned_entries: int = 0
     fragments_tested: int = 0
     fragments_passed: int = 0
     timings_ms: dict[str, float] = field(default_factory=dict)
     pending: dict[str, list] = field(default_factory=dict)
+
+    def add_status(self, status: np.ndarray) -> None:
+        """Count one pass's per-triangle setup status codes (uint8 (M_pass,))."""
+        self.status_counts += status_counts(status)
 
     def add_time(self, stage: str, ms: float) -> None:
         self.timings_ms[stage] = self.timings_ms.get(stage, 0.0) + ms
@@ -90,10 +97,10 @@ class FrameTotals:
     def stats(self, counts: dict[str, int]) -> FrameStats:
         """The frame's `FrameStats` from the culling counts (cull.DrawList.counts plus the
         occlusion rows) and these totals; timings included."""
-        status = np.concatenate(self.status) if self.status else np.zeros(0, np.uint8)
-        s = FrameStats.from_counts(counts, status, clip_pieces=self.clip_pieces,
-                                   binned_entries=self.binned_entries,
-                                   fragments_tested=self.fragments_tested,
-                                   fragments_passed=self.fragments_passed)
+        s = FrameStats.from_status_counts(counts, self.status_counts,
+                                          clip_pieces=self.clip_pieces,
+                                          binned_entries=self.binned_entries,
+                                          fragments_tested=self.fragments_tested,
+                                          fragments_passed=self.fragments_passed)
         s.timings_ms = dict(self.timings_ms)
         return s

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 import pyopencl as cl
@@ -19,6 +20,7 @@ from .params import FrameParams, FrameTotals
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
 from .stages.raster import RasterOutput
+from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
 
 
@@ -32,7 +34,29 @@ class Renderer:
             PYOPENCL_CTX, else the first PoCL CPU device).
 
     Device buffers are kept and grown between frames; programs are built once per context
-    and config. Threads may share a Renderer: its frames are serialized by a lock (one per
+    and config. Frames are streamed: the draws go through the stage chain in consecutive
+    batches bounded by ``config.batch_triangles`` (M) and ``config.batch_entries`` (E, bin
+    entries and clipped pieces of a pass), all rasterized into the same frame buffers —
+    the image and every count are those of one unbatched pass, whatever the budget
+    (`clraster.streaming`). So device memory is bounded by the budget and the image,
+    never by the scene's triangle count::
+
+        frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
+                       NumPy arrays, used in place by a CPU device)
+      + per pass       ≤ 207·M + 164·E bytes (535 MiB at the defaults; draws, vertex stream,
+                       setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
+      + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
+      + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and
+                       64 bytes per instance (its matrix) — not per drawn triangle
+      + pyramid        ≈ 5.3·W·H bytes (its levels, level 0 included) and 25 bytes per
+                       tested cluster box, when occlusion culling is on
+
+    A single draw (cluster) whose bin list alone exceeds E is still drawn, in a pass of its
+    own; the buffers it grew are released after the frame, so memory returns to the bound.
+    Frame buffers that cannot fit the device fail here, in the constructor, before
+    anything is allocated.
+
+    Threads may share a Renderer: its frames are serialized by a lock (one per
     Renderer; use one Renderer per thread for parallel frames). It works only in the process
     that created it: after fork() a child must make its own, and only if its parent never
     used OpenCL (`clraster.device.ForkedProcessError` says why and what to do instead).
@@ -45,12 +69,7 @@ class Renderer:
         self.context = context or default_context()
         self._pid = os.getpid()
         self._lock = threading.Lock()
-        dev = self.context.devices[0]
-        need = 12 * self.width * self.height
-        if need > dev.max_mem_alloc_size:
-            raise ValueError(f"{self.width}x{self.height} needs a {need / 2**20:.0f} MiB "
-                             f"barycentric buffer; {dev.name} allocates at most "
-                             f"{dev.max_mem_alloc_size / 2**20:.0f} MiB per buffer")
+        _check_frame_fits(self.context.devices[0], self.width, self.height, self.config)
         self.queue = cl.CommandQueue(
             self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.chain = StageChain(self.context, self.config)
@@ -95,6 +114,27 @@ class Renderer:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
                                 fates)
 
+    def render_many(self, target, cameras, **render_kwargs) -> Iterator[Frame]:
+        """Render ``target`` from each of ``cameras`` in order: a generator of Frames.
+
+        Args:
+            cameras: a list (any iterable, read lazily) of `clraster.Camera` objects, camera
+                entry dicts, or objects with ``view_projection(width, height)``; or the path
+                of a camera list file (JSON; format and checks in `clraster.views`).
+            render_kwargs: `render`'s keywords (cull, frustum, cones, occlusion, overdraw,
+                fates), the same for every view; unknown ones raise TypeError at once.
+
+        Each frame is exactly what ``render(target, camera, **render_kwargs)`` returns in a
+        loop on this renderer (with occlusion=True, each view's history is the view before
+        it). The scene's clusters, BVH and geometry pool and its upload to the device are
+        kept across views; each frame has its own arrays. A broken camera raises
+        `clraster.views.ViewError` naming its index (and field) when the generator reaches
+        it; `clraster.batch.render_views` instead fails that view and goes on.
+        """
+        from .views import render_many
+
+        return render_many(self, target, cameras, **render_kwargs)
+
     def _render(self, target, camera, cull: str, frustum: bool, cones: bool, occlusion: bool,
                 overdraw: bool, fates: bool) -> Frame:
         w, h = self.width, self.height
@@ -114,16 +154,26 @@ class Renderer:
         params = FrameParams.make(w, h, self.config, cull)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
         occluded = None
-        if not occlusion:
-            out = self.chain.draw(self.queue, plan.pool, fd, params, totals,
-                                  overdraw=overdraw)
-        else:
-            def draw(draws, into: RasterOutput | None) -> RasterOutput:
-                return self.chain.draw(self.queue, plan.pool, draws, params, totals,
-                                       into=into, overdraw=overdraw)
+        config = self.config
 
-            res = two_phase(plan, self._occlusion, draw, self._hiz, totals, counts)
-            out, occluded = res.out, res.occluded_keys
+        def one_pass(batch, max_entries: int | None, into: RasterOutput | None
+                     ) -> RasterOutput:
+            return self.chain.draw(self.queue, plan.pool, batch, params, totals, into=into,
+                                   overdraw=overdraw, max_entries=max_entries)
+
+        def draw(draws, into: RasterOutput | None) -> RasterOutput:
+            # a frame (or an occlusion phase) as a stream of bounded passes
+            return stream_draws(draws, config.batch_triangles, config.batch_entries,
+                                one_pass, into)
+
+        try:
+            if not occlusion:
+                out = draw(fd, None)
+            else:
+                res = two_phase(plan, self._occlusion, draw, self._hiz, totals, counts)
+                out, occluded = res.out, res.occluded_keys
+        finally:
+            self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
         return Frame(out.depth, out.ids, out.bary, totals.stats(counts), overdraw=out.overdraw,
                      fates=ClusterFates.from_plan(plan, occluded) if fates else None)
 
@@ -135,3 +185,25 @@ class Renderer:
         pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
         verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h)
         return verdict, event_ms([*pyr.events, ev] if ev else pyr.events)
+
+
+def _check_frame_fits(dev: cl.Device, width: int, height: int, config: RasterConfig) -> None:
+    """Refuse an image whose frame buffers cannot fit ``dev``, before anything is allocated:
+    the largest frame array (barycentrics, 12·W·H bytes) and the bin count buffer against
+    the device's per-buffer limit, and all of them (depth, ids, barycentrics, overdraw:
+    24·W·H, plus the per-tile buffers) against its global memory."""
+    npx = width * height
+    tiles_x, tiles_y = config.tiles(width, height)
+    n_tiles = tiles_x * tiles_y
+    limit, total = int(dev.max_mem_alloc_size), int(dev.global_mem_size)
+    for nbytes, what, cap, unit in (
+            (12 * npx, "barycentric buffer", limit, "per buffer"),
+            (4 * config.bin_chunks * n_tiles, "bin count buffer", limit, "per buffer"),
+            (24 * npx + (4 * config.bin_chunks + 24) * n_tiles,
+             "set of frame buffers (depth, ids, barycentrics, overdraw, per-tile counts)",
+             total, "in all")):
+        if nbytes > cap:
+            raise ValueError(f"{width}x{height} needs a {nbytes / 2**20:,.0f} MiB {what}; "
+                             f"{dev.name} allocates at most {cap / 2**20:,.0f} MiB {unit}. "
+                             "Render a smaller image (or split the view into several "
+                             "cameras)")

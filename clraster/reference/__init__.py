@@ -24,6 +24,7 @@ from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
 from ..inputs import check_cull, check_flag, check_size
 from ..params import FrameParams, FrameTotals
+from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
 from . import bin as bin_
 from . import pyramid as pyramid_
@@ -105,9 +106,24 @@ def render(target, camera, width: int, height: int, *, cull: str = "back",
 def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
               totals: FrameTotals, into: Images | None = None) -> Images:
     """The twin's stage chain over the draws ``fd`` of ``pool``: vertex → setup → bin →
-    raster into ``into`` (an earlier pass's images, not modified; None: clear), as
-    `clraster.stages.chain.StageChain.draw`. Adds the pass's counts and host times to
-    ``totals``; returns the new images."""
+    raster into ``into`` (an earlier pass's images, not modified; None: clear), streamed
+    in batches within ``config``'s budget by the renderer's own batching function
+    (`clraster.streaming.stream_draws`), so the twin's memory per pass is bounded like the
+    device's and it runs the same passes. Adds the counts and host times to ``totals``;
+    returns the new images."""
+
+    def one_pass(batch: FrameDraws, max_entries: int | None, into: Images | None
+                 ) -> Images:
+        return _one_pass(pool, batch, params, config, totals, into, max_entries)
+
+    return stream_draws(fd, config.batch_triangles, config.batch_entries, one_pass, into)
+
+
+def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
+              totals: FrameTotals, into: Images | None, max_entries: int | None) -> Images:
+    """One pass of the twin's stage chain, as `clraster.stages.chain.StageChain.draw`
+    (``max_entries``: over it, in clipped pieces or bin entries,
+    `clraster.streaming.BinBudgetExceeded` is raised and nothing is counted)."""
     w, h = params.width, params.height
     if fd.n_tris == 0:
         if into is not None:
@@ -120,14 +136,16 @@ def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     tri_verts, ids = setup_.draw_triangles(pool, fd)
     st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky)
     t2 = time.perf_counter()
+    if max_entries is not None and st.clip_pieces.size > max_entries:
+        raise BinBudgetExceeded(st.clip_pieces.size, max_entries)
     order = bin_.unified_order(st.status, st.clip_count, st.clip_offset)
     allp = np.concatenate([st.pieces, st.clip_pieces])
-    tile_start, entries = bin_.bin_pieces(allp, order, w, h, config)
+    tile_start, entries = bin_.bin_pieces(allp, order, w, h, config, max_entries)
     t3 = time.perf_counter()
     depth, ids_img, bary, tested, passed = raster_.raster(st.clip_bary, tile_start, entries,
                                                           w, h, config, into=into)
     t4 = time.perf_counter()
-    totals.status.append(st.status)
+    totals.add_status(st.status)
     totals.clip_pieces += int(st.clip_pieces.size)
     totals.binned_entries += int(entries.size)
     totals.fragments_tested += tested

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
+from ..streaming import BinBudgetExceeded
 
 
 def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.ndarray
@@ -46,20 +47,41 @@ def rect_outside(X: np.ndarray, Y: np.ndarray, x0, y0, x1, y1) -> np.ndarray:
 
 
 def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
-               config: RasterConfig) -> tuple[np.ndarray, np.ndarray]:
+               config: RasterConfig, max_entries: int | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """Bin pieces into tiles.
 
     Args:
         pieces: PIECE_DTYPE (M + P,) unified piece array (slots, then clipped pieces).
         order: int64 (K,) indices of the live pieces in submission order (`unified_order`).
+        max_entries: as bin.cl's host side: more (piece, tile) pairs than this raise
+            `clraster.streaming.BinBudgetExceeded` before the records are gathered
+            (None: no limit).
 
     Returns:
         tile_start int32 (T + 1,) and entries PIECE_DTYPE (E,) (copies of the records),
         tile-major, submission order within each tile — what kernels/bin.cl produces.
     """
+    owner, tile = piece_tiles(pieces, order, width, height, config)
+    if max_entries is not None and owner.size > max_entries:
+        raise BinBudgetExceeded(owner.size, max_entries)
+    tiles_x, tiles_y = config.tiles(width, height)
+    srt = np.argsort(tile, kind="stable")
+    entries = pieces[order[owner[srt]]]
+    counts = np.bincount(tile, minlength=tiles_x * tiles_y)
+    if counts.sum() > np.iinfo(np.int32).max:
+        raise ValueError("binning would need more than 2**31 entries; use larger tiles")
+    tile_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return tile_start, entries
+
+
+def piece_tiles(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
+                config: RasterConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The (piece, tile) pairs of `bin_pieces`, the count step of kernels/bin.cl: int64
+    (E,) positions in ``order`` and int64 (E,) tiles, piece by piece in submission order
+    and each piece's tiles row by row."""
     bb_min, bb_max = pieces["bb_min"][order], pieces["bb_max"][order]
     tiles_x, tiles_y = config.tiles(width, height)
-    n_tiles = tiles_x * tiles_y
     s = config.tile_log2
     tx0, ty0 = (bb_min & 0xFFFF) >> s, (bb_min >> 16) >> s
     tx1, ty1 = (bb_max & 0xFFFF) >> s, (bb_max >> 16) >> s
@@ -80,11 +102,4 @@ def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
     y1 = np.minimum(bb_max[owner] >> 16, ((ty + 1) << s) - 1)
     keep = single | ~rect_outside(pieces["x"][order][owner], pieces["y"][order][owner],
                                   x0, y0, x1, y1)
-    owner, tile = owner[keep], tile[keep]
-    srt = np.argsort(tile, kind="stable")
-    entries = pieces[order[owner[srt]]]
-    counts = np.bincount(tile, minlength=n_tiles)
-    if counts.sum() > np.iinfo(np.int32).max:
-        raise ValueError("binning would need more than 2**31 entries; use larger tiles")
-    tile_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
-    return tile_start, entries
+    return owner[keep], tile[keep]

@@ -10,6 +10,7 @@ import pyopencl as cl
 from ..config import PIECE_DTYPE, RasterConfig
 from ..device import program, wait
 from ..params import FrameParams
+from ..streaming import BinBudgetExceeded
 from ._buffers import GrowBuffer
 from .setup import SetupBuffers
 
@@ -43,10 +44,15 @@ class BinStage:
         self.config = config
         self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))
 
-    def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams
-            ) -> tuple[BinBuffers, list[cl.Event]]:
+    def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams,
+            max_entries: int | None = None) -> tuple[BinBuffers, list[cl.Event]]:
         """Bin the pieces of setup's ``n_tris`` triangles into per-tile lists. Returns the
-        buffers (n_entries = E) and the profiling events."""
+        buffers (n_entries = E) and the profiling events.
+
+        ``max_entries``: when the count → scan step finds E > max_entries, raise
+        `clraster.streaming.BinBudgetExceeded` (E) before the entry buffer is sized or
+        written (the streamed frame draws these triangles again in smaller batches);
+        None: no limit (a single draw)."""
         b = self.buffers
         m = setup.n_tris
         width, height = params.width, params.height
@@ -67,6 +73,8 @@ class BinStage:
         wait(queue)   # interruptibly, with the GIL free (device.wait)
         cl.enqueue_copy(queue, over, b.overflow.buf)
         cl.enqueue_copy(queue, head, tile_start, src_offset=4 * n_tiles)
+        if max_entries is not None and (over[0] or int(head[0]) > max_entries):
+            raise BinBudgetExceeded(2**31 if over[0] else int(head[0]), max_entries, ev)
         if over[0]:
             raise ValueError(
                 f"binning would need more than 2**31 (piece, tile) entries at {width}x{height} "

@@ -14,9 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig
+from ..config import DRAW_DTYPE, PIECE_DTYPE, WINVERT_DTYPE, RasterConfig
 from ..drawlist import FrameDraws
 from ..params import FrameParams, FrameTotals
+from ..streaming import BinBudgetExceeded
+from ._buffers import GrowBuffer
 from .bin import BinBuffers, BinStage
 from .geometry import GeometryStage
 from .raster import RasterOutput, RasterStage
@@ -43,9 +45,45 @@ class StageChain:
         self.setup = SetupStage(ctx, config)
         self.binning = BinStage(ctx, config)
         self.raster = RasterStage(ctx, config) if raster else None
+        for gb, nbytes in self.budget_bounds().items():
+            gb.bound = nbytes
+
+    def budget_bounds(self) -> dict:
+        """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
+        bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
+        least one triangle), vertex stream 34 bytes × 3·M vertices (a draw has at most 3
+        vertices per triangle), setup 73·M (record, status, clip count and offset),
+        clipped pieces 100·E (record + barycentrics; a pass with more pieces than E is
+        split like one with too many entries), bin entries 64·E. The per-tile buffers
+        (C·T counts, tile starts, tile stats) depend on the image only."""
+        m, e = self.config.batch_triangles, self.config.batch_entries
+        g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,
+                      self.binning.buffers)
+        return {g.draws: DRAW_DTYPE.itemsize * m, v.clip: 16 * 3 * m, v.outcode: 2 * 3 * m,
+                v.win: WINVERT_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
+                s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m,
+                s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
+                b.entries: PIECE_DTYPE.itemsize * e}
+
+    def trim(self) -> None:
+        """Release the per-pass buffers left above the budget's bound (`budget_bounds`) by
+        an outsized pass (a single draw over the entry budget); call between frames."""
+        for gb in self.budget_bounds():
+            gb.trim()
+
+    def device_bytes(self) -> int:
+        """Bytes of device memory the chain's buffers hold now (pool included)."""
+        stages = [self.geometry, self.vertex, self.setup, self.binning]
+        if self.raster is not None:
+            stages.append(self.raster)
+        total = self.setup.partial.capacity
+        for st in stages:
+            total += sum(gb.capacity for gb in vars(st.buffers).values()
+                         if isinstance(gb, GrowBuffer))
+        return total
 
     def bin(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
-            totals: FrameTotals) -> BinBuffers:
+            totals: FrameTotals, *, max_entries: int | None = None) -> BinBuffers:
         """Run geometry upload → vertex → setup → bin over the draws ``fd`` of ``pool`` (a
         `drawlist.GeometryPool` or `clraster.boxes.BoxGeometry`; uploaded only when it is a
         different object from last time). Adds the clipped pieces, binned entries and the
@@ -53,12 +91,25 @@ class StageChain:
 
         Returns the bin buffers (tile lists); the setup buffers stay in ``self.setup``.
         The last stages may still be running: read the outputs through the same queue.
+
+        ``max_entries``: the pass's bin-entry budget (None: none). Over it — more entries,
+        or more clipped pieces — `clraster.streaming.BinBudgetExceeded` is raised before
+        anything is counted in ``totals`` (only the device times of the work done).
         """
         self.geometry.upload_pool(queue, pool)
         geo = self.geometry.upload_frame(queue, fd)
         verts, ev_v = self.vertex.run(queue, geo, params)
-        setup, ev_s = self.setup.run(queue, geo, verts, params)
-        bins, ev_b = self.binning.run(queue, setup, params)
+        stage = "setup"
+        try:
+            setup, ev_s = self.setup.run(queue, geo, verts, params, max_pieces=max_entries)
+            stage = "bin"
+            bins, ev_b = self.binning.run(queue, setup, params, max_entries)
+        except BinBudgetExceeded as e:   # the device time spent still counts
+            totals.add_events("vertex", ev_v)
+            if stage == "bin":
+                totals.add_events("setup", ev_s)
+            totals.add_events(stage, e.events)
+            raise
         totals.clip_pieces += setup.n_clip_pieces
         totals.binned_entries += bins.n_entries
         totals.add_events("vertex", ev_v)
@@ -68,7 +119,7 @@ class StageChain:
 
     def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
              totals: FrameTotals, *, into: RasterOutput | None = None,
-             overdraw: bool = False) -> RasterOutput:
+             overdraw: bool = False, max_entries: int | None = None) -> RasterOutput:
         """`bin`, then rasterize into ``into`` (the frame buffers of an earlier pass of the
         same frame, whose depth and ids take part in the depth test) or, when None, into
         fresh cleared frame buffers. Adds the setup status of every triangle, the fragment
@@ -76,6 +127,10 @@ class StageChain:
 
         Returns the frame buffers, complete and readable. With no triangles in ``fd``
         nothing runs: ``into`` is returned as it is, or fresh cleared buffers.
+        ``max_entries``: as in `bin` (over it, nothing is drawn or counted).
+
+        This is one pass of whatever size ``fd`` is; `clraster.streaming.stream_draws`
+        cuts a frame into passes within the config's budget.
         """
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
@@ -83,13 +138,13 @@ class StageChain:
                                              overdraw)
                 into.clear()
             return into
-        bins = self.bin(queue, pool, fd, params, totals)
+        bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
         setup = self.setup.buffers
         out, tstats, ev_r = self.raster.run(queue, setup, bins, params, into=into,
                                             overdraw=overdraw)
         status = np.empty(setup.n_tris, np.uint8)
         cl.enqueue_copy(queue, status, setup.status.buf, is_blocking=True)
-        totals.status.append(status)
+        totals.add_status(status)
         totals.fragments_tested += int(tstats[:, 0].sum())
         totals.fragments_passed += int(tstats[:, 1].sum())
         totals.add_events("raster", [ev_r])

@@ -11,6 +11,7 @@ import pyopencl as cl
 from ..config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
 from ..device import program, wait
 from ..params import FrameParams
+from ..streaming import BinBudgetExceeded
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
 from .vertex import ClipBuffers
@@ -57,10 +58,13 @@ class SetupStage:
         self.partial = GrowBuffer(ctx)
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
-            params: FrameParams) -> tuple[SetupBuffers, list[cl.Event]]:
+            params: FrameParams, max_pieces: int | None = None
+            ) -> tuple[SetupBuffers, list[cl.Event]]:
         """Set up the ``geo.n_tris`` triangles of the uploaded draws (geo) over the vertex
         stage's outputs (verts). Returns the buffers (n_clip_pieces = P) and the profiling
-        events."""
+        events. ``max_pieces``: when P > max_pieces, raise
+        `clraster.streaming.BinBudgetExceeded` (P) before the clipped pieces are sized or
+        written (a streamed frame splits the pass; None: no limit)."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize
         n_draws, m = geo.n_draws, geo.n_tris
@@ -87,6 +91,8 @@ class SetupStage:
             wait(queue)   # interruptibly, with the GIL free (device.wait)
             cl.enqueue_copy(queue, total, b.clip_total.buf)
         p = int(total[0])
+        if max_pieces is not None and p > max_pieces:
+            raise BinBudgetExceeded(p, max_pieces, ev)
         if p:
             ev.append(self.k_clipped(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                      np.float32(kx), np.float32(ky), b.clip_count.buf,

@@ -1,0 +1,485 @@
+"""Rendering past one machine on Dask (``dask.distributed``): sort-last compositing.
+
+Sort-last rendering (Molnar et al. 1994's taxonomy): the scene's (instance, cluster) pairs
+are split spatially into N parts (`partition`, a k-d split of their world-box centres);
+each part is rendered on a worker as a full frame; the frames are merged by the compositing
+operator of `clraster.composite` (per pixel the smallest (depth, id)) in a tree of Dask
+tasks, and one frame comes back to the client. It equals the frame one `Renderer` makes
+of the whole scene, bit for bit (`clraster.composite` says why). docs/DISTRIBUTED.md
+describes the reduction, and binary-swap / radix-k for large frames.
+
+The module has three layers, so batch views (`render_views`, to come) can sit beside
+sort-last on the same worker state:
+
+* **Client helpers**: `local_cluster` (a LocalCluster of worker processes whose PoCL thread
+  count keeps workers × threads <= cores), `pocl_thread_env`.
+* **Worker side**: `worker_renderer` (one `Renderer` per (width, height, config) per worker
+  process, made lazily in that process and never pickled), `worker_target` (a scene file
+  loaded once per process), `worker_info`. These are module-level dicts guarded by the pid:
+  an OpenCL context does not survive fork(), so a process that finds another pid's entries
+  drops them (Dask's workers are spawned by default, `distributed.worker.
+  multiprocessing-method: spawn`, so this is the belt to that braces).
+* **Sort-last**: `Part`, `partition`, `scatter_parts`, `submit_sort_last`,
+  `render_sort_last`.
+
+Thread counts. PoCL's CPU device starts one thread per core unless told otherwise; two
+worker processes on two cores would each start two. The variable is read once, when PoCL
+initializes (the first OpenCL call of the process), so it must be in the worker's
+environment before that: `local_cluster` passes it as the Nanny's ``env=`` (the documented
+way; on a real cluster set ``distributed.nanny.environ`` in the Dask config, or export it
+before ``dask worker``). PoCL 3.x reads ``POCL_MAX_PTHREAD_COUNT`` (the pip
+pocl-binary-distribution 3.0 here, checked: the device then reports that many compute
+units); PoCL 4 and later read ``POCL_CPU_MAX_CU_COUNT``. Both are set.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .composite import Crop, composite_crops, crop, uncrop
+from .config import RasterConfig
+from .frame import Frame
+from .mesh import Mesh
+from .scene import Scene
+
+__all__ = ["POCL_THREAD_VARS", "Part", "ScatteredParts", "SortLastFutures", "kd_split",
+           "local_cluster", "partition", "pocl_thread_env", "render_sort_last",
+           "scatter_parts", "submit_sort_last", "usable_cores", "worker_info", "worker_renderer",
+           "worker_target"]
+
+log = logging.getLogger(__name__)
+
+#: Environment variables that bound PoCL's CPU worker threads: PoCL 3.x reads the first,
+#: PoCL 4+ the second (an unknown one is ignored, so both are set).
+POCL_THREAD_VARS = ("POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_COUNT")
+
+
+# -- client helpers --------------------------------------------------------------------------
+
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:   # not on Linux
+        return os.cpu_count() or 1
+
+
+def pocl_thread_env(threads: int) -> dict[str, str]:
+    """Environment for a worker process whose PoCL may start ``threads`` threads (>= 1)."""
+    if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return {k: str(threads) for k in POCL_THREAD_VARS}
+
+
+def local_cluster(n_workers: int = 2, *, threads_per_worker: int = 1,
+                  pocl_threads: int | None = None, **kwargs: Any):
+    """A `dask.distributed.LocalCluster` of ``n_workers`` worker processes for rendering.
+
+    Args:
+        n_workers: worker processes (each one OpenCL context, made on first use).
+        threads_per_worker: Dask task threads per worker. 1 is right for rendering: a
+            Renderer serializes its frames, and PoCL already spreads one frame over cores.
+        pocl_threads: PoCL threads per worker; default ``max(1, cores // n_workers)`` so
+            that workers × threads <= cores.
+        kwargs: passed on to LocalCluster (e.g. ``dashboard_address=None``); an ``env``
+            dict is merged over the PoCL variables.
+
+    Returns:
+        The LocalCluster (``processes=True``); connect with ``dask.distributed.Client(c)``
+        and close both when done (they are context managers).
+    """
+    from dask.distributed import LocalCluster
+
+    if pocl_threads is None:
+        pocl_threads = max(1, usable_cores() // max(1, n_workers))
+    env = {**pocl_thread_env(pocl_threads), **kwargs.pop("env", {})}
+    kwargs.setdefault("dashboard_address", None)
+    return LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker,
+                        processes=True, env=env, **kwargs)
+
+
+# -- worker side: per-process state ----------------------------------------------------------
+
+_STATE_LOCK = threading.Lock()
+_STATE_PID: int | None = None
+#: (width, height, config) → Renderer of this process
+_RENDERERS: dict[tuple[int, int, RasterConfig], Any] = {}
+#: (resolved path, mtime_ns) → Scene loaded in this process; (path key, parts) → [Part]
+_TARGETS: dict[tuple[str, int], Scene] = {}
+_PARTS: dict[tuple[tuple[str, int], int], list[Part]] = {}
+
+
+def _process_state() -> None:
+    """Drop state made by another process (we are a fork() child: its OpenCL contexts are
+    unusable here). Call with _STATE_LOCK held."""
+    global _STATE_PID
+    pid = os.getpid()
+    if _STATE_PID != pid:
+        _RENDERERS.clear()
+        _TARGETS.clear()
+        _PARTS.clear()
+        _STATE_PID = pid
+
+
+def worker_renderer(width: int, height: int, config: RasterConfig | None = None):
+    """This process's `Renderer` for (width, height, config), made on first use.
+
+    Run it inside the worker (in a task): the Renderer holds an OpenCL context and device
+    buffers, which are neither picklable nor valid in another process. It lives as long as
+    the process, so its programs, buffers and plan cache serve every later task."""
+    from .renderer import Renderer
+
+    key = (int(width), int(height), config or RasterConfig())
+    with _STATE_LOCK:
+        _process_state()
+        r = _RENDERERS.get(key)
+        if r is None:
+            r = _RENDERERS[key] = Renderer(key[0], key[1], config=key[2])
+        return r
+
+
+def worker_target(path: str | os.PathLike) -> Scene:
+    """The scene in ``path`` (`Scene.load`), loaded once per process and file version
+    (path and modification time), so tasks that name a file do not each read it."""
+    p = Path(path).resolve()
+    key = (str(p), p.stat().st_mtime_ns)
+    with _STATE_LOCK:
+        _process_state()
+        scene = _TARGETS.get(key)
+        if scene is None:
+            scene = _TARGETS[key] = Scene.load(p)
+        return scene
+
+
+def _worker_parts(path: str | os.PathLike, parts: int) -> list[Part]:
+    """`partition` of the scene in ``path``, computed once per process (deterministic, so
+    every worker makes the same parts)."""
+    scene = worker_target(path)
+    p = Path(path).resolve()
+    key = ((str(p), p.stat().st_mtime_ns), parts)
+    with _STATE_LOCK:
+        got = _PARTS.get(key)
+    if got is None:
+        got = partition(scene, parts)
+        with _STATE_LOCK:
+            _PARTS[key] = got
+    return got
+
+
+def worker_info() -> dict[str, Any]:
+    """A small record of this process: pid, the PoCL thread variables in its environment,
+    and (if this process has opened one) its OpenCL device's name and compute units. Use
+    with ``client.run(worker_info)`` to check a cluster's set-up."""
+    info: dict[str, Any] = {"pid": os.getpid(),
+                            **{k: os.environ.get(k) for k in POCL_THREAD_VARS}}
+    from .device import default_context
+
+    dev = default_context().devices[0]
+    info["device"] = dev.name
+    info["compute_units"] = int(dev.max_compute_units)
+    info["renderers"] = len(_RENDERERS) if _STATE_PID == os.getpid() else 0
+    return info
+
+
+# -- spatial partition -----------------------------------------------------------------------
+
+def kd_split(centres: np.ndarray, weights: np.ndarray, n: int) -> np.ndarray:
+    """Split points into ``n`` groups by a k-d tree: recursively cut along the axis of largest
+    extent at the weighted quantile that gives each side work in proportion to the number of
+    groups it will hold (floor(m/2) : ceil(m/2)).
+
+    Args:
+        centres: float64 (K, 3) finite points. weights: (K,) non-negative work per point
+            (triangles). n: groups, >= 1.
+
+    Returns:
+        int64 (K,) group of each point in [0, n). Deterministic (stable sorts); a group is
+        empty only when there are fewer points than groups.
+    """
+    centres = np.asarray(centres, np.float64)
+    weights = np.asarray(weights, np.float64)
+    labels = np.zeros(centres.shape[0], np.int64)
+    stack = [(np.arange(centres.shape[0]), 0, int(n))]
+    while stack:
+        idx, first, m = stack.pop()
+        if m == 1 or idx.size == 0:
+            labels[idx] = first
+            continue
+        ml = m // 2
+        c = centres[idx]
+        axis = int(np.argmax(np.ptp(c, axis=0))) if idx.size else 0
+        order = idx[np.argsort(c[:, axis], kind="stable")]
+        cw = np.cumsum(weights[order])
+        k = int(np.searchsorted(cw, cw[-1] * ml / m)) + 1   # points on the left side
+        k = min(max(k, 1), max(idx.size - 1, 1)) if idx.size > 1 else idx.size
+        stack.append((order[k:], first + ml, m - ml))
+        stack.append((order[:k], first, ml))
+    return labels
+
+
+@dataclass(frozen=True)
+class Part:
+    """One part of a scene for sort-last rendering.
+
+    Attributes:
+        scene: a `Scene` of the part's triangles: one instance per original instance that
+            has clusters in the part, in the original instance order, with the original
+            transform and either the original mesh (all its clusters are in the part) or a
+            sub-mesh of the part's faces in their original order (vertices compacted).
+        id_map: int32 (scene.n_faces,) the original scene's triangle id of each of this
+            part's triangle ids. Strictly increasing, so on equal depth the lower part id
+            is the lower original id: a part frame breaks ties as the whole scene would.
+        index: this part's number in [0, parts).
+    """
+
+    scene: Scene
+    id_map: np.ndarray
+    index: int
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.id_map.size)
+
+    def scene_ids(self, ids: np.ndarray) -> np.ndarray:
+        """int32 ids of a frame of ``self.scene`` (−1 background) as ids of the original
+        scene (−1 stays −1)."""
+        ids = np.asarray(ids)
+        if self.id_map.size == 0:
+            return np.full(ids.shape, -1, np.int32)
+        return np.where(ids >= 0, self.id_map[np.maximum(ids, 0)], -1).astype(np.int32)
+
+
+def _gather_ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """int64 indices ``concat(arange(s, s + l) for s, l in zip(starts, lengths))``."""
+    lengths = np.asarray(lengths, np.int64)
+    total = int(lengths.sum())
+    offs = np.cumsum(lengths) - lengths
+    return np.repeat(np.asarray(starts, np.int64) - offs, lengths) + np.arange(total)
+
+
+def _sub_mesh(mesh: Mesh, faces: np.ndarray) -> Mesh:
+    """The faces ``faces`` (sorted int64) of ``mesh`` as a Mesh of the vertices they use
+    (same float32 values, so they transform to the same clip positions)."""
+    f = mesh.faces[faces]
+    used, inverse = np.unique(f, return_inverse=True)
+    return Mesh(mesh.vertices[used], inverse.reshape(f.shape).astype(np.int32))
+
+
+def partition(target: Mesh | Scene, parts: int) -> list[Part]:
+    """Split ``target`` spatially into ``parts`` `Part` objects for sort-last rendering.
+
+    The unit is a (instance, cluster) pair (clusters from `clraster.clusters.clusters_of`,
+    the renderer's own): their world boxes (`drawlist.key_boxes`) give centres, which a
+    `kd_split` weighted by triangle counts divides into ``parts`` groups of about equal
+    work and compact extent (so each part covers a small piece of the screen, and occlusion
+    culling keeps working inside a part). Clusters with a NaN/Inf vertex have no box and go
+    to part 0 (their bad triangles are dropped and counted there, as in one frame).
+
+    Every triangle of the scene is in exactly one part. A part renders exactly its
+    triangles: its own culling (frustum, cones, occlusion) is conservative like the whole
+    scene's, and each triangle's depth and barycentrics depend only on the triangle, its
+    instance's matrix and the image size. Deterministic: the same scene gives the same
+    parts in every process.
+    """
+    from .clusters import clusters_of
+    from .drawlist import GeometryPool, key_boxes
+
+    if not isinstance(parts, int) or isinstance(parts, bool) or parts < 1:
+        raise ValueError(f"parts must be a positive integer, got {parts!r}")
+    if isinstance(target, Mesh):
+        scene = Scene.from_mesh(target)
+    elif isinstance(target, Scene):
+        scene = target
+    else:
+        raise ValueError(f"expected a clraster.Mesh or clraster.Scene, got "
+                         f"{type(target).__name__}")
+    pool = GeometryPool.build(scene)
+    lo, hi, bounded = key_boxes(pool, scene)
+    n_keys = np.diff(pool.instance_key_base)
+    inst_of_key = np.repeat(np.arange(n_keys.size), n_keys)
+    local_of_key = np.arange(inst_of_key.size) - np.repeat(pool.instance_key_base[:-1], n_keys)
+    gcl = pool.mesh_cluster_base[pool.instance_mesh[inst_of_key]] + local_of_key
+    weights = pool.clusters[gcl, 1].astype(np.float64)
+    centres = np.where(bounded[:, None], 0.5 * (lo + hi), 0.0)
+    labels = np.zeros(inst_of_key.size, np.int64)
+    if bounded.any():
+        labels[bounded] = kd_split(centres[bounded], weights[bounded], parts)
+
+    face_base = np.asarray(scene.face_base, np.int64)
+    subs: dict[tuple[int, bytes], Mesh] = {}   # sub-meshes shared by instances
+    out = []
+    for p in range(parts):
+        keys = np.flatnonzero(labels == p)           # ascending: grouped by instance
+        insts, starts = np.unique(inst_of_key[keys], return_index=True)
+        ends = np.append(starts[1:], keys.size)
+        part_scene = Scene()
+        ids = []
+        for i, s, e in zip(insts.tolist(), starts.tolist(), ends.tolist(), strict=True):
+            inst = scene.instances[i]
+            mesh = inst.mesh
+            if e - s == n_keys[i]:
+                part_scene.add(mesh, inst.transform)
+                ids.append(face_base[i] + np.arange(mesh.n_faces, dtype=np.int64))
+                continue
+            lc = local_of_key[keys[s:e]]
+            cm = clusters_of(mesh)
+            faces = np.sort(cm.face_ids[_gather_ranges(cm.tri_offset[lc],
+                                                       np.diff(cm.tri_offset)[lc])]
+                            ).astype(np.int64)
+            sk = (id(mesh), lc.tobytes())
+            sub = subs.get(sk)
+            if sub is None:
+                sub = subs[sk] = _sub_mesh(mesh, faces)
+            part_scene.add(sub, inst.transform)
+            ids.append(face_base[i] + faces)
+        id_map = (np.concatenate(ids) if ids else np.zeros(0, np.int64)).astype(np.int32)
+        out.append(Part(part_scene, id_map, p))
+    return out
+
+
+# -- sort-last on Dask -----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ScatteredParts:
+    """Parts of one scene held on the workers (`scatter_parts`): reuse it across frames so
+    the geometry crosses the network once. futures: one Dask Future per `Part`."""
+
+    futures: tuple
+    n_faces: int
+
+
+def scatter_parts(client, target: Mesh | Scene, parts: int) -> ScatteredParts:
+    """`partition` ``target`` on the client and scatter the parts to the workers (spread
+    over them, one copy each); pass the result to `render_sort_last` as its target."""
+    ps = partition(target, parts)
+    futs = client.scatter(ps, hash=False)
+    return ScatteredParts(tuple(futs), sum(p.n_faces for p in ps))
+
+
+def _render_part(part: Part, camera, width: int, height: int, config: RasterConfig | None,
+                 render_kwargs: dict[str, Any]) -> Crop:
+    """Worker task: render one part, ids mapped back to the original scene's, cropped to
+    the rectangle it covers (all that needs to travel)."""
+    if part.n_faces == 0:   # more parts than clusters: nothing to draw
+        fr = Frame.empty(width, height)
+        if render_kwargs.get("overdraw"):
+            fr.overdraw = np.zeros((height, width), np.int32)
+        return crop(fr)
+    t0 = time.perf_counter()
+    fr = worker_renderer(width, height, config).render(part.scene, camera, **render_kwargs)
+    fr.triangle_id = part.scene_ids(fr.triangle_id)
+    fr.fates = None
+    out = crop(fr)
+    out.frame.stats.timings_ms["part render (wall)"] = (time.perf_counter() - t0) * 1e3
+    return out
+
+
+def _render_part_from_path(path: str, parts: int, index: int, camera, width: int,
+                           height: int, config: RasterConfig | None,
+                           render_kwargs: dict[str, Any]) -> Crop:
+    """Worker task: load and partition the scene file on the worker (once per process),
+    then render part ``index``."""
+    return _render_part(_worker_parts(path, parts)[index], camera, width, height, config,
+                        render_kwargs)
+
+
+def _composite_task(a: Crop, b: Crop) -> Crop:
+    """Worker task: one node of the reduction tree (`clraster.composite.composite_crops`; it
+    makes a new crop, because Dask may hold or retry the inputs)."""
+    t0 = time.perf_counter()
+    out = composite_crops(a, b)
+    t = out.frame.stats.timings_ms
+    t["composite"] = t.get("composite", 0.0) + (time.perf_counter() - t0) * 1e3
+    return out
+
+
+@dataclass(frozen=True)
+class SortLastFutures:
+    """The Dask futures of one sort-last frame: ``parts`` (one rendered part each) and
+    ``frame`` (the root of the reduction tree), all `clraster.composite.Crop` objects
+    (`clraster.composite.uncrop` makes the full frame). Waiting on ``parts`` first separates render
+    time from compositing time (bench/sort_last.py)."""
+
+    parts: tuple
+    frame: Any
+
+
+_RENDER_KWARGS = ("cull", "frustum", "cones", "occlusion", "overdraw")
+
+
+def submit_sort_last(target, camera, client, *, parts: int | None = None, width: int,
+                     height: int, config: RasterConfig | None = None,
+                     **render_kwargs: Any) -> SortLastFutures:
+    """Submit a sort-last frame to ``client`` without waiting; see `render_sort_last`."""
+    from .inputs import check_size
+
+    width, height = check_size(width, height)
+    bad = set(render_kwargs) - set(_RENDER_KWARGS)
+    if bad:
+        raise ValueError(f"render_sort_last does not take {sorted(bad)}; it takes "
+                         f"{list(_RENDER_KWARGS)} (per-cluster fates are not composited)")
+    if isinstance(target, (str, os.PathLike)):
+        if parts is None:
+            raise ValueError("parts is needed when the target is a file")
+        path = str(Path(target).resolve())
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"scene file not found: {path!r}")
+        level = [client.submit(_render_part_from_path, path, parts, i, camera, width, height,
+                               config, render_kwargs, pure=False) for i in range(parts)]
+    else:
+        if not isinstance(target, ScatteredParts):
+            if parts is None:
+                raise ValueError("parts is needed (how many parts to split the scene into)")
+            target = scatter_parts(client, target, parts)
+        elif parts is not None and parts != len(target.futures):
+            raise ValueError(f"the scattered parts are {len(target.futures)}, not {parts}")
+        level = [client.submit(_render_part, f, camera, width, height, config,
+                               render_kwargs, pure=False) for f in target.futures]
+    rendered = tuple(level)
+    while len(level) > 1:   # the reduction tree: neighbours pairwise, an odd one goes up
+        nxt = [client.submit(_composite_task, level[k], level[k + 1], pure=False)
+               for k in range(0, len(level) - 1, 2)]
+        if len(level) % 2:
+            nxt.append(level[-1])
+        level = nxt
+    return SortLastFutures(rendered, level[0])
+
+
+def render_sort_last(target, camera, client, *, parts: int | None = None, width: int,
+                     height: int, config: RasterConfig | None = None,
+                     **render_kwargs: Any) -> Frame:
+    """Render ``target`` split into ``parts`` parts on the workers of ``client``, composited.
+
+    Args:
+        target: a `clraster.Mesh` or `clraster.Scene` (partitioned on the client and
+            scattered), a `ScatteredParts` from `scatter_parts` (reused: the geometry is
+            already on the workers), or a path to a scene file (each worker loads and
+            partitions it once per process; nothing large crosses the network).
+        camera: a `clraster.Camera` (or any picklable object with ``view_projection``).
+        client: a `dask.distributed.Client`.
+        parts: number of parts (spatial k-d split of the clusters, `partition`).
+        width, height: image size in pixels.
+        config: the workers' `RasterConfig` (never changes the image).
+        render_kwargs: ``cull``, ``frustum``, ``cones``, ``occlusion``, ``overdraw`` as in
+            `Renderer.render` (each part is culled on its own, conservatively).
+
+    Returns:
+        One `Frame`, gathered to the client, equal bit for bit (depth, triangle_id,
+        barycentrics) to ``Renderer(width, height).render(target, camera, **render_kwargs)``;
+        overdraw is the sum of the parts' (equal to one frame's with ``occlusion=False``;
+        with occlusion a part culls less than the whole scene would). Stats: counts added
+        over the parts (`clraster.composite.merge_stats`); timings_ms adds "part render
+        (wall)" and "composite" (worker milliseconds, summed over the tasks).
+    """
+    futs = submit_sort_last(target, camera, client, parts=parts, width=width, height=height,
+                            config=config, **render_kwargs)
+    return uncrop(futs.frame.result())
+

@@ -1,0 +1,338 @@
+"""Many views of one scene: camera lists (Python or a JSON file) and `render_many`'s engine.
+
+Camera list file (JSON, UTF-8): either a bare list of entries or an object
+``{"cameras": [entry, ...]}``. Each entry is one of two kinds:
+
+* look-at (gluLookAt + gluPerspective, as `clraster.Camera.look_at`)::
+
+      {"eye": [x, y, z], "target": [x, y, z], "up": [0, 1, 0],
+       "fov_y": 45.0, "near": 0.1, "far": 100.0}
+
+  ``eye`` and ``target`` are required; ``up`` (default [0, 1, 0]), ``fov_y`` (vertical field
+  of view in degrees, default 45), ``near`` (default 0.1) and ``far`` (default 100) are
+  optional. The aspect ratio is the rendered image's width / height.
+* matrices (as `clraster.Camera.from_matrices`)::
+
+      {"view": [[...], [...], [...], [...]], "projection": [[...], ...]}
+
+  4×4 each, row by row (``view[i][j]`` is row i, column j), for column vectors:
+  ``clip = projection @ view @ [x, y, z, 1]``; the projection is used as it is whatever the
+  image size, so it carries its own aspect ratio.
+
+An optional ``"name"`` (a string) is allowed in either kind and ignored by the renderer.
+Any other key is an error (a misspelt ``"fovy"`` must not silently become the default).
+Python's JSON reader accepts ``NaN`` and ``Infinity``; such values are reported as broken.
+
+A broken entry is reported by its index and field (`ViewError`: ``camera 3: field 'near':
+near must be > 0 ...``). `load_cameras` raises on the first one by default; with
+``strict=False`` it keeps a `BrokenCamera` in that place, which `clraster.batch.render_views`
+turns into one failed view while the rest of the batch goes on.
+
+Python camera lists may hold `clraster.Camera` objects, dicts in the file's entry format, or
+any object with ``view_projection(width, height)`` (as `Renderer.render` accepts).
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .camera import Camera
+
+if TYPE_CHECKING:
+    from .frame import Frame
+    from .renderer import Renderer
+
+__all__ = ["BrokenCamera", "CameraFileError", "ViewError", "camera_from_entry",
+           "iter_cameras", "load_cameras", "render_many"]
+
+_LOOK_AT_KEYS = ("eye", "target", "up", "fov_y", "near", "far")
+_MATRIX_KEYS = ("view", "projection")
+_LOOK_AT_DEFAULTS: dict[str, Any] = {"up": (0.0, 1.0, 0.0), "fov_y": 45.0, "near": 0.1,
+                                     "far": 100.0}
+
+
+class ViewError(ValueError):
+    """One view cannot be rendered: ``index`` is its place in the camera list, ``field`` the
+    entry's field at fault (None when it is not one field's fault)."""
+
+    def __init__(self, index: int, field: str | None, message: str) -> None:
+        self.index = index
+        self.field = field
+        self.message = message
+        where = f"camera {index}" + (f": field {field!r}" if field else "")
+        super().__init__(f"{where}: {message}")
+
+
+class CameraFileError(ValueError):
+    """A camera list file that cannot be read as a list of entries at all (not JSON, or not
+    a list / ``{"cameras": [...]}``). Broken entries are `ViewError` instead."""
+
+
+@dataclass(frozen=True)
+class BrokenCamera:
+    """Placeholder for a camera list entry that could not be made into a camera."""
+
+    error: ViewError
+
+    @property
+    def index(self) -> int:
+        return self.error.index
+
+
+def _number(entry: dict, key: str, index: int) -> float:
+    v = entry[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise ViewError(index, key, f"must be a number, got {v!r}")
+    f = float(v)
+    if not math.isfinite(f):
+        raise ViewError(index, key, f"must be finite, got {f}")
+    return f
+
+
+def _array(entry: dict, key: str, index: int, shape: tuple[int, ...]) -> np.ndarray:
+    v = entry[key]
+    what = "3 numbers [x, y, z]" if shape == (3,) else "a 4x4 matrix (4 rows of 4 numbers)"
+    try:
+        a = np.asarray(v)
+    except (TypeError, ValueError):   # ragged nested lists
+        raise ViewError(index, key, f"must be {what}, got {v!r}") from None
+    if a.dtype.kind not in "iuf" or a.shape != shape:
+        raise ViewError(index, key, f"must be {what}, got {v!r}")
+    a = a.astype(np.float64)
+    if not np.all(np.isfinite(a)):
+        raise ViewError(index, key, f"must be finite, got {a.tolist()}")
+    return a
+
+
+def camera_from_entry(entry: Any, index: int) -> Camera:
+    """A `Camera` from one camera-list entry (the module docstring's format).
+
+    Raises:
+        ViewError: naming ``index`` and the field at fault.
+    """
+    if not isinstance(entry, dict):
+        raise ViewError(index, None, f"expected an object with 'eye'/'target' (look-at) or "
+                                     f"'view'/'projection' (matrices), got "
+                                     f"{type(entry).__name__} {entry!r:.60}")
+    keys = set(entry) - {"name"}
+    unknown = sorted(str(k) for k in keys - set(_LOOK_AT_KEYS) - set(_MATRIX_KEYS))
+    if unknown:
+        raise ViewError(index, unknown[0],
+                        f"unknown field; a look-at entry has {', '.join(_LOOK_AT_KEYS)} and a "
+                        f"matrices entry has {', '.join(_MATRIX_KEYS)}")
+    if "name" in entry and not isinstance(entry["name"], str):
+        raise ViewError(index, "name", f"must be a string, got {entry['name']!r}")
+    look, mats = keys & set(_LOOK_AT_KEYS), keys & set(_MATRIX_KEYS)
+    if look and mats:
+        raise ViewError(index, sorted(mats)[0],
+                        f"an entry is either look-at ({', '.join(sorted(look))}) or matrices, "
+                        f"not both")
+    if mats:
+        for key in _MATRIX_KEYS:
+            if key not in entry:
+                raise ViewError(index, key, "missing (a matrices entry needs both view and "
+                                            "projection)")
+        view = _array(entry, "view", index, (4, 4))
+        proj = _array(entry, "projection", index, (4, 4))
+        check_projection(proj, index)
+        try:
+            return Camera.from_matrices(view, proj)
+        except ValueError as exc:
+            raise ViewError(index, "view", str(exc)) from None
+    for key in ("eye", "target"):
+        if key not in entry:
+            raise ViewError(index, key, "missing (a look-at entry needs eye and target; or "
+                                        "give view and projection matrices)")
+    e = {**_LOOK_AT_DEFAULTS, **entry}
+    eye = _array(e, "eye", index, (3,))
+    target = _array(e, "target", index, (3,))
+    up = _array(e, "up", index, (3,))
+    fov_y, near, far = (_number(e, k, index) for k in ("fov_y", "near", "far"))
+    if not 0.0 < fov_y < 180.0:
+        raise ViewError(index, "fov_y", f"is the vertical field of view in degrees and must "
+                                        f"be in (0, 180), got {fov_y}")
+    if near <= 0.0:
+        raise ViewError(index, "near", f"must be > 0 (distance to the near plane), got {near}")
+    if far <= near:
+        raise ViewError(index, "far", f"must be > near, got near={near}, far={far}")
+    if np.array_equal(eye, target):
+        raise ViewError(index, "target", f"must differ from eye (both are {eye.tolist()})")
+    try:
+        return Camera.look_at(eye, target, up, fov_y=fov_y, near=near, far=far)
+    except ValueError as exc:   # up zero or parallel to the view direction
+        raise ViewError(index, "up", str(exc)) from None
+
+
+def check_projection(proj: np.ndarray, index: int, field: str = "projection") -> None:
+    """Refuse a projection (float64 (4, 4), finite) that cannot make an image: singular, or
+    a perspective / orthographic one whose near plane is not in front of its far plane.
+
+    For OpenGL's perspective (last row 0 0 −1 0) the planes are at the distances
+    n = P23 / (P22 − 1) and f = P23 / (P22 + 1) (where NDC z is −1 and +1). Other
+    projections are only checked for being invertible: an orthographic one with its planes
+    swapped is a legitimate reversed depth range (the identity is one).
+    """
+    if abs(np.linalg.det(proj)) == 0.0 or not np.linalg.cond(proj) < 1e15:
+        raise ViewError(index, field, "is singular (not invertible): it maps space onto a "
+                                      "plane, so no depth can be made")
+    if not np.array_equal(proj[3], (0.0, 0.0, -1.0, 0.0)):
+        return
+    n, f = proj[2, 3] / (proj[2, 2] - 1.0), proj[2, 3] / (proj[2, 2] + 1.0)
+    if not 0.0 < n < f:
+        raise ViewError(index, field, f"this perspective projection puts the near plane at "
+                                      f"{n:.6g} and the far plane at {f:.6g}; it needs "
+                                      f"0 < near < far")
+
+
+def _check_camera(cam: Any, index: int, width: int, height: int) -> Any:
+    """``cam`` if it can make a view-projection matrix for this image, else ViewError."""
+    if isinstance(cam, Camera):
+        if cam.fov_y is None:   # from_matrices: its projection was never checked
+            check_projection(np.asarray(cam.projection(width, height), np.float64), index)
+        return cam
+    if not callable(getattr(cam, "view_projection", None)):
+        raise ViewError(index, None, f"expected a clraster.Camera or a camera entry (dict), "
+                                     f"got {type(cam).__name__}")
+    try:
+        m = np.asarray(cam.view_projection(width, height), np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ViewError(index, "view_projection", f"could not be computed: {exc}") from None
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ViewError(index, "view_projection", "must return a finite (4, 4) matrix")
+    return cam
+
+
+def iter_cameras(cameras: Iterable[Any] | str | os.PathLike, width: int, height: int
+                 ) -> Iterator[tuple[int, Any]]:
+    """(index, camera) for the entries of ``cameras`` in order, each checked for a
+    ``width`` × ``height`` image: the camera object, or a `BrokenCamera` where the entry is
+    broken (never raises for one entry). ``cameras``: a path to a camera list file
+    (`load_cameras`), or an iterable of `Camera` objects, entry dicts, objects with
+    ``view_projection`` or `BrokenCamera`s. Lazy: a generator is read one camera at a time."""
+    if isinstance(cameras, (str, os.PathLike)):
+        cameras = load_cameras(cameras, strict=False)
+    elif isinstance(cameras, (dict, Camera)):
+        raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
+                         f"{type(cameras).__name__}; wrap it in a list")
+    for index, entry in enumerate(cameras):
+        if isinstance(entry, BrokenCamera):
+            yield index, entry
+            continue
+        try:
+            cam = camera_from_entry(entry, index) if isinstance(entry, dict) else entry
+            yield index, _check_camera(cam, index, width, height)
+        except ViewError as exc:
+            yield index, BrokenCamera(exc)
+
+
+def load_cameras(path: str | os.PathLike, *, strict: bool = True
+                 ) -> list[Camera | BrokenCamera]:
+    """Read a camera list file (format: the module docstring).
+
+    Args:
+        strict: raise `ViewError` (naming the entry's index and field) for the first broken
+            entry; False: keep a `BrokenCamera` in its place and go on.
+
+    Raises:
+        CameraFileError: the file is not JSON, or not a list of entries (nor an object with
+            a ``"cameras"`` list). OSError: it cannot be read.
+    """
+    p = Path(path)
+    text = p.read_text(encoding="utf-8")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CameraFileError(f"{p}: not valid JSON: {exc.msg} at line {exc.lineno} column "
+                              f"{exc.colno}") from None
+    if isinstance(doc, dict):
+        if set(doc) - {"cameras"} or not isinstance(doc.get("cameras"), list):
+            raise CameraFileError(f"{p}: expected a list of camera entries or an object "
+                                  f"{{\"cameras\": [...]}}, got an object with keys "
+                                  f"{sorted(doc)}")
+        doc = doc["cameras"]
+    if not isinstance(doc, list):
+        raise CameraFileError(f"{p}: expected a list of camera entries or an object "
+                              f"{{\"cameras\": [...]}}, got {type(doc).__name__}")
+    out: list[Camera | BrokenCamera] = []
+    for index, entry in enumerate(doc):
+        try:
+            out.append(camera_from_entry(entry, index))
+        except ViewError as exc:
+            if strict:
+                raise ViewError(exc.index, exc.field, f"{exc.message} (in {p})") from None
+            out.append(BrokenCamera(exc))
+    return out
+
+
+def check_render_kwargs(renderer: Renderer, render_kwargs: dict) -> None:
+    """TypeError now (not at the first view) for keywords `Renderer.render` does not take."""
+    try:
+        inspect.signature(renderer.render).bind(None, None, **render_kwargs)
+    except TypeError as exc:
+        raise TypeError(f"render_many: {exc}") from None
+
+
+def check_target(target: Any) -> None:
+    """ValueError now, not once per view, unless ``target`` is a Mesh or a Scene."""
+    from .mesh import Mesh
+    from .scene import Scene
+
+    if not isinstance(target, (Mesh, Scene)):
+        raise ValueError(f"expected a clraster.Mesh or clraster.Scene, got "
+                         f"{type(target).__name__}")
+
+
+def frames(renderer: Renderer, target: Any, cameras: Iterable[Any] | str | os.PathLike,
+           render_kwargs: dict) -> Iterator[tuple[int, Frame | ViewError]]:
+    """(index, frame) per camera in order, or (index, `ViewError`) for a view that failed:
+    a broken camera, or a camera `Renderer.render` refuses (ValueError: e.g. a matrix that
+    overflows float32). Other exceptions propagate.
+
+    Each view is one `Renderer.render` call. Measured (bench/views.py): a plain loop
+    of render calls on the same target already keeps the per-scene work — the Scene made
+    from a Mesh, its clusters, BVH and geometry pool (`drawlist.PlanCache`), and the pool on
+    the device (`GeometryStage.upload_pool` skips the same pool) — so what repeats per view
+    is the view's own work: culling (~3 ms on the dragon) and the four device stages
+    (~60 ms), which keep the CPU busy; planning the next view on a second thread while the
+    device runs, or two renderers in turn, did not raise views/s on this 2-core machine.
+    """
+    for index, cam in iter_cameras(cameras, renderer.width, renderer.height):
+        if isinstance(cam, BrokenCamera):
+            yield index, cam.error
+            continue
+        try:
+            frame = renderer.render(target, cam, **render_kwargs)
+        except ValueError as exc:
+            err = ViewError(index, None, str(exc))
+            err.__cause__ = exc
+            yield index, err
+            continue
+        yield index, frame
+
+
+def render_many(renderer: Renderer, target: Any,
+                cameras: Iterable[Any] | str | os.PathLike, **render_kwargs: Any
+                ) -> Iterator[Frame]:
+    """`Renderer.render_many`: see its docstring."""
+    check_render_kwargs(renderer, render_kwargs)
+    check_target(target)
+    if isinstance(cameras, (dict, Camera)):
+        raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
+                         f"{type(cameras).__name__}; wrap it in a list")
+
+    def gen() -> Iterator[Frame]:
+        for _, item in frames(renderer, target, cameras, render_kwargs):
+            if isinstance(item, ViewError):
+                raise item
+            yield item
+
+    return gen()
