@@ -11,8 +11,14 @@ Quick start::
 Line segments (frustums, wireframes): ``clraster.LineRenderer`` / ``clraster.render_lines``
 (Cohen–Sutherland clipping in clip space, depth-tested; see `clraster.lines`).
 
-``Renderer``, ``reference``, ``Frame``, ``FrameStats`` and the line API are imported on
-first use, so
+Scenes of many instances: ``clraster.Scene`` (``Scene.load(path)``,
+``Scene.from_trimesh(tm_scene)``); the renderers also take a ``trimesh.Trimesh`` or
+``trimesh.Scene`` directly (`clraster.inputs.as_target`).
+
+``Renderer``, ``reference``, ``Frame``, ``FrameStats``, ``Scene`` and the line API are
+imported on first use, and so are the public submodules (``clraster.shade``,
+``clraster.views``, ``clraster.batch``, ...: ``clraster.shade.shade`` works without an
+``import clraster.shade`` first), so
 ``import clraster`` (and ``Mesh``, ``Camera``, ``RasterConfig``) works without touching
 OpenCL.
 """
@@ -28,15 +34,19 @@ from .mesh import Mesh
 
 if TYPE_CHECKING:
     from . import reference
+    from .boxes import Occlusion
+    from .fates import ClusterFates
     from .frame import Frame, FrameStats
     from .lines import LineFrame, LineRenderer, render_lines
     from .renderer import Renderer
+    from .scene import Instance, Scene, SceneWarning
 
-__all__ = ["Camera", "Frame", "FrameStats", "LineFrame", "LineRenderer", "Mesh",
-           "RasterConfig", "Renderer", "reference", "render_lines"]
+__all__ = ["Camera", "ClusterFates", "Frame", "FrameStats", "Instance", "LineFrame",
+           "LineRenderer", "Mesh", "Occlusion", "RasterConfig", "Renderer", "Scene",
+           "SceneWarning", "reference", "render_lines"]
 __version__ = "0.1.0"
 
-_LAZY = {
+_LAZY: dict[str, tuple[str, str | None]] = {
     "Renderer": (".renderer", "Renderer"),
     "reference": (".reference", None),
     "Frame": (".frame", "Frame"),
@@ -44,7 +54,16 @@ _LAZY = {
     "LineRenderer": (".lines", "LineRenderer"),
     "LineFrame": (".lines", "LineFrame"),
     "render_lines": (".lines", "render_lines"),
+    "Scene": (".scene", "Scene"),
+    "Instance": (".scene", "Instance"),
+    "SceneWarning": (".scene", "SceneWarning"),
+    "ClusterFates": (".fates", "ClusterFates"),
+    "Occlusion": (".boxes", "Occlusion"),
 }
+# public submodules, importable as attributes (``clraster.shade.shade(frame, mesh)``)
+_LAZY.update((name, ("." + name, None)) for name in (
+    "batch", "composite", "distributed", "fates", "inputs", "lines", "occlusion", "scene",
+    "scenes", "shade", "views"))
 
 
 def __getattr__(name: str) -> Any:

@@ -41,11 +41,11 @@ def ui_scale(width: int, height: int) -> int:
 
 
 @lru_cache(maxsize=8)
-def _font(scale: int) -> tuple[ImageFont.FreeTypeFont, int]:
+def _font(scale: int) -> tuple[ImageFont.FreeTypeFont | ImageFont.ImageFont, int]:
     """(font, ascent) at UI scale `scale`: ascent is the height in pixels of the ink of
     capitals, digits and ascenders above the baseline."""
     font = ImageFont.load_default(size=_FONT_SIZE * scale)
-    return font, -font.getbbox("Hd0", anchor="ls")[1]
+    return font, -int(font.getbbox("Hd0", anchor="ls")[1])
 
 
 def text_width(s: str, scale: int) -> int:

@@ -134,6 +134,12 @@ def _write_view(files: dict[str, Path], frame: Frame, target: Any) -> None:
             _write_atomic(path, lambda fh, a=arrays[name]: np.save(fh, a))
 
 
+def write_failures(path: Path, failures: Sequence[ViewFailure]) -> None:
+    """The JSON list ``[{"index": ..., "message": ...}, ...]`` of ``failures``, atomically."""
+    text = json.dumps([{"index": f.index, "message": f.message} for f in failures], indent=1)
+    _write_atomic(path, lambda fh: fh.write(text.encode("utf-8")))
+
+
 class _Progress:
     """A one-line progress bar on a stream, redrawn at most ~10 times a second."""
 
@@ -160,7 +166,7 @@ class _Progress:
 def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
                  out_dir: str | os.PathLike, outputs: Sequence[str] = ("depth", "ids"), *,
                  size: tuple[int, int] = (640, 480), renderer: Renderer | None = None,
-                 start: int = 0, progress: bool | None = None,
+                 start: int = 0, progress: bool | None = None, failures_file: bool = True,
                  **render_kwargs: Any) -> RenderSummary:
     """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) from every camera and write
     one file set per view into ``out_dir`` (names and formats: the module docstring).
@@ -176,6 +182,9 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         start: index of ``cameras[0]`` in the whole list, for file names, when a list is
             split into chunks rendered apart (e.g. one Dask task per chunk).
         progress: a progress bar on stderr; default only when stderr is a terminal.
+        failures_file: write (or remove) ``out_dir/failures.json``; False leaves it alone,
+            for chunks of one list run side by side (`clraster.distributed.render_views`
+            writes the merged list once).
         render_kwargs: `Renderer.render`'s keywords (cull, frustum, cones, occlusion, ...).
 
     Returns:
@@ -238,12 +247,10 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
     seconds = time.perf_counter() - t0
     if bar:
         bar.update(len(cams), rendered, len(failures), final=True)
-    ffile = out / FAILURES_FILE
-    if failures:
-        text = json.dumps([{"index": f.index, "message": f.message} for f in failures],
-                          indent=1)
-        _write_atomic(ffile, lambda fh: fh.write(text.encode("utf-8")))
-    else:
+    ffile = out / FAILURES_FILE if failures_file else None
+    if ffile is not None and failures:
+        write_failures(ffile, failures)
+    elif ffile is not None:
         ffile.unlink(missing_ok=True)   # an earlier run's list is no longer true
     return RenderSummary(len(cams), rendered, skipped, tuple(failures), seconds,
                          ffile if failures else None)

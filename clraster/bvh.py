@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import TYPE_CHECKING, ClassVar, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -125,7 +126,7 @@ def _plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
 
 
 def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 mag: np.ndarray):
+                 mag: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Min and max of each plane over each box, and the margin term: float64 (6, F) each.
 
     planes, scales: float64 (6, 4) shared by all boxes. lo, hi, mag: float64 (3, F)
@@ -142,7 +143,8 @@ def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.
     return dmin, dmax, mterm
 
 
-def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray):
+def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`box_extremes` with one plane set per box: table (66, F) from `_plane_table`
     (gathered per box), lo, hi, mag (3, F)."""
     f = lo.shape[1]
@@ -157,7 +159,7 @@ def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: 
 
 
 def sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
-                    radii: np.ndarray):
+                    radii: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Like `box_extremes` for spheres (centre ± r·|n|): planes, scales float64 (6, 4),
     centers float64 (K, 3), radii float64 (K,); float64 (6, K) results. The margin
     magnitude of a sphere is ``|centre| + r`` per axis."""
@@ -286,6 +288,10 @@ class BVH:
     item_min: np.ndarray
     item_max: np.ndarray
     item_mag: np.ndarray
+    if TYPE_CHECKING:   # set in __post_init__, not dataclass fields
+        _nodes9: ClassVar[np.ndarray]
+        _items9: ClassVar[np.ndarray]
+        _dense_rows: ClassVar[tuple[np.ndarray, np.ndarray, np.ndarray] | None]
 
     def __post_init__(self) -> None:
         # Gather-friendly copies, coordinate-major (9, n): rows min xyz, max xyz, mag xyz;
@@ -308,7 +314,7 @@ class BVH:
             for r in rows:
                 r.flags.writeable = False
             object.__setattr__(self, "_dense_rows", rows)
-        return self._dense_rows
+        return cast("tuple[np.ndarray, np.ndarray, np.ndarray]", self._dense_rows)
 
     @property
     def n_nodes(self) -> int:
@@ -485,7 +491,8 @@ class BVH:
             if single:
                 ext = box_extremes(p[0], s[0], lo, hi, mag)
             else:
-                ext = _box_extremes_table(np.take(table, fq, axis=1), lo, hi, mag)
+                ext = _box_extremes_table(np.take(cast(np.ndarray, table), fq, axis=1), lo, hi,
+                                          mag)
             state, nmask = classify_extremes(*ext, fm, inside_margin, outside_margin)
             inside = state == INSIDE
             if inside.any():  # every item of the node is inside: no further tests
@@ -510,7 +517,8 @@ class BVH:
                 if single:
                     ext = box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
                 else:
-                    ext = _box_extremes_table(np.take(table, iq, axis=1), lo_i, hi_i, mag_i)
+                    ext = _box_extremes_table(np.take(cast(np.ndarray, table), iq, axis=1), lo_i,
+                                              hi_i, mag_i)
                 ist, imask = classify_extremes(*ext, im, inside_margin, outside_margin)
                 keep = ist != OUTSIDE
                 out_q.append(iq[keep])

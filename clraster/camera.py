@@ -11,6 +11,13 @@ carry over unchanged):
   NDC z = −1 is the near plane and +1 the far plane; window depth is ``(z/w + 1) / 2``.
 * The aspect ratio of a :meth:`Camera.look_at` camera is not part of the camera: it is
   ``width / height`` of the image it renders, supplied to :meth:`Camera.view_projection`.
+* Cameras made from pixel intrinsics (:meth:`Camera.from_intrinsics`, the trimesh and
+  pyrender adapters) are tied to the image size they were made for: their projection
+  refuses any other size (a K matrix is in pixels of one image).
+* Vision cameras (OpenCV, COLMAP, most RGB-D datasets) look down +Z with +Y down; their
+  intrinsics K put pixel (u, v)'s centre at image coordinate (u, v) (``cv2.projectPoints``).
+  :meth:`Camera.from_intrinsics` derives the OpenGL-style projection that puts every point
+  on the same pixel; :meth:`Camera.to_intrinsics` goes back.
 """
 
 from __future__ import annotations
@@ -23,12 +30,17 @@ import numpy.typing as npt
 
 from .inputs import check_mat4, check_size
 
-__all__ = ["Camera", "look_at_matrix", "perspective_matrix"]
+__all__ = ["Camera", "intrinsics_projection", "look_at_matrix", "perspective_matrix"]
 
 #: |sin| of the angle between `up` and the view direction below which they count as parallel.
 _PARALLEL_SIN = 1e-6
 #: Condition number above which a view matrix counts as non-invertible.
 _MAX_COND = 1e12
+#: OpenCV camera axes (x right, y down, z forward) → OpenGL camera axes (x right, y up,
+#: looking down −z), and back: the same matrix, its own inverse.
+_CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Camera-frame conventions of a pose (camera → world) accepted by the intrinsics cameras.
+CONVENTIONS = ("opencv", "opengl")
 
 
 def _real_array(value: npt.ArrayLike, name: str, expected: str) -> np.ndarray:
@@ -133,19 +145,128 @@ def perspective_matrix(fov_y: float, aspect: float, near: float, far: float) -> 
     proj[3, 2] = -1.0
     return proj
 
+def _check_near_far(near: float, far: float) -> tuple[float, float]:
+    """near/far as floats with 0 < near < far, both finite."""
+    _, near, far = _check_lens(90.0, near, far)
+    return near, far
+
+
+def _check_K(K: npt.ArrayLike) -> np.ndarray:
+    """A 3×3 pinhole intrinsics matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` as a float64
+    copy, or ValueError saying which entry is wrong."""
+    k = _real_array(K, "K", "a 3×3 intrinsics matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]]")
+    if k.shape != (3, 3):
+        raise ValueError(f"K must have shape (3, 3) (a pinhole intrinsics matrix "
+                         f"[[fx, s, cx], [0, fy, cy], [0, 0, 1]]), got shape {k.shape}; a 4×4 "
+                         f"projection goes to Camera.from_matrices")
+    if not np.all(np.isfinite(k)):
+        raise ValueError("K must be finite; it contains NaN or Inf")
+    if k[1, 0] != 0.0 or k[2, 0] != 0.0 or k[2, 1] != 0.0 or k[2, 2] != 1.0:
+        raise ValueError(f"K must be upper triangular with K[2, 2] = 1 "
+                         f"([[fx, s, cx], [0, fy, cy], [0, 0, 1]]), got {k.tolist()}")
+    if not (k[0, 0] > 0.0 and k[1, 1] > 0.0):
+        raise ValueError(f"K's focal lengths fx = K[0, 0] and fy = K[1, 1] must be > 0 "
+                         f"(pixels), got fx={k[0, 0]}, fy={k[1, 1]}")
+    return k
+
+
+def intrinsics_projection(K: npt.ArrayLike, width: int, height: int, near: float,
+                          far: float) -> np.ndarray:
+    """Eye → clip matrix (OpenGL eye space) of an OpenCV pinhole camera: (4, 4) float64.
+
+    Args:
+        K: ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` in pixels, OpenCV's meaning: a point
+            (x, y, z) in OpenCV camera coordinates (+x right, +y down, +z forward) lands at
+            image coordinates ``u = (fx·x + s·y)/z + cx``, ``v = fy·y/z + cy``, and pixel
+            (column i, row j) has its centre at (u, v) = (i, j) (as ``cv2.projectPoints``).
+        width, height: the image K belongs to.
+        near, far: clip-plane distances along the optical axis, 0 < near < far.
+
+    Derivation. clraster samples pixel (i, j) (row 0 on top) at window coordinates
+    (i + 0.5, j + 0.5), with ``x_w = (x_ndc + 1)·W/2`` and ``y_w = (1 − y_ndc)·H/2``. So
+    the point seen at image coordinates (u, v) must reach ``x_w = u + 0.5``,
+    ``y_w = v + 0.5``, i.e.::
+
+        x_ndc = 2(u + 0.5)/W − 1        y_ndc = 1 − 2(v + 0.5)/H
+
+    OpenGL eye coordinates are OpenCV's with y and z negated: ``(x_e, y_e, z_e) =
+    (x, −y, −z)``, and the clip w is ``−z_e = z``. Multiplying by w = z::
+
+        x_c = x_ndc·z = (2/W)(fx·x + s·y + (cx + 0.5)·z) − z
+            = (2fx/W)·x_e − (2s/W)·y_e + (1 − 2(cx + 0.5)/W)·z_e
+        y_c = y_ndc·z = z − (2/H)(fy·y + (cy + 0.5)·z)
+            = (2fy/H)·y_e + (2(cy + 0.5)/H − 1)·z_e
+
+    which gives the first two rows; rows 3 and 4 are gluPerspective's (z_e = −near → NDC
+    −1, z_e = −far → +1; w = −z_e)::
+
+        [ 2fx/W   −2s/W   1 − 2(cx + 0.5)/W     0          ]
+        [ 0        2fy/H  2(cy + 0.5)/H − 1     0          ]
+        [ 0        0      (f + n)/(n − f)       2fn/(n − f) ]
+        [ 0        0      −1                    0          ]
+
+    A centred principal point, cx = (W − 1)/2 and cy = (H − 1)/2, gives zeros in column 3
+    (a symmetric frustum): the half-pixel terms are exactly the difference between
+    OpenCV's pixel centres at integers and OpenGL's at half-integers.
+    """
+    k = _check_K(K)
+    width, height = check_size(width, height)
+    near, far = _check_near_far(near, far)
+    fx, s, cx = k[0]
+    fy, cy = k[1, 1], k[1, 2]
+    proj = np.zeros((4, 4))
+    proj[0, 0] = 2.0 * fx / width
+    proj[0, 1] = -2.0 * s / width
+    proj[0, 2] = 1.0 - 2.0 * (cx + 0.5) / width
+    proj[1, 1] = 2.0 * fy / height
+    proj[1, 2] = 2.0 * (cy + 0.5) / height - 1.0
+    proj[2, 2] = (far + near) / (near - far)
+    proj[2, 3] = 2.0 * far * near / (near - far)
+    proj[3, 2] = -1.0
+    return proj
+
+
+def _check_pose(pose: npt.ArrayLike | None, convention: str) -> np.ndarray:
+    """A camera → world pose in `convention` as the OpenGL-frame pose (4, 4) float64."""
+    if convention not in CONVENTIONS:
+        raise ValueError(f"convention must be one of {list(CONVENTIONS)} (the camera frame of "
+                         f"the pose: 'opencv' looks down +z with y down, 'opengl' down −z "
+                         f"with y up), got {convention!r}")
+    p = np.eye(4) if pose is None else check_mat4(pose, "pose")
+    if not np.all(p[3] == (0.0, 0.0, 0.0, 1.0)):
+        raise ValueError(f"pose must be an affine camera → world matrix (last row 0 0 0 1), "
+                         f"got last row {p[3].tolist()}")
+    return p @ _CV_TO_GL if convention == "opencv" else p
+
+
+def _view_from_pose(pose_gl: np.ndarray) -> np.ndarray:
+    """World → eye matrix from an affine camera → world pose (OpenGL camera frame)."""
+    try:
+        lin_inv = np.linalg.inv(pose_gl[:3, :3])
+    except np.linalg.LinAlgError:
+        raise ValueError("pose is singular: it must be a camera → world rigid transform "
+                         "(rotation and translation)") from None
+    view = np.eye(4)
+    view[:3, :3] = lin_inv
+    view[:3, 3] = -lin_inv @ pose_gl[:3, 3]
+    return view
+
 
 class Camera:
     """A pinhole camera: a view matrix plus either lens parameters or a fixed projection.
 
-    Build one with :meth:`look_at`, :meth:`framing` or :meth:`from_matrices`; the
+    Build one with :meth:`look_at`, :meth:`framing`, :meth:`from_matrices`,
+    :meth:`from_intrinsics`, :meth:`from_trimesh` or :meth:`from_pyrender`; the
     constructor is not public API. Cameras are immutable; their matrices are read-only.
     See the module docstring for the conventions.
     """
 
-    __slots__ = ("_view", "_projection", "_eye", "_fov_y", "_near", "_far")
+    __slots__ = ("_view", "_projection", "_eye", "_fov_y", "_near", "_far", "_size",
+                 "_origin")
 
     def __init__(self, view: np.ndarray, *, projection: np.ndarray | None = None,
-                 lens: tuple[float, float, float] | None = None) -> None:
+                 lens: tuple[float, float, float] | None = None,
+                 size: tuple[int, int] | None = None, origin: str = "from_matrices") -> None:
         if (projection is None) == (lens is None):
             raise ValueError("Camera needs exactly one of projection or lens; use "
                              "Camera.look_at or Camera.from_matrices")
@@ -180,6 +301,9 @@ class Camera:
             self._fov_y = self._near = self._far = None
         else:
             self._fov_y, self._near, self._far = _check_lens(*lens)
+        # (width, height) a pixel-intrinsics camera belongs to; None: any size
+        self._size = None if size is None else check_size(*size)
+        self._origin = origin   # the constructor's name, for repr
 
     # -- constructors -------------------------------------------------------------------
 
@@ -217,7 +341,7 @@ class Camera:
         Raises:
             ValueError: wrong shape, non-finite entries, or a non-invertible view.
         """
-        return cls(view, projection=projection)
+        return cls(view, projection=projection)  # type: ignore[arg-type]  # checked there
 
     @classmethod
     def framing(cls, bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, *,
@@ -280,6 +404,224 @@ class Camera:
         far = (dist - float(cz.min())) * 1.5
         return cls.look_at(eye, centre, up, fov_y=fov_y, near=near, far=far)
 
+    @classmethod
+    def from_intrinsics(cls, K: npt.ArrayLike, width: int, height: int, *,
+                        pose: npt.ArrayLike | None = None, near: float, far: float,
+                        convention: str = "opencv") -> Camera:
+        """A pinhole camera from a vision-style intrinsics matrix and a camera → world pose.
+
+        Args:
+            K: (3, 3) ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` in pixels, OpenCV's meaning
+                whatever `convention` says: u grows to the right, v downwards from the top
+                row, and pixel (column i, row j) has its centre at (u, v) = (i, j), as
+                ``cv2.projectPoints`` gives it. Skew s, an off-centre principal point and
+                fx ≠ fy (non-square pixels) are all honoured.
+            width, height: the image K belongs to. The camera is tied to it:
+                :meth:`projection` refuses any other size (scale K yourself for another
+                resolution: fx, fy, s by the factor, cx + 0.5 and cy + 0.5 likewise).
+            pose: (4, 4) affine camera → world matrix (identity if None: the camera at the
+                origin), whose camera frame is given by `convention`.
+            near, far: clip-plane distances along the optical axis, 0 < near < far
+                (keyword-only: there is no sensible default for a metric scene).
+            convention: the camera frame of `pose`. ``"opencv"``: +x right, +y down, +z
+                forward (OpenCV, COLMAP, Open3D extrinsics inverted). ``"opengl"``: +x
+                right, +y up, looking down −z (OpenGL, trimesh, pyrender, Blender).
+
+        The projection matrix is `intrinsics_projection` (its docstring has the
+        derivation); the view is the inverse of the pose, turned to OpenGL axes.
+
+        Raises:
+            ValueError: K not a (3, 3) upper-triangular matrix with K[2, 2] = 1 and fx, fy
+                > 0; a bad size, near/far, pose (not 4×4, not affine, singular) or
+                convention.
+        """
+        proj = intrinsics_projection(K, width, height, near, far)
+        pose_gl = _check_pose(pose, convention)
+        return cls(_view_from_pose(pose_gl), projection=proj, size=(width, height),
+                   origin="from_intrinsics")
+
+    def to_intrinsics(self, width: int, height: int, *, convention: str = "opencv"
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """``(K, pose)`` of this camera for a ``width × height`` image: the inverse of
+        :meth:`from_intrinsics`.
+
+        Returns:
+            K: (3, 3) float64 ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``, OpenCV's pixel
+                convention (centres at integer coordinates).
+            pose: (4, 4) float64 camera → world in `convention`'s camera frame.
+
+        Raises:
+            ValueError: the projection is not a pinhole perspective one that a K can hold
+                (orthographic, an oblique near plane, a sheared or shifted clip z, a
+                vertical shear), the view is not affine, or (for an intrinsics camera) the
+                size differs from the camera's.
+        """
+        width, height = check_size(width, height)
+        if convention not in CONVENTIONS:
+            raise ValueError(f"convention must be one of {list(CONVENTIONS)}, got "
+                             f"{convention!r}")
+        p = np.array(self.projection(width, height), dtype=np.float64)
+        scale = float(np.abs(p).max())
+        tol = 1e-12 * scale
+
+        def small(v) -> bool:
+            return bool(np.all(np.abs(v) <= tol))
+
+        if not (small(p[3, :2]) and small(p[3, 3]) and p[3, 2] < 0.0):
+            raise ValueError("to_intrinsics needs a pinhole perspective camera (clip w = "
+                             "−z_eye); this projection is orthographic or not a pinhole")
+        p /= -p[3, 2]
+        if not (small(p[2, :2]) and small(p[:2, 3]) and small(p[1, 0])):
+            raise ValueError("to_intrinsics: this projection cannot be written as a K matrix "
+                             "(an oblique near plane, a shifted image plane or a vertical "
+                             "shear)")
+        k = np.eye(3)
+        k[0, 0] = p[0, 0] * width / 2.0
+        k[0, 1] = -p[0, 1] * width / 2.0
+        k[0, 2] = (1.0 - p[0, 2]) * width / 2.0 - 0.5
+        k[1, 1] = p[1, 1] * height / 2.0
+        k[1, 2] = (p[1, 2] + 1.0) * height / 2.0 - 0.5
+        if not (k[0, 0] > 0.0 and k[1, 1] > 0.0):
+            raise ValueError("to_intrinsics: this projection mirrors the image (fx or fy "
+                             "would be negative)")
+        view = self._view
+        if not np.all(view[3] == (0.0, 0.0, 0.0, 1.0)):
+            raise ValueError("to_intrinsics needs an affine view matrix (last row 0 0 0 1)")
+        pose = np.eye(4)
+        pose[:3, :3] = np.linalg.inv(view[:3, :3])
+        pose[:3, 3] = self._eye
+        if convention == "opencv":
+            pose = pose @ _CV_TO_GL
+        return k, pose
+
+    @classmethod
+    def from_trimesh(cls, camera, width: int | None = None, height: int | None = None, *,
+                     pose: npt.ArrayLike | None = None, near: float | None = None,
+                     far: float | None = None) -> Camera:
+        """A camera from a ``trimesh.Scene`` (its ``camera`` placed by its
+        ``camera_transform``) or a ``trimesh.scene.Camera`` (placed by `pose`).
+
+        trimesh cameras look down −Z with +Y up (OpenGL axes); their field of view
+        ``camera.fov = (fov_x, fov_y)`` in degrees spans the image edges, so a pixel centre
+        sits where ``scene.camera_rays()`` casts its ray (trimesh numbers its pixel rows
+        bottom-up; clraster's row 0 is the top row).
+
+        Args:
+            camera: a ``trimesh.Scene`` or a ``trimesh.scene.Camera``.
+            width, height: image size; default ``camera.resolution`` (width, height).
+                Another aspect ratio than the field of view's stretches the pixels.
+            pose: (4, 4) camera → world (OpenGL axes) for a bare Camera; default the
+                scene's ``camera_transform``, or identity for a bare Camera.
+            near, far: clip planes; default the camera's ``z_near`` and ``z_far``.
+
+        The camera is tied to ``width × height``.
+        """
+        tcam = camera
+        scene_pose = None
+        if hasattr(camera, "camera_transform") and hasattr(camera, "camera"):
+            tcam = camera.camera
+            scene_pose = np.asarray(camera.camera_transform, dtype=np.float64)
+        if not hasattr(tcam, "fov"):
+            raise ValueError(f"from_trimesh expects a trimesh.Scene or trimesh.scene.Camera, "
+                             f"got {type(camera).__name__}")
+        if width is None or height is None:
+            res = np.asarray(tcam.resolution)
+            width = int(res[0]) if width is None else width
+            height = int(res[1]) if height is None else height
+        width, height = check_size(width, height)
+        fov = np.asarray(tcam.fov, dtype=np.float64)
+        if fov.shape != (2,) or not np.all((fov > 0.0) & (fov < 180.0)):
+            raise ValueError(f"trimesh camera fov must be (fov_x, fov_y) in (0, 180) degrees, "
+                             f"got {fov.tolist()}")
+        near = float(tcam.z_near) if near is None else near
+        far = float(tcam.z_far) if far is None else far
+        near, far = _check_near_far(near, far)
+        proj = perspective_matrix(float(fov[1]), 1.0, near, far)
+        proj[0, 0] = 1.0 / math.tan(math.radians(float(fov[0])) / 2.0)
+        if pose is None:
+            pose = scene_pose
+        pose_gl = _check_pose(pose, "opengl")
+        return cls(_view_from_pose(pose_gl), projection=proj, size=(width, height),
+                   origin="from_trimesh")
+
+    @classmethod
+    def from_pyrender(cls, camera, pose: npt.ArrayLike, width: int, height: int) -> Camera:
+        """A camera from a pyrender camera and its node pose, with pyrender's own projection.
+
+        Duck-typed on pyrender's documented attributes (pyrender itself is not needed):
+
+        * ``IntrinsicsCamera``: ``fx, fy, cx, cy, znear, zfar``. pyrender's matrix has no
+          half-pixel shift (its cx, cy are measured from the image's corner, so a centred
+          camera has cx = W/2); this reproduces pyrender's image. The same numbers in
+          :meth:`from_intrinsics` (OpenCV's convention) land half a pixel away.
+        * ``PerspectiveCamera``: ``yfov`` (radians), ``znear``, ``zfar``, ``aspectRatio``
+          (None: ``width / height``).
+        * ``OrthographicCamera``: ``xmag, ymag, znear, zfar``.
+
+        ``zfar=None`` is pyrender's infinite far plane (kept: nothing is far-clipped).
+
+        Args:
+            camera: the pyrender camera (or any object with those attributes).
+            pose: (4, 4) camera → world of the camera's node, OpenGL axes (pyrender's).
+            width, height: the viewport; the camera is tied to it.
+        """
+        width, height = check_size(width, height)
+
+        def attr(name: str):
+            v = getattr(camera, name)
+            return None if v is None else float(v)
+
+        try:
+            znear = attr("znear")
+            zfar = attr("zfar")
+        except AttributeError:
+            raise ValueError(f"from_pyrender expects a pyrender camera (with znear, zfar), "
+                             f"got {type(camera).__name__}") from None
+        if znear is None or not (math.isfinite(znear) and znear > 0.0):
+            raise ValueError(f"pyrender camera znear must be > 0, got {znear}")
+        if zfar is not None:
+            znear, zfar = _check_near_far(znear, zfar)
+        proj = np.zeros((4, 4))
+        if all(hasattr(camera, a) for a in ("fx", "fy", "cx", "cy")):
+            # pyrender.IntrinsicsCamera.get_projection_matrix
+            proj[0, 0] = 2.0 * attr("fx") / width
+            proj[1, 1] = 2.0 * attr("fy") / height
+            proj[0, 2] = 1.0 - 2.0 * attr("cx") / width
+            proj[1, 2] = 2.0 * attr("cy") / height - 1.0
+            proj[3, 2] = -1.0
+        elif hasattr(camera, "xmag") and hasattr(camera, "ymag"):
+            # pyrender.OrthographicCamera.get_projection_matrix
+            if zfar is None:
+                raise ValueError("a pyrender OrthographicCamera needs a finite zfar")
+            proj[0, 0] = 1.0 / attr("xmag")
+            proj[1, 1] = 1.0 / attr("ymag")
+            proj[2, 2] = 2.0 / (znear - zfar)
+            proj[2, 3] = (zfar + znear) / (znear - zfar)
+            proj[3, 3] = 1.0
+        elif hasattr(camera, "yfov"):
+            # pyrender.PerspectiveCamera.get_projection_matrix
+            aspect = getattr(camera, "aspectRatio", None)
+            a = width / height if aspect is None else float(aspect)
+            t = math.tan(attr("yfov") / 2.0)
+            proj[0, 0] = 1.0 / (a * t)
+            proj[1, 1] = 1.0 / t
+            proj[3, 2] = -1.0
+        else:
+            raise ValueError(f"from_pyrender: {type(camera).__name__} has none of pyrender's "
+                             f"camera attributes (fx/fy/cx/cy, xmag/ymag, yfov)")
+        if proj[3, 2] != 0.0:   # perspective: pyrender's depth rows
+            if zfar is None:
+                proj[2, 2] = -1.0
+                proj[2, 3] = -2.0 * znear
+            else:
+                proj[2, 2] = (zfar + znear) / (znear - zfar)
+                proj[2, 3] = 2.0 * zfar * znear / (znear - zfar)
+        if not np.all(np.isfinite(proj)):
+            raise ValueError("pyrender camera parameters give a non-finite projection")
+        pose_gl = _check_pose(pose, "opengl")
+        return cls(_view_from_pose(pose_gl), projection=proj, size=(width, height),
+                   origin="from_pyrender")
+
     # -- properties ---------------------------------------------------------------------
 
     @property
@@ -307,13 +649,29 @@ class Camera:
         """Far-plane distance; None for a from_matrices camera."""
         return self._far
 
+    @property
+    def image_size(self) -> tuple[int, int] | None:
+        """(width, height) the camera is tied to (intrinsics cameras and adapters), else
+        None (any size)."""
+        return self._size
+
     def projection(self, width: int, height: int) -> np.ndarray:
         """Eye → clip matrix for a ``width × height`` image, (4, 4) float64.
 
         look_at cameras use ``aspect = width / height``; from_matrices cameras return their
-        projection unchanged (a read-only array).
+        projection unchanged (a read-only array); intrinsics cameras return theirs for their
+        own size only.
+
+        Raises:
+            ValueError: an intrinsics camera asked for another size than its image's.
         """
         width, height = check_size(width, height)
+        if self._size is not None and (width, height) != self._size:
+            w, h = self._size
+            raise ValueError(f"this camera ({self._origin}) was made for a {w}×{h} image and "
+                             f"its intrinsics are in that image's pixels; render at {w}×{h}, "
+                             f"or build a camera for {width}×{height} (scale fx, fy, skew, "
+                             f"cx + 0.5 and cy + 0.5 by the size ratio)")
         if self._projection is not None:
             return self._projection
         assert self._fov_y is not None and self._near is not None and self._far is not None
@@ -326,6 +684,7 @@ class Camera:
     def __repr__(self) -> str:
         eye = ", ".join(f"{v:.6g}" for v in self._eye)
         if self._projection is not None:
-            return f"Camera.from_matrices(eye=({eye}))"
+            size = "" if self._size is None else f", size={self._size[0]}x{self._size[1]}"
+            return f"Camera.{self._origin}(eye=({eye}){size})"
         return (f"Camera.look_at(eye=({eye}), fov_y={self._fov_y:.6g}, "
                 f"near={self._near:.6g}, far={self._far:.6g})")

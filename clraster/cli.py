@@ -2,30 +2,38 @@
 
 - ``clraster render MESH --size WxH --out image.png``: render one mesh (this module).
 - ``clraster render MESH --views cameras.json --out DIR``: render one view per camera of a
-  camera list file into DIR (`clraster.batch.render_views`; file format in `clraster.views`).
+  camera list file into DIR (`clraster.batch.render_views`; file format in `clraster.views`);
+  with ``--workers N`` on a local Dask cluster of N worker processes, with ``--scheduler
+  ADDRESS`` on a running Dask cluster (`clraster.distributed.render_views`, same files).
 - ``clraster demo ...``: the built-in plant demo with the culling inspector
   (`clraster.demo.main`).
 - ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
   docs in the repository's ``bench/`` folder).
 
 Exit codes: 0 success; 1 the mesh, camera or output could not be used, or memory ran out
-(one line on stderr, no traceback), or with --views some views failed (a summary line on
-stderr says how many and where their messages are); 2 bad command-line arguments
-(argparse's usage message); 130 interrupted (Ctrl-C).
+(one line on stderr, no traceback), or nothing is visible in the image (a warning on stderr,
+no file written; ``--allow-empty`` writes the empty image and exits 0), or with --views some
+views failed (a summary line on stderr says how many and where their messages are); 2 bad
+command-line arguments (argparse's usage message); 130 interrupted (Ctrl-C).
+
+Vectors (``--eye``, ``--target``, ``--up``) are three numbers, ``--eye 1 -2 3``; the older
+one-word form ``--eye 1,-2,3`` (or ``--eye=-1,2,3``) is accepted too.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from . import __version__
 from .camera import Camera
 from .config import RasterConfig
 from .device import NoDeviceError
@@ -40,40 +48,82 @@ __all__ = ["main"]
 EXAMPLE = "example"
 
 
+#: options that take a vector of three numbers
+_VECTOR_OPTIONS = ("--eye", "--target", "--up")
+
+
 def _vec3(text: str) -> np.ndarray:
     try:
         v = np.array([float(t) for t in text.split(",")])
     except ValueError:
         v = np.array([])
     if v.shape != (3,) or not np.all(np.isfinite(v)):
+        shown = text.replace(",", " ")
         raise argparse.ArgumentTypeError(
-            f"expected three finite numbers x,y,z, e.g. 0,1.5,4, got {text!r} "
-            f"(write --eye=-1,2,3 when the first one is negative)")
+            f"expected three finite numbers X Y Z, e.g. 0 -1.5 4, got {shown!r}")
     return v
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _join_vectors(argv: list[str]) -> list[str]:
+    """``--eye X Y Z`` (three words, negatives included) and ``--eye X,Y,Z`` as the one
+    word ``--eye=X,Y,Z`` that `_vec3` parses. Done before argparse, which would read a
+    word such as ``-1e-3`` or ``-1,2,3`` as an unknown option, not as a value."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok == "--":
+            out.extend(argv[i:])
+            break
+        i += 1
+        if tok not in _VECTOR_OPTIONS or i >= len(argv):
+            out.append(tok)
+            continue
+        if "," in argv[i]:
+            out.append(f"{tok}={argv[i]}")
+            i += 1
+            continue
+        words: list[str] = []
+        while i < len(argv) and len(words) < 3 and _is_number(argv[i]):
+            words.append(argv[i])
+            i += 1
+        # fewer than three numbers: _vec3 says what was expected
+        out.append(f"{tok}={','.join(words)}" if words else tok)
+    return out
+
+
 def _output_file(path: Path, option: str, suffixes: tuple[str, ...] | None = None) -> None:
-    """Refuse an output path before rendering (not after): a folder, a missing folder, no
-    or the wrong suffix."""
+    """Refuse an output path before rendering (not after): a folder, a missing or
+    read-only folder, a read-only file, no or the wrong suffix (without ``suffixes``: one
+    imageio does not know as an image format)."""
     if path.is_dir():
         raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
     if not path.parent.is_dir():
         raise ValueError(f"{option} {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    if not os.access(path.parent, os.W_OK | os.X_OK) or (
+            path.exists() and not os.access(path, os.W_OK)):
+        raise ValueError(f"{option} {str(path)!r} cannot be written (permission denied)")
     suffix = path.suffix.lower()
     if suffixes is None:
         if not suffix:
             raise ValueError(f"{option} {str(path)!r} has no file extension; give one that "
                              f"names the image format, e.g. .png")
-    elif suffix not in suffixes:
+        from imageio.config import known_extensions
+
+        if suffix not in known_extensions:
+            raise ValueError(f"{option} {str(path)!r}: {suffix} is not an image format "
+                             f"imageio knows; use e.g. .png, .jpg or .tif")
+    elif suffixes and suffix not in suffixes:   # (): the caller checks the suffix
         raise ValueError(f"{option} {str(path)!r} must end in {' or '.join(suffixes)} "
                          f"(it is written as a NumPy array file)")
-
-
-def _save_npy(path: Path, array: np.ndarray) -> None:
-    # through a file object: np.save(name) would append .npy to any other name, so the
-    # file written would not be the one reported
-    with open(path, "wb") as fh:
-        np.save(fh, array)
 
 
 def _positive(text: str) -> float:
@@ -83,6 +133,16 @@ def _positive(text: str) -> float:
         v = float("nan")
     if not (np.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _at_least_one(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return v
 
 
@@ -98,7 +158,27 @@ def _outputs(text: str) -> tuple[str, ...]:
 #: single-view options that mean nothing with --views (dest → option)
 _SINGLE_VIEW = {"eye": "--eye", "target": "--target", "near": "--near", "far": "--far",
                 "depth": "--depth", "ids": "--ids", "wireframe": "--wireframe",
-                "reference": "--reference"}
+                "reference": "--reference", "allow_empty": "--allow-empty"}
+
+
+def _dask_client(args: argparse.Namespace, stack: contextlib.ExitStack):
+    """A Dask client for --workers N (a LocalCluster of N worker processes, PoCL threads
+    per worker = cores // N: `clraster.distributed.local_cluster`) or --scheduler ADDRESS;
+    closed with ``stack``."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise ValueError("--workers and --scheduler need Dask: pip install "
+                         "'clraster[distributed]'") from None
+    if args.scheduler is not None:
+        client = stack.enter_context(Client(args.scheduler))
+        print(f"cluster: scheduler {args.scheduler}, {len(client.nthreads())} workers")
+        return client
+    from .distributed import local_cluster
+
+    cluster = stack.enter_context(local_cluster(args.workers))
+    print(f"cluster: local, {args.workers} worker processes")
+    return stack.enter_context(Client(cluster))
 
 
 def _render_views(args: argparse.Namespace) -> int:
@@ -115,10 +195,24 @@ def _render_views(args: argparse.Namespace) -> int:
         mesh = Mesh.load(args.mesh)
     width, height = args.size
     print(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
-    renderer = Renderer(width, height, config=RasterConfig(tile_log2=args.tile_log2))
-    summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
-                           progress=True if args.progress else None, cull=args.cull)
-    print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
+    config = RasterConfig(tile_log2=args.tile_log2)
+    summary: Any   # a Dask ViewsSummary or a RenderSummary: both have .failures
+    if args.workers is not None or args.scheduler is not None:
+        from .distributed import render_views as dask_render_views
+
+        with contextlib.ExitStack() as stack:
+            client = _dask_client(args, stack)
+            summary = dask_render_views(mesh, args.views, client, args.out, args.outputs,
+                                        chunk=args.chunk, size=(width, height), config=config,
+                                        progress=True if args.progress else None,
+                                        cull=args.cull)
+        print(summary)
+        print(f"wrote {', '.join(args.outputs)} per view to {args.out}")
+    else:
+        renderer = Renderer(width, height, config=config)
+        summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
+                               progress=True if args.progress else None, cull=args.cull)
+        print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
     if summary.failures:
         for f in summary.failures:
             print(f"clraster: view failed: {f.message}", file=sys.stderr)
@@ -131,6 +225,7 @@ def _render_views(args: argparse.Namespace) -> int:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="clraster", description="Tile-based software rasterizer on CPU OpenCL (PoCL).")
+    p.add_argument("--version", action="version", version=f"clraster {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (_module, text) in DELEGATED.items():
         # listed for --help only: main() hands these to their modules before parsing
@@ -158,17 +253,28 @@ def _parser() -> argparse.ArgumentParser:
                       metavar="LIST", help="comma-separated outputs per view out of depth, "
                                            "ids, bary, shaded (default depth,ids)")
     many.add_argument("--progress", action="store_true",
-                      help="show a progress bar on stderr even when it is not a terminal")
+                      help="show a progress bar on stderr even when it is not a terminal "
+                           "(with --workers/--scheduler: Dask's, on stdout)")
+    where = many.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_at_least_one, metavar="N",
+                       help="render on a local Dask cluster of N worker processes (PoCL "
+                            "threads per worker = cores // N); each writes its views' files")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="render on a running Dask cluster (e.g. tcp://host:8786); --out "
+                            "must be a folder every worker sees under the same path")
+    many.add_argument("--chunk", type=_at_least_one, metavar="N",
+                      help="with --workers/--scheduler: cameras per Dask task (default up to "
+                           "16, fewer for short lists)")
     cam = r.add_argument_group(
         "camera", "OpenGL conventions: right-handed world, the camera looks from EYE "
-                  "towards TARGET (down its −Z). Vectors are x,y,z; write --eye=-1,2,3 "
-                  "when the first number is negative.")
-    cam.add_argument("--eye", type=_vec3, metavar="X,Y,Z",
+                  "towards TARGET (down its −Z). Vectors are three numbers, negatives "
+                  "allowed: --eye 1 -2 3 (the form --eye 1,-2,3 works too).")
+    cam.add_argument("--eye", type=_vec3, metavar="X Y Z",
                      help="camera position (default: framing the bounding box)")
-    cam.add_argument("--target", type=_vec3, metavar="X,Y,Z",
+    cam.add_argument("--target", type=_vec3, metavar="X Y Z",
                      help="point looked at (default: bounding-box centre)")
-    cam.add_argument("--up", type=_vec3, default=np.array([0.0, 1.0, 0.0]), metavar="X,Y,Z",
-                     help="up direction (default 0,1,0)")
+    cam.add_argument("--up", type=_vec3, default=np.array([0.0, 1.0, 0.0]), metavar="X Y Z",
+                     help="up direction (default 0 1 0)")
     cam.add_argument("--fov", type=float, default=45.0, metavar="DEG",
                      help="vertical field of view in degrees (default 45)")
     cam.add_argument("--near", type=_positive, metavar="N",
@@ -177,11 +283,13 @@ def _parser() -> argparse.ArgumentParser:
                      help="far-plane distance (default: from the bounding sphere)")
     r.add_argument("--cull", choices=("back", "front", "none"), default="back",
                    help="face culling; counter-clockwise is front (default back)")
-    r.add_argument("--depth", type=Path, metavar="NPY",
-                   help="also save the (H, W) float32 window depth to this .npy file")
-    r.add_argument("--ids", type=Path, metavar="NPY",
-                   help="also save the (H, W) int32 triangle ids (-1 background) to this .npy "
-                        "file")
+    r.add_argument("--depth", type=Path, metavar="FILE",
+                   help="also save the (H, W) window depth (1.0 background); the extension "
+                        "names the format: .npy/.npz/.tif float32, .png 16-bit (see "
+                        "clraster.outputs)")
+    r.add_argument("--ids", type=Path, metavar="FILE",
+                   help="also save the (H, W) triangle ids: .npy/.npz/.tif int32 (-1 "
+                        "background), .png uint16 id + 1 (0 background)")
     r.add_argument("--wireframe", action="store_true",
                    help="draw the mesh's edges over the image (line segments, clipped in clip "
                         "space and depth-tested against the frame, so hidden edges stay hidden)")
@@ -194,11 +302,21 @@ def _parser() -> argparse.ArgumentParser:
                    help="render with the NumPy reference pipeline instead of OpenCL")
     r.add_argument("--repeat", type=int, default=1, metavar="N",
                    help="render N times and report the first and the best frame time")
+    r.add_argument("-q", "--quiet", action="store_true",
+                   help="one image: print nothing but warnings and errors (no mesh, camera "
+                        "and device lines, no stage table, no frame time)")
+    r.add_argument("--allow-empty", action="store_true",
+                   help="write the files even when nothing is visible (by default an empty "
+                        "view is a warning and exit 1, with no file written)")
     return p
 
 
 def _camera(args: argparse.Namespace, mesh: Mesh, width: int, height: int) -> Camera:
     """The camera the arguments describe; missing parts are fitted to the mesh bounds."""
+    lo: np.ndarray | None
+    hi: np.ndarray | None
+    near: float
+    far: float
     try:
         lo, hi = mesh.bounds()
     except ValueError:
@@ -206,17 +324,17 @@ def _camera(args: argparse.Namespace, mesh: Mesh, width: int, height: int) -> Ca
             raise ValueError("the mesh has no finite vertex in a face, so the camera cannot "
                              "frame it; give --eye and --target") from None
         lo = hi = None
-    if lo is not None:
+    if lo is not None and hi is not None:   # both or neither
         centre = (lo + hi) / 2.0
         radius = float(np.linalg.norm(hi - lo)) / 2.0
         framed = Camera.framing(lo, hi, fov_y=args.fov, aspect=width / height)
         eye = framed.eye if args.eye is None else args.eye
         target = centre if args.target is None else args.target
         if args.eye is None and args.target is None:
-            near, far = framed.near, framed.far
+            near, far = cast(float, framed.near), cast(float, framed.far)
         else:  # bracket the bounding sphere as seen from the eye
             dist = float(np.linalg.norm(eye - centre))
-            far = (dist + radius) * 1.5 if radius > 0 else framed.far
+            far = (dist + radius) * 1.5 if radius > 0 else cast(float, framed.far)
             near = (dist - radius) * 0.5 if dist > radius * 1.01 else far * 1e-4
     else:
         eye, target, near, far = args.eye, args.target, 0.1, 100.0
@@ -230,27 +348,34 @@ def _camera(args: argparse.Namespace, mesh: Mesh, width: int, height: int) -> Ca
 def _render(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
+    from .outputs import check_output_path, write_output
     from .shade import shade
 
     width, height = args.size
+    # --quiet: nothing on stdout; warnings and errors still go to stderr
+    info: Callable[..., None] = _silent if args.quiet else print
     _output_file(args.out, "--out")
-    for option, path in (("--depth", args.depth), ("--ids", args.ids)):
+    for option, path, what in (("--depth", args.depth, "depth"), ("--ids", args.ids, "ids")):
         if path is not None:
-            _output_file(path, option, (".npy",))
+            _output_file(path, option, ())
+            try:   # the extension names the format (clraster.outputs): checked up front
+                check_output_path(path, what)
+            except ValueError as exc:
+                raise ValueError(f"{option}: {exc}") from None
     if args.mesh == EXAMPLE:
         from .examples import example_mesh
 
         mesh = example_mesh()
     else:
         mesh = Mesh.load(args.mesh)
-    print(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
+    info(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
     camera = _camera(args, mesh, width, height)
-    print(f"camera: {camera!r}")
+    info(f"camera: {camera!r}")
 
     if args.reference:
         from .reference import render as reference_render
 
-        print("pipeline: NumPy reference")
+        info("pipeline: NumPy reference")
 
         def draw() -> Frame:
             return reference_render(mesh, camera, width, height, cull=args.cull)
@@ -258,7 +383,7 @@ def _render(args: argparse.Namespace) -> int:
         from .renderer import Renderer
 
         renderer = Renderer(width, height, config=RasterConfig(tile_log2=args.tile_log2))
-        print(f"device: {renderer.context.devices[0].name.strip()}")
+        info(f"device: {renderer.context.devices[0].name.strip()}")
 
         def draw() -> Frame:
             return renderer.render(mesh, camera, cull=args.cull)
@@ -270,6 +395,13 @@ def _render(args: argparse.Namespace) -> int:
         frame = draw()
         times.append((time.perf_counter() - t0) * 1e3)
     assert frame is not None
+    if not args.allow_empty and not np.any(frame.triangle_id >= 0):
+        # a blank image with exit 0 looks like success to a script: say so, write nothing
+        info(frame.stats)
+        print(f"clraster: warning: nothing is visible ({_why_empty(frame)}); no file "
+              f"written. Check the camera (--eye, --target, --near, --far) and --cull, or "
+              f"pass --allow-empty to write the empty image", file=sys.stderr)
+        return 1
 
     image = shade(frame, mesh)
     if args.wireframe:
@@ -278,26 +410,43 @@ def _render(args: argparse.Namespace) -> int:
         from .reference.lines import render_lines as reference_lines
 
         edges = mesh_edges(mesh)
-        draw = reference_lines if args.reference else draw_lines
-        lines = draw(edges, camera, width, height, depth=frame.depth,
-                     depth_bias=args.wireframe_bias)
+        draw_edges = reference_lines if args.reference else draw_lines
+        lines = draw_edges(edges, camera, width, height, depth=frame.depth,
+                           depth_bias=args.wireframe_bias)
         image = overlay(image, lines, (20, 20, 20))
-        print(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
+        info(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
     iio.imwrite(args.out, image)
     if args.depth is not None:
-        _save_npy(args.depth, frame.depth)
+        write_output(args.depth, frame, "depth")
     if args.ids is not None:
-        _save_npy(args.ids, frame.triangle_id)
+        write_output(args.ids, frame, "ids")
 
-    print(frame.stats)
+    info(frame.stats)
     line = f"frame time: {times[0]:.1f} ms (first frame"
     line += ", includes kernel build)" if not args.reference else ")"
     if len(times) > 1:
         line += f"; best of {len(times)}: {min(times):.1f} ms"
-    print(line)
+    info(line)
     written = [args.out] + [p for p in (args.depth, args.ids) if p is not None]
-    print("wrote " + ", ".join(str(p) for p in written))
+    info("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _silent(*_args: object, **_kwargs: object) -> None:
+    """`print` under --quiet."""
+
+
+def _why_empty(frame: Frame) -> str:
+    """Where an empty frame's triangles went, from its stats (one clause)."""
+    st = frame.stats
+    if st.triangles_total == 0:
+        return "the mesh has no triangle"
+    parts = [(st.triangles_frustum_culled + st.trivially_rejected, "outside the view"),
+             (st.triangles_cone_culled + st.backface_culled, "facing away (--cull)"),
+             (st.degenerate + st.no_sample, "too small to cover a pixel centre"),
+             (st.invalid, "with a NaN/Inf vertex")]
+    said = ", ".join(f"{n:,} {what}" for n, what in parts if n)
+    return f"of {st.triangles_total:,} triangles: {said or 'none drew a pixel'}"
 
 
 #: Subcommands that own their arguments: ``clraster NAME ARGS...`` calls ``main(ARGS)`` of
@@ -323,6 +472,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if argv and argv[0] in DELEGATED:
         return _delegate(argv[0], argv[1:])
     parser = _parser()
+    if argv and argv[0] == "render":
+        argv = _join_vectors(argv)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
@@ -340,11 +491,17 @@ def main(argv: Sequence[str] | None = None) -> int:
                   f"--views (the cameras come from the file, the outputs from --outputs)",
                   file=sys.stderr)
             return 2
+        if args.chunk is not None and args.workers is None and args.scheduler is None:
+            parser.print_usage(sys.stderr)
+            print("clraster: error: --chunk needs --workers or --scheduler (it sizes the Dask "
+                  "tasks)", file=sys.stderr)
+            return 2
         return run_guarded("clraster", lambda: _render_views(args))
-    if args.progress or args.outputs != ("depth", "ids"):
+    if (args.progress or args.outputs != ("depth", "ids") or args.workers is not None
+            or args.scheduler is not None or args.chunk is not None):
         parser.print_usage(sys.stderr)
-        print("clraster: error: --outputs and --progress need --views (one image: --out, "
-              "--depth, --ids)", file=sys.stderr)
+        print("clraster: error: --outputs, --progress, --workers, --scheduler and --chunk "
+              "need --views (one image: --out, --depth, --ids)", file=sys.stderr)
         return 2
     return run_guarded("clraster", lambda: _render(args))
 

@@ -223,7 +223,9 @@ def _split_rows(vals: np.ndarray, n_tri: np.ndarray, max_vertices: int):
     # whose entries introduce at most max_vertices new vertices.
     valid = pos[None, :] < 3 * n_tri[:, None]
     start = np.zeros(n_rows, dtype=np.int64)
-    seg_row, seg_start, seg_len = [], [], []
+    seg_rows: list[np.ndarray] = []
+    seg_starts: list[np.ndarray] = []
+    seg_lens: list[np.ndarray] = []
     active = np.arange(n_rows)
     tri = np.arange(n_slots)[None, :]
     while active.size:
@@ -232,14 +234,14 @@ def _split_rows(vals: np.ndarray, n_tri: np.ndarray, max_vertices: int):
         count = np.cumsum(new, axis=1, dtype=np.int32)[:, 2::3]  # new vertices up to tri t
         fits = (tri >= st) & (tri < n_tri[active][:, None]) & (count <= max_vertices)
         k = fits.sum(axis=1)  # count is monotone in t, so the fitting ones are a prefix
-        seg_row.append(active)
-        seg_start.append(start[active].copy())
-        seg_len.append(k)
+        seg_rows.append(active)
+        seg_starts.append(start[active].copy())
+        seg_lens.append(k)
         start[active] += k
         active = active[start[active] < n_tri[active]]
-    seg_row = np.concatenate(seg_row)
-    seg_start = np.concatenate(seg_start)
-    seg_len = np.concatenate(seg_len)
+    seg_row = np.concatenate(seg_rows)
+    seg_start = np.concatenate(seg_starts)
+    seg_len = np.concatenate(seg_lens)
     order = np.argsort(seg_row * n_slots + seg_start)
     seg_row, seg_start, seg_len = seg_row[order], seg_start[order], seg_len[order]
 

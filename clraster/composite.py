@@ -45,6 +45,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -85,7 +86,7 @@ def merge_stats(a: FrameStats, b: FrameStats) -> FrameStats:
     Triangle counts of the parts of a scene add up to the whole scene's (each triangle is
     in one part). Instance and cluster counts are the parts' own: a part re-clusters its
     share of a mesh, and an instance split across parts counts once per part."""
-    out = {}
+    out: dict[str, Any] = {}
     for f in dataclasses.fields(FrameStats):
         if f.name == "timings_ms":
             t = dict(a.timings_ms)
@@ -243,7 +244,7 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
         f = keep.frame
         out = Frame(f.depth.copy(), f.triangle_id.copy(), f.barycentrics.copy(),
                     merge_stats(a.frame.stats, b.frame.stats),
-                    overdraw=f.overdraw.copy() if od else None)
+                    overdraw=f.overdraw.copy() if od and f.overdraw is not None else None)
         return Crop(out, keep.x0, keep.y0, keep.width, keep.height)
     ra, rb = a.rect, b.rect
     x0, y0 = min(ra[0], rb[0]), min(ra[1], rb[1])
@@ -253,7 +254,7 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
     va.depth[...] = a.frame.depth
     va.triangle_id[...] = a.frame.triangle_id
     va.barycentrics[...] = a.frame.barycentrics
-    if od:
+    if od and va.overdraw is not None:   # od: both parts (so the blank) have overdraw
         va.overdraw[...] = a.frame.overdraw
     vb = _sub(out, rb[0] - x0, rb[1] - y0, rb[2] - x0, rb[3] - y0, False)
     composite_into(vb, b.frame)   # writes through the views into out's arrays

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -277,8 +278,8 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
         if pos_t.size:
             box = np.take(prep.flat_boxes, pos_t, axis=1)
             mask = np.repeat(inst_mask[ids[test]], prep.flat_count[test])
-            cst, _ = classify_extremes(*box_extremes(planes, scales, box[0:3], box[3:6], box[6:9]),
-                             mask, inside_margin, outside_margin)
+            ext = box_extremes(planes, cast(np.ndarray, scales), box[0:3], box[3:6], box[6:9])
+            cst, _ = classify_extremes(*ext, mask, inside_margin, outside_margin)
             alive = cst != OUTSIDE
             pos_t, cst = pos_t[alive], cst[alive]
         else:

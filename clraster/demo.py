@@ -31,6 +31,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 
@@ -205,8 +206,9 @@ def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: M
     segs = frustum_segments(fp_view_proj)
     lr = LineRenderer(width, height, context=context)
     s = ui_scale(width, height)
-    hidden = lr.render(segs, view_proj)
-    shown = lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4)
+    # LineFrames, or stand-ins with grown masks (what overlay reads: mask, line_id)
+    hidden: Any = lr.render(segs, view_proj)
+    shown: Any = lr.render(segs, view_proj, depth=frame.depth, depth_bias=1e-4)
     if s > 1:  # thicker lines on big images: grow the masks by one pixel
         hidden, shown = (SimpleNamespace(mask=_grow(f.mask), line_id=f.line_id)
                          for f in (hidden, shown))
@@ -334,7 +336,7 @@ def _run(args: argparse.Namespace) -> int:
     world = world_mesh(scene)
     shaded = shade(frame, world)
     depth = depth_picture(frame.depth, cam.projection(w, h))
-    over, top = overdraw_picture(frame.overdraw)
+    over, top = overdraw_picture(cast(np.ndarray, frame.overdraw))   # overdraw=True
     floor_y = float(cam.eye[1]) - EYE_HEIGHT
     sub, keep = inspector_scene(scene, floor_y)
     icam = inspector_camera(scene, floor_y, w, h)
@@ -350,7 +352,7 @@ def _run(args: argparse.Namespace) -> int:
         path = args.out / name
         iio.imwrite(path, img)
         written.append(path)
-    o = frame.overdraw
+    o = cast(np.ndarray, frame.overdraw)
     print(f"overdraw: mean {o[o > 0].mean():.2f} fragments per covered pixel, max "
           f"{int(o.max())}; heat scale 0..{top} (black = none, white = {top} or more)")
     print(f"inspector: {sub.n_instances:,} of {scene.n_instances:,} instances (the storey "

@@ -1,4 +1,5 @@
-"""Rendering past one machine on Dask (``dask.distributed``): sort-last compositing.
+"""Rendering past one machine on Dask (``dask.distributed``): sort-last compositing and
+batch views.
 
 Sort-last rendering (Molnar et al. 1994's taxonomy): the scene's (instance, cluster) pairs
 are split spatially into N parts (`partition`, a k-d split of their world-box centres);
@@ -8,8 +9,13 @@ tasks, and one frame comes back to the client. It equals the frame one `Renderer
 of the whole scene, bit for bit (`clraster.composite` says why). docs/DISTRIBUTED.md
 describes the reduction, and binary-swap / radix-k for large frames.
 
-The module has three layers, so batch views (`render_views`, to come) can sit beside
-sort-last on the same worker state:
+Batch views (`render_views`): many views of one scene, cut into chunks of cameras; each
+chunk is one task that runs `clraster.batch.render_views` on a worker with that worker's
+Renderer and writes the files there (atomic renames, complete views skipped, so a task can
+run twice); only a small `ChunkRecord` per task comes back, and a `ViewsSummary` (views/s
+per worker) at the end.
+
+The module has four layers, batch views and sort-last sitting on the same worker state:
 
 * **Client helpers**: `local_cluster` (a LocalCluster of worker processes whose PoCL thread
   count keeps workers × threads <= cores), `pocl_thread_env`.
@@ -21,6 +27,7 @@ sort-last on the same worker state:
   multiprocessing-method: spawn`, so this is the belt to that braces).
 * **Sort-last**: `Part`, `partition`, `scatter_parts`, `submit_sort_last`,
   `render_sort_last`.
+* **Batch views**: `render_views`, `ChunkRecord`, `WorkerRate`, `ViewsSummary`.
 
 Thread counts. PoCL's CPU device starts one thread per core unless told otherwise; two
 worker processes on two cores would each start two. The variable is read once, when PoCL
@@ -40,19 +47,21 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
+from .batch import RenderSummary, ViewFailure
 from .composite import Crop, composite_crops, crop, uncrop
 from .config import RasterConfig
 from .frame import Frame
 from .mesh import Mesh
 from .scene import Scene
 
-__all__ = ["POCL_THREAD_VARS", "Part", "ScatteredParts", "SortLastFutures", "kd_split",
-           "local_cluster", "partition", "pocl_thread_env", "render_sort_last",
-           "scatter_parts", "submit_sort_last", "usable_cores", "worker_info", "worker_renderer",
+__all__ = ["POCL_THREAD_VARS", "ChunkRecord", "Part", "ScatteredParts", "SortLastFutures",
+           "ViewsSummary", "WorkerRate", "kd_split", "local_cluster", "partition",
+           "pocl_thread_env", "render_sort_last", "render_views", "scatter_parts",
+           "submit_sort_last", "usable_cores", "worker_info", "worker_renderer",
            "worker_target"]
 
 log = logging.getLogger(__name__)
@@ -483,3 +492,270 @@ def render_sort_last(target, camera, client, *, parts: int | None = None, width:
                             config=config, **render_kwargs)
     return uncrop(futs.frame.result())
 
+
+
+# -- batch views on Dask ---------------------------------------------------------------------
+
+#: temporary files `clraster.batch` writes before renaming them into place
+#: (``.{final name}.{pid}.tmp``); one left behind is a writer that died (a lost worker)
+_TMP_GLOBS = (".view_*.tmp", ".failures.json.*.tmp")
+
+
+@dataclass(frozen=True)
+class ChunkRecord:
+    """What one chunk task of `render_views` did (the only thing it sends back).
+
+    start: index of the chunk's first camera in the whole list. views: cameras in the chunk.
+    rendered / skipped: views written by this task / found complete already. failures: the
+    chunk's failed views (`clraster.batch.ViewFailure`, indices in the whole list). seconds:
+    wall time of the task on the worker. worker: the worker's address. pid: its process.
+    """
+
+    start: int
+    views: int
+    rendered: int
+    skipped: int
+    failures: tuple[ViewFailure, ...]
+    seconds: float
+    worker: str
+    pid: int
+
+
+@dataclass(frozen=True)
+class WorkerRate:
+    """One worker's share of a `render_views` run: chunks run, views rendered, busy seconds
+    (sum of its tasks' wall times) and views rendered per busy second."""
+
+    worker: str
+    chunks: int
+    rendered: int
+    seconds: float
+
+    @property
+    def views_per_s(self) -> float:
+        return self.rendered / self.seconds if self.seconds > 0 else 0.0
+
+
+def _per_worker(chunks) -> tuple[WorkerRate, ...]:
+    acc: dict[str, list] = {}
+    for c in chunks:
+        a = acc.setdefault(c.worker, [0, 0, 0.0])
+        a[0] += 1
+        a[1] += c.rendered
+        a[2] += c.seconds
+    return tuple(WorkerRate(w, n, r, s) for w, (n, r, s) in sorted(acc.items()))
+
+
+@dataclass(frozen=True)
+class ViewsSummary(RenderSummary):
+    """What `render_views` did: a `clraster.batch.RenderSummary` (views, rendered, skipped,
+    failures, seconds = wall time on the client, views_per_s, failures_file) plus ``chunks``
+    (one `ChunkRecord` per chunk task, in camera order) and `per_worker`."""
+
+    chunks: tuple[ChunkRecord, ...] = ()
+
+    @property
+    def per_worker(self) -> tuple[WorkerRate, ...]:
+        """Per worker address: chunks, views rendered, busy seconds, views/s. A worker that
+        was lost and restarted comes back under a new address."""
+        return _per_worker(self.chunks)
+
+    def __str__(self) -> str:
+        rates = self.per_worker
+        lines = [f"{super().__str__()} on {len(rates)} workers"]
+        lines += [f"  {w.worker}: {w.chunks} chunks, {w.rendered} views in {w.seconds:.1f} s "
+                  f"busy, {w.views_per_s:.2f} views/s" for w in rates]
+        return "\n".join(lines)
+
+
+def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tuple[str, ...],
+                  width: int, height: int, config: RasterConfig | None,
+                  render_kwargs: dict[str, Any]) -> ChunkRecord:
+    """Worker task: `clraster.batch.render_views` of one chunk of cameras with this process's
+    Renderer; the files are written here (atomic renames, views already complete skipped),
+    so running it twice — Dask recomputing it after a worker was lost — writes every file
+    once under its final name and nothing else."""
+    from dask.distributed import get_worker
+
+    from .batch import render_views as batch_render_views
+
+    t0 = time.perf_counter()
+    if isinstance(target, str):
+        target = worker_target(target)
+    s = batch_render_views(target, cameras, out_dir, outputs,
+                           renderer=worker_renderer(width, height, config), start=start,
+                           progress=False, failures_file=False, **render_kwargs)
+    return ChunkRecord(start, s.views, s.rendered, s.skipped, s.failures,
+                       time.perf_counter() - t0, get_worker().address, os.getpid())
+
+
+def _finish_out_dir(out_dir: str, failures: list[ViewFailure]) -> int:
+    """Run on every worker at the end of `render_views`: write (or remove) the merged
+    ``failures.json`` and delete temporary files a dead writer left (every task is finished
+    by then, so no live writer owns one). Returns the files deleted."""
+    from .batch import FAILURES_FILE, write_failures
+
+    out = Path(out_dir)
+    if not out.is_dir():   # a worker on a machine that does not see out_dir
+        return 0
+    if failures:
+        write_failures(out / FAILURES_FILE, failures)
+    else:
+        (out / FAILURES_FILE).unlink(missing_ok=True)
+    gone = 0
+    for pattern in _TMP_GLOBS:
+        for p in out.glob(pattern):
+            p.unlink(missing_ok=True)
+            gone += 1
+    return gone
+
+
+def _chunk_size(n_views: int, n_workers: int) -> int:
+    """Default cameras per task: up to 16 (at ~50–100 ms a view, a second or so of work, so
+    the ~1 ms a Dask task costs is lost in it, and a lost worker costs at most that much
+    redone), fewer so that every worker gets at least two tasks."""
+    return max(1, min(16, -(-n_views // max(1, 2 * n_workers))))
+
+
+def render_views(target, cameras, client, out_dir: str | os.PathLike,
+                 outputs=("depth", "ids"), *, chunk: int | None = None,
+                 size: tuple[int, int] = (640, 480), config: RasterConfig | None = None,
+                 progress: bool | None = None, **render_kwargs: Any) -> ViewsSummary:
+    """Render many views of one scene on the workers of ``client``, each writing its views'
+    files; what `clraster.batch.render_views` does on one machine, with the same files.
+
+    The scene goes to the workers once: a `clraster.Mesh` or `clraster.Scene` is scattered
+    to every worker (``broadcast=True``; a worker started later fetches it from another),
+    and a path to a scene file is loaded by each worker process itself (`worker_target`,
+    once per process: nothing large crosses the network). The cameras are cut into chunks
+    of ``chunk`` consecutive views; each chunk is one task that runs
+    `clraster.batch.render_views` (``start=`` numbers its files) with the worker's
+    `worker_renderer` — one Renderer, one OpenCL context per worker process, made there and
+    kept — and sends back only a `ChunkRecord`. Frames never reach the client.
+
+    Faults. Files are written to a temporary name and renamed into place, and a view whose
+    files all exist is skipped, so a task is idempotent: when a worker is lost, Dask runs
+    its tasks again elsewhere and every view ends up written exactly once under its final
+    names; temporary files the dead process left are deleted at the end. A camera that
+    cannot render fails its own view with a recorded message (``summary.failures`` and
+    ``out_dir/failures.json``); the batch goes on. Errors that are not one view's fault (a
+    folder that cannot be written) stop the batch: the task's exception is raised here.
+    Re-running the same call skips every view already written.
+
+    Args:
+        target: a `clraster.Mesh` or `clraster.Scene`, or the path of a scene file that
+            every worker can read (`clraster.Scene.load`).
+        cameras: a list of cameras (`clraster.Camera`, camera entry dicts, picklable objects
+            with ``view_projection``) or the path of a camera list file (read here,
+            `clraster.views.load_cameras` with ``strict=False``).
+        client: a `dask.distributed.Client`.
+        out_dir: the folder the workers write into (made absolute here; on a real cluster a
+            file system every worker sees under that path, also for the final clean-up).
+        outputs: any of "depth", "ids", "bary", "shaded" (names and formats:
+            `clraster.batch`; "shaded" needs a Mesh target).
+        chunk: cameras per task; default up to 16, fewer when there are few views
+            (`_chunk_size`). Smaller chunks balance and recover better, larger ones cost
+            less scheduling.
+        size: (width, height) of the images. config: the workers' `RasterConfig` (never
+            changes the images).
+        progress: Dask's own progress bar (`dask.distributed.progress`, on stdout) over the
+            chunk tasks; default only when stdout is a terminal.
+        render_kwargs: `Renderer.render`'s keywords (cull, frustum, cones, occlusion, ...).
+
+    Returns:
+        a `ViewsSummary`: views, rendered, skipped, failures (in index order), seconds (wall
+        time here), views_per_s, failures_file, chunks (records in camera order) and
+        per_worker (views/s of each worker). A chunk that Dask recomputed after a worker
+        was lost reports the views that worker had already written as skipped.
+
+    Raises:
+        ValueError / TypeError: bad outputs, target, chunk or keywords, before anything is
+            submitted; CameraFileError: a camera list file that is not a list of entries;
+            FileNotFoundError: a scene file that is not there.
+    """
+    import functools
+    import sys
+    import types
+
+    from dask.distributed import as_completed, wait
+    from dask.distributed import progress as dask_progress
+
+    from .batch import FAILURES_FILE, check_outputs
+    from .camera import Camera
+    from .inputs import check_size
+    from .renderer import Renderer
+    from .views import check_render_kwargs, check_target, load_cameras
+
+    outs = check_outputs(outputs)
+    width, height = check_size(*size)
+    if isinstance(target, (str, os.PathLike)):
+        target = os.path.abspath(target)
+        if not Path(target).is_file():
+            raise FileNotFoundError(f"scene file not found: {target!r}")
+        if "shaded" in outs:
+            raise ValueError("output 'shaded' needs a clraster.Mesh target; load the mesh "
+                             "and pass it (it is scattered to the workers once)")
+    else:
+        check_target(target)
+        # (the workers' clraster.batch has the last word on other targets)
+        if "shaded" in outs and isinstance(target, Scene):
+            raise ValueError("output 'shaded' needs a clraster.Mesh target (face normals of "
+                             "one mesh); write 'ids' and shade per instance with "
+                             "Scene.split_ids")
+    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int)
+                              or chunk < 1):
+        raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
+    # the keywords are checked against Renderer.render's signature, without a context
+    probe: Any = types.SimpleNamespace(render=functools.partial(cast(Any, Renderer.render), None))
+    check_render_kwargs(probe, render_kwargs)
+    if isinstance(cameras, (str, os.PathLike)):
+        cameras = load_cameras(cameras, strict=False)
+    elif isinstance(cameras, (dict, Camera)):
+        raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
+                         f"{type(cameras).__name__}; wrap it in a list")
+    cams = list(cameras)
+    out = os.path.abspath(out_dir)
+    n_workers = max(1, len(client.nthreads()))
+    step = chunk or _chunk_size(len(cams), n_workers)
+    show = sys.stdout.isatty() if progress is None else bool(progress)
+
+    t0 = time.perf_counter()
+    if isinstance(target, str):
+        held = target
+    else:
+        # broadcast: every worker gets its copy now, not each task its own
+        held = client.scatter(target, broadcast=True, hash=False)
+    futures = [client.submit(_render_chunk, held, cams[s:s + step], s, out, outs, width,
+                             height, config, render_kwargs, pure=False)
+               for s in range(0, len(cams), step)]
+    bar = None
+    if show and futures:
+        # Dask's text progress bar blocks until the tasks finish: run it beside the loop
+        # that collects the records as they come
+        bar = threading.Thread(target=dask_progress, args=(futures,), daemon=True,
+                               kwargs={"notebook": False, "multi": False, "complete": False,
+                                       "scheduler": client.scheduler.address})
+        bar.start()
+    records: dict[int, ChunkRecord] = {}
+    try:
+        # records are taken as tasks finish, so one whose worker is lost later is not lost
+        # to the summary (Dask may still recompute it: it finds its files and skips them)
+        for fut in as_completed(futures):
+            rec = fut.result()   # raises a task's error (not one view's: those are records)
+            records.setdefault(rec.start, rec)
+        # every recomputation done too, so no task is left writing when we clean up
+        wait(futures)
+    finally:
+        if bar is not None:
+            bar.join(timeout=5.0)   # it ends (and clears its line) when the tasks do
+        client.cancel(futures)
+        del futures
+        if not isinstance(held, str):
+            client.cancel([held])
+    chunks = tuple(records[s] for s in sorted(records))
+    failures = tuple(f for c in chunks for f in c.failures)
+    client.run(_finish_out_dir, out, list(failures), on_error="return")
+    seconds = time.perf_counter() - t0
+    ffile = Path(out) / FAILURES_FILE if failures else None
+    return ViewsSummary(len(cams), sum(c.rendered for c in chunks),
+                        sum(c.skipped for c in chunks), failures, seconds, ffile, chunks)

@@ -9,13 +9,19 @@ renderer uploads these arrays; the NumPy twin reads the very same ones.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .clusters import clusters_of
 from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
-from .inputs import view_projection
+from .inputs import as_target, view_projection
 from .precision import check_depth_range
+
+if TYPE_CHECKING:
+    from .cull import DrawList
+    from .mesh import Mesh
+    from .scene import Scene
 
 
 @dataclass(frozen=True)
@@ -182,9 +188,9 @@ class FramePlan:
     """Everything both renderers need before the vertex stage: the scene, its pool, the cull
     result and the draw records."""
 
-    scene: object
+    scene: Scene
     pool: GeometryPool
-    draw_list: object
+    draw_list: DrawList
     frame: FrameDraws
     view_proj: np.ndarray
 
@@ -194,13 +200,14 @@ class PlanCache:
     target, so repeated frames of the same mesh or scene reuse them."""
 
     def __init__(self) -> None:
-        self._key: tuple | None = None
-        self._value: tuple | None = None
+        self._key: tuple[Any, ...] | None = None
+        self._value: tuple[Mesh | Scene, Scene, GeometryPool] | None = None
 
-    def scene_and_pool(self, target) -> tuple[object, GeometryPool]:
+    def scene_and_pool(self, target: Mesh | Scene) -> tuple[Scene, GeometryPool]:
         from .mesh import Mesh
         from .scene import Scene
 
+        key: tuple[Any, ...]
         if isinstance(target, Mesh):
             key = ("mesh", id(target))
         elif isinstance(target, Scene):
@@ -217,12 +224,14 @@ class PlanCache:
 
 def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
                cones: bool, cache: PlanCache, keep_cone_culled: bool = False) -> FramePlan:
-    """Cull ``target`` (Mesh or Scene) for ``camera`` and lay out this frame's draws
-    (``keep_cone_culled``: see `cull.build_draw_list`)."""
+    """Cull ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene: converted once by
+    `inputs.as_target`, before the cache, so the cache keys on the converted object) for
+    ``camera`` and lay out this frame's draws (``keep_cone_culled``: see
+    `cull.build_draw_list`)."""
     from .cull import build_draw_list
 
     vp = view_projection(camera, width, height)
-    scene, pool = cache.scene_and_pool(target)
+    scene, pool = cache.scene_and_pool(as_target(target))
     check_depth_range(camera, width, height, scene)
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
                          keep_cone_culled=keep_cone_culled)

@@ -17,11 +17,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from .clusters import clusters_of
+
+if TYPE_CHECKING:
+    from .mesh import Mesh
+    from .scene import Scene
 
 __all__ = ["ClusterFates", "Fate"]
 
@@ -51,7 +56,7 @@ class ClusterFates:
         fate: uint8 (K,): each key's `Fate`.
     """
 
-    scene: object
+    scene: Scene
     instance_key_base: np.ndarray
     instance: np.ndarray
     cluster: np.ndarray
@@ -130,7 +135,7 @@ class ClusterFates:
         """Per scene: unique-mesh index per instance, first face of each unique mesh in the
         concatenation, and the mesh-local cluster of every face of every unique mesh."""
         index: dict[int, int] = {}
-        meshes = []
+        meshes: list[Mesh] = []
         mesh_of = np.empty(len(self.scene.instances), np.int64)
         for k, inst in enumerate(self.scene.instances):
             mesh_of[k] = index.setdefault(id(inst.mesh), len(meshes))

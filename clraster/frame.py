@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,6 +21,7 @@ from .config import (
 
 if TYPE_CHECKING:
     from .fates import ClusterFates
+    from .outputs import FramePoints
 
 
 def status_counts(status: np.ndarray) -> np.ndarray:
@@ -94,11 +97,11 @@ class FrameStats:
         return cls.from_status_counts(counts, status_counts(status), **kw)
 
     @classmethod
-    def from_status_counts(cls, counts: dict[str, int], c: np.ndarray, **kw: int
+    def from_status_counts(cls, counts: dict[str, int], c: np.ndarray, **kw: Any
                            ) -> FrameStats:
         """Stats from the culling counts and the number of triangles per setup status code
         (int64 (8,), `status_counts`, summed over the passes of a frame)."""
-        obj = {k: int(counts.get(k, 0)) for k in (
+        obj: dict[str, Any] = {k: int(counts.get(k, 0)) for k in (
             "instances_total", "instances_frustum_culled", "instances_empty",
             "clusters_total", "clusters_frustum_culled", "clusters_cone_culled",
             "clusters_drawn", "triangles_total", "triangles_frustum_culled",
@@ -188,3 +191,65 @@ class Frame:
         """Sorted int32 array of the face indices visible in at least one pixel."""
         ids = np.unique(self.triangle_id)
         return ids[ids >= 0].astype(np.int32)
+
+    # Outputs that need the camera or the geometry take them as arguments (the frame holds
+    # only its buffers); the work is in clraster.outputs, imported when asked for, since
+    # it sits above this module (meshes, scenes, shading, image files).
+
+    def linear_depth(self, camera: Any, target: Any = None) -> np.ndarray:
+        """(H, W) float32 depth along the view axis in scene units (−z in eye space for a
+        rigid view); inf on the background.
+
+        Args:
+            camera: the camera the frame was rendered with (`clraster.Camera`).
+            target: optional, the Mesh / Scene / trimesh object it was rendered from: the
+                depth then comes from the exact surface points (ids + barycentrics,
+                float64) instead of the float32 window depth, whose metric error grows as
+                distance² · (far − near) / (far · near) (~1e-6 relative at moderate range).
+        """
+        from .outputs import linear_depth
+
+        return linear_depth(self, camera, target)
+
+    def distance(self, camera: Any, target: Any = None) -> np.ndarray:
+        """(H, W) float32 distance from the eye to the surface along each pixel's ray
+        (the ray through the pixel centre), scene units; inf on the background. For an
+        orthographic camera, the depth from the image plane. `target` as in
+        :meth:`linear_depth`."""
+        from .outputs import distance
+
+        return distance(self, camera, target)
+
+    def normals(self, target: Any, smooth: bool = False, space: str = "world",
+                camera: Any = None) -> np.ndarray:
+        """(H, W, 3) float32 unit normals of the visible surface, zeros on the background.
+
+        Args:
+            target: the Mesh / Scene / trimesh object the frame was rendered from.
+            smooth: False: face normals ``normalize((b − a) × (c − a))``; True: area-weighted
+                vertex normals interpolated with the barycentrics. Scene instances map
+                them with the inverse transpose of their transform, outward also for a
+                mirroring one (glTF's rule).
+            space: "world", or "camera" (OpenGL eye space: x right, y up, z towards the
+                viewer; needs `camera`).
+        """
+        from .outputs import normals
+
+        return normals(self, target, smooth=smooth, space=space, camera=camera)
+
+    def points(self, target: Any) -> FramePoints:
+        """The covered pixels as a point cloud: ``(points, ids, pixels)`` — (N, 3) float64
+        world positions (barycentrics applied to the face's world-space vertices), (N,)
+        int32 triangle ids, (N, 2) int32 pixel (x, y); row-major pixel order."""
+        from .outputs import points
+
+        return points(self, target)
+
+    def save(self, path: str | os.PathLike, what: str = "depth", **options: Any) -> Path:
+        """Write one output ("depth", "linear_depth", "distance", "ids", "normals",
+        "shaded", "points") to exactly `path`, in the format its extension names (.png,
+        .tif/.tiff, .exr, .npy, .npz, .ply): `clraster.outputs.write_output`, whose
+        keyword options (``target``, ``camera``, ``depth_scale``...) pass through."""
+        from .outputs import write_output
+
+        return write_output(path, self, what, **options)

@@ -2,16 +2,41 @@
 twin, the cameras, scenes, generators and the command lines (image sizes, integers, 4×4
 matrices, boxes, yes/no options, WIDTHxHEIGHT arguments). Each raises ValueError (argparse's
 ArgumentTypeError for command-line text) saying what was wrong.
+
+`as_target` is the one place where what a caller renders (a clraster Mesh or Scene, a
+trimesh Trimesh or Scene) becomes a clraster Mesh or Scene, for both renderers.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+import threading
+import weakref
+from typing import TYPE_CHECKING, Any, Protocol, Union
 
 import numpy as np
 import numpy.typing as npt
 
 from .config import CULL_MODES, MAX_IMAGE_SIZE
+
+if TYPE_CHECKING:
+    import trimesh
+
+    from .mesh import Mesh
+    from .scene import Scene
+
+
+class CameraLike(Protocol):
+    """What the renderers take as a camera: a `clraster.Camera`, or any object whose
+    ``view_projection(width, height)`` returns a (4, 4) view-projection matrix (OpenGL
+    conventions, column vectors: ``clip = M @ [x, y, z, 1]``)."""
+
+    def view_projection(self, width: int, height: int) -> npt.ArrayLike: ...
+
+
+#: What the renderers draw (`as_target` turns it into a Mesh or a Scene).
+Target = Union["Mesh", "Scene", "trimesh.Trimesh", "trimesh.Scene"]
 
 
 def check_size(width: int, height: int) -> tuple[int, int]:
@@ -76,8 +101,8 @@ def check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike, dtype: type = np.float
     """Axis-aligned boxes as C-contiguous ``dtype`` (K, 3) arrays each (an empty 1-D input
     is read as (0, 3)); ValueError unless both have shape (K, 3). Values (NaN, order) are
     not checked: callers treat non-finite boxes as unbounded."""
-    lo = np.ascontiguousarray(np.asarray(mins, dtype=dtype))
-    hi = np.ascontiguousarray(np.asarray(maxs, dtype=dtype))
+    lo: np.ndarray = np.ascontiguousarray(np.asarray(mins, dtype=dtype))
+    hi: np.ndarray = np.ascontiguousarray(np.asarray(maxs, dtype=dtype))
     if lo.ndim == 1 and lo.size == 0:
         lo = lo.reshape(0, 3)
     if hi.ndim == 1 and hi.size == 0:
@@ -95,7 +120,7 @@ def check_cull(cull: str) -> str:
     return cull
 
 
-def view_projection(camera, width: int, height: int) -> np.ndarray:
+def view_projection(camera: CameraLike, width: int, height: int) -> np.ndarray:
     """float64 (4, 4) view-projection of ``camera`` for this image size, validated."""
     try:
         m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
@@ -106,7 +131,7 @@ def view_projection(camera, width: int, height: int) -> np.ndarray:
     return m
 
 
-def mvp_matrix(camera, width: int, height: int) -> np.ndarray:
+def mvp_matrix(camera: CameraLike, width: int, height: int) -> np.ndarray:
     """Row-major float32 (4, 4) view-projection matrix of ``camera`` for this image size."""
     m = view_projection(camera, width, height)
     with np.errstate(over="ignore"):
@@ -122,3 +147,78 @@ def check_flag(value: object, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be True or False, got {value!r}")
     return bool(value)
+
+
+#: trimesh object id → (weak reference to it, its content hash when converted, the
+#: converted Mesh or Scene). Weak: the entry goes when the trimesh object does.
+_CONVERTED: dict[int, tuple[weakref.ref, int, Any]] = {}
+_CONVERTED_LOCK = threading.Lock()
+
+
+def as_target(obj: object) -> Mesh | Scene:
+    """What the renderers draw: ``obj`` itself if it is a `clraster.Mesh` or
+    `clraster.Scene`; a ``trimesh.Trimesh`` as a Mesh (`Mesh.from_trimesh`: same vertices
+    and faces, in order, so ids are its face indices); a ``trimesh.Scene`` as a Scene
+    (`Scene.from_trimesh`: node transforms, node and geometry names kept; ids as the
+    `clraster.scene` module docstring says, ``scene.geometry_of(ids)`` names them).
+
+    A trimesh object is converted once and the result kept while the object lives (a weak
+    reference) and its content is unchanged (trimesh's own content hash, cheap when nothing
+    changed): repeated frames of one trimesh object reuse one clraster object, so the
+    renderers' per-scene caches (clusters, BVH, uploaded geometry) hold; a changed object
+    is converted again. ``as_target(tm_scene)`` returns that same Scene, the one to map a
+    frame's ids back with.
+
+    Raises:
+        ValueError: another type (the message says what is accepted), a trimesh mesh with
+            no face (a point cloud loaded as a mesh: rendering it would give a blank
+            image), or a trimesh scene with no triangle mesh.
+    """
+    from .mesh import Mesh
+    from .scene import Scene
+
+    if isinstance(obj, (Mesh, Scene)):
+        return obj
+    kind = _trimesh_kind(obj)
+    if kind is None:
+        raise ValueError(f"expected a clraster.Mesh or clraster.Scene (or a trimesh.Trimesh "
+                         f"or trimesh.Scene), got {type(obj).__name__}")
+    key = id(obj)
+    stamp = hash(obj)   # trimesh: a content hash, recomputed only after a change
+    with _CONVERTED_LOCK:
+        entry = _CONVERTED.get(key)
+        if entry is not None and entry[0]() is obj and entry[1] == stamp:
+            return entry[2]
+    tm: Any = obj
+    target: Mesh | Scene
+    if kind == "mesh":
+        if len(tm.faces) == 0:
+            raise ValueError(f"the trimesh.Trimesh has no faces ({len(tm.vertices):,} "
+                             f"vertices): a point cloud or lines? clraster renders triangle "
+                             f"meshes")
+        target = Mesh.from_trimesh(tm)
+    else:
+        target = Scene.from_trimesh(tm)
+
+    def forget(ref: weakref.ref, key: int = key) -> None:
+        with _CONVERTED_LOCK:
+            if key in _CONVERTED and _CONVERTED[key][0] is ref:
+                del _CONVERTED[key]
+
+    with _CONVERTED_LOCK:
+        _CONVERTED[key] = (weakref.ref(obj, forget), stamp, target)
+    return target
+
+
+def _trimesh_kind(obj: object) -> str | None:
+    """"mesh" for a trimesh.Trimesh, "scene" for a trimesh.Scene, else None (without
+    importing trimesh: if it is not imported, ``obj`` cannot be one of its objects)."""
+    trimesh = sys.modules.get("trimesh")
+    if trimesh is None:
+        return None
+
+    if isinstance(obj, trimesh.Trimesh):
+        return "mesh"
+    if isinstance(obj, trimesh.Scene):
+        return "scene"
+    return None

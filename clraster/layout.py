@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import re
 import textwrap
+from collections.abc import Mapping
+from typing import cast
 
 import numpy as np
 
@@ -224,8 +226,9 @@ def c_struct(name: str, dtype: np.dtype) -> str:
     (a gap, a field off its natural alignment, trailing padding, unknown or nested types)."""
     lines = []
     offset, largest = 0, 1
-    for field in dtype.names:
-        fdt, at = dtype.fields[field][:2]
+    fields = cast("Mapping[str, tuple[np.dtype, int]]", dtype.fields)   # a structured dtype
+    for field in cast("tuple[str, ...]", dtype.names):
+        fdt, at = fields[field][:2]
         base, shape = fdt.subdtype if fdt.subdtype else (fdt, ())
         if base not in _C_TYPES or len(shape) > 1:
             raise ValueError(f"{name}.{field}: dtype {fdt} has no C equivalent here")

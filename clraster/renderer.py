@@ -5,7 +5,8 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from typing import Any
 
 import numpy as np
 import pyopencl as cl
@@ -15,7 +16,7 @@ from .device import check_process, default_context, event_ms
 from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .inputs import check_cull, check_flag, check_size
+from .inputs import CameraLike, Target, check_cull, check_flag, check_size
 from .params import FrameParams, FrameTotals
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
@@ -77,10 +78,13 @@ class Renderer:
         self._plans = PlanCache()
         self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
 
-    def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
-               cones: bool = True, occlusion: bool = False, overdraw: bool = False,
-               fates: bool = False) -> Frame:
-        """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) seen by ``camera``.
+    def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
+               frustum: bool = True, cones: bool = True, occlusion: bool = False,
+               overdraw: bool = False, fates: bool = False) -> Frame:
+        """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
+        or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
+        by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
+        height)``).
 
         Args:
             cull: "back" (drop faces that are clockwise in NDC, i.e. counter-clockwise is
@@ -114,7 +118,8 @@ class Renderer:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
                                 fates)
 
-    def render_many(self, target, cameras, **render_kwargs) -> Iterator[Frame]:
+    def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
+                    **render_kwargs: Any) -> Iterator[Frame]:
         """Render ``target`` from each of ``cameras`` in order: a generator of Frames.
 
         Args:
@@ -135,8 +140,8 @@ class Renderer:
 
         return render_many(self, target, cameras, **render_kwargs)
 
-    def _render(self, target, camera, cull: str, frustum: bool, cones: bool, occlusion: bool,
-                overdraw: bool, fates: bool) -> Frame:
+    def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
+                cones: bool, occlusion: bool, overdraw: bool, fates: bool) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,

@@ -10,6 +10,11 @@ indices of the concatenation of all instances' meshes in scene order, and a one-
 scene's ids are the mesh's own face indices. :meth:`Scene.split_ids` maps ids back to
 (instance, face). Ids are int32 in frames, so a scene holds fewer than 2**31 faces.
 
+Names. Each instance may carry a name and the name of its geometry (both None unless
+given): :meth:`Scene.from_trimesh` keeps a trimesh scene's node names
+(:attr:`Scene.instance_names`) and geometry names (:attr:`Scene.geometry_names`), and
+:meth:`Scene.geometry_of` maps a frame's triangle ids back to geometry names.
+
 Transforms are float64 (4, 4) affine matrices for column vectors (``world = T @ [x, y, z,
 1]``), last row ``(0, 0, 0, 1)``, invertible and well conditioned. Mirroring transforms
 (negative determinant) are allowed: they turn the winding of the instance's faces, which the
@@ -24,13 +29,16 @@ import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from .inputs import check_mat4
 from .mesh import Mesh
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["Instance", "Scene", "SceneWarning"]
 
@@ -138,6 +146,8 @@ class Scene:
     def __init__(self, instances: Iterable[Instance | tuple[Mesh, npt.ArrayLike]] = ()) -> None:
         self._instances: list[Instance] = []
         self._face_counts: list[int] = []
+        self._instance_names: list[str | None] = []
+        self._geometry_names: list[str | None] = []
         self._n_faces = 0
         self._version = 0
         self._infos: dict[int, _MeshInfo] = {}
@@ -157,8 +167,14 @@ class Scene:
 
     # -- building -------------------------------------------------------------------------
 
-    def add(self, mesh: Mesh, transform: npt.ArrayLike | None = None) -> int:
+    def add(self, mesh: Mesh, transform: npt.ArrayLike | None = None, *,
+            name: str | None = None, geometry: str | None = None) -> int:
         """Append an instance of `mesh` placed by `transform` (identity if None).
+
+        Args:
+            name: the instance's name (e.g. a scene-graph node), kept in `instance_names`.
+            geometry: the name of its geometry, kept in `geometry_names` (what
+                `geometry_of` maps triangle ids to).
 
         Returns:
             The new instance's index.
@@ -168,13 +184,18 @@ class Scene:
                 the instance); or the scene would reach 2**31 faces.
         """
         index = len(self._instances)
+        for what, value in (("name", name), ("geometry", geometry)):
+            if value is not None and not isinstance(value, str):
+                raise ValueError(f"instance {index}: {what} must be a string or None, got "
+                                 f"{type(value).__name__}")
         try:
-            inst = Instance(mesh, transform)
+            inst = Instance(mesh, transform)   # type: ignore[arg-type]  # converted there
         except ValueError as exc:
             raise ValueError(f"instance {index}: {exc}") from None
-        return self._append(inst)
+        return self._append(inst, name, geometry)
 
-    def _append(self, inst: Instance) -> int:
+    def _append(self, inst: Instance, name: str | None = None,
+                geometry: str | None = None) -> int:
         index = len(self._instances)
         m = inst.mesh.n_faces
         if self._n_faces + m > MAX_SCENE_FACES:
@@ -182,6 +203,8 @@ class Scene:
                              f"{self._n_faces + m:,}; triangle ids are int32, so a scene holds "
                              f"at most {MAX_SCENE_FACES:,} faces: split it into several scenes")
         self._instances.append(inst)
+        self._instance_names.append(name)
+        self._geometry_names.append(geometry)
         self._face_counts.append(m)
         self._n_faces += m
         self._version += 1
@@ -202,9 +225,9 @@ class Scene:
 
         A trimesh Scene (glTF/GLB, multi-object OBJ, ...) gives one instance per graph node
         that holds a triangle mesh, in ``graph.nodes_geometry`` order, with the node's world
-        transform; each geometry becomes one `Mesh` shared by all its nodes. Non-triangle
-        geometry (points, paths) is skipped. A single-mesh file gives one instance with the
-        identity transform.
+        transform; each geometry becomes one `Mesh` shared by all its nodes; node and
+        geometry names are kept (`from_trimesh`). Non-triangle geometry (points, paths) is
+        skipped. A single-mesh file gives one instance with the identity transform.
 
         Raises:
             FileNotFoundError: `path` does not exist.
@@ -227,8 +250,47 @@ class Scene:
         if not isinstance(loaded, trimesh.Scene):
             raise ValueError(f"{str(p)!r} holds no triangle mesh (trimesh read a "
                              f"{type(loaded).__name__})")
+        return cls._from_trimesh_scene(loaded, repr(str(p)))
+
+    @classmethod
+    def from_trimesh(cls, tm: trimesh.Scene | trimesh.Trimesh) -> Scene:
+        """A scene made from a trimesh object, in memory (what `load` does after reading).
+
+        A ``trimesh.Scene`` gives one instance per graph node that holds a triangle mesh,
+        in ``graph.nodes_geometry`` order, placed by the node's world transform
+        (``tm.graph[node]``); each geometry becomes one `Mesh` (its vertices and faces in
+        trimesh's order, nothing merged) shared by all its nodes. Node names go to
+        `instance_names`, geometry names (keys of ``tm.geometry``) to `geometry_names`, so
+        ``scene.geometry_of(frame.triangle_id)`` names the geometry seen at each pixel.
+        Non-triangle geometry (points, paths) is skipped; nodes scaled to zero are skipped
+        with a `SceneWarning`. A ``trimesh.Trimesh`` gives one instance, identity transform,
+        no names.
+
+        The result is a new Scene (renderers convert a trimesh object once and cache it:
+        `clraster.inputs.as_target`); ids are the same on every conversion of the same
+        object.
+
+        Raises:
+            TypeError: `tm` is neither a trimesh.Scene nor a trimesh.Trimesh.
+            ValueError: it holds no triangle mesh, or a node's transform is invalid.
+        """
+        import trimesh
+
+        if isinstance(tm, trimesh.Trimesh):
+            return cls.from_mesh(Mesh.from_trimesh(tm))
+        if not isinstance(tm, trimesh.Scene):
+            raise TypeError(f"from_trimesh expects a trimesh.Scene or trimesh.Trimesh, got "
+                            f"{type(tm).__name__}")
+        return cls._from_trimesh_scene(tm, "trimesh scene")
+
+    @classmethod
+    def _from_trimesh_scene(cls, loaded: trimesh.Scene, where: str) -> Scene:
+        """`from_trimesh` of a trimesh.Scene; ``where`` starts error messages (a file's
+        path for `load`)."""
+        import trimesh
+
         scene = cls()
-        meshes: dict[str, Mesh] = {}
+        meshes: dict[Any, Mesh] = {}
         skipped = 0
         hidden: list[str] = []
         for node in loaded.graph.nodes_geometry:
@@ -246,17 +308,17 @@ class Scene:
             if mesh is None:
                 mesh = meshes[geom_name] = Mesh.from_trimesh(geom)
             try:
-                scene.add(mesh, transform)
+                scene.add(mesh, transform, name=str(node), geometry=str(geom_name))
             except ValueError as exc:
-                raise ValueError(f"{str(p)!r}, node {node!r}: {exc}") from exc
+                raise ValueError(f"{where}, node {node!r}: {exc}") from exc
         if skipped:
-            log.info("%s: skipped %d node(s) without a triangle mesh", p, skipped)
+            log.info("%s: skipped %d node(s) without a triangle mesh", where, skipped)
         if hidden:
-            warnings.warn(f"{str(p)!r}: skipped {len(hidden)} node(s) scaled to zero (hidden, "
+            warnings.warn(f"{where}: skipped {len(hidden)} node(s) scaled to zero (hidden, "
                           f"they draw nothing): {', '.join(hidden[:5])}"
-                          f"{', ...' if len(hidden) > 5 else ''}", SceneWarning, stacklevel=2)
+                          f"{', ...' if len(hidden) > 5 else ''}", SceneWarning, stacklevel=3)
         if scene.n_instances == 0:
-            raise ValueError(f"{str(p)!r} holds no triangle mesh")
+            raise ValueError(f"{where} holds no triangle mesh")
         return scene
 
     # -- data -----------------------------------------------------------------------------
@@ -265,6 +327,34 @@ class Scene:
     def instances(self) -> tuple[Instance, ...]:
         """The instances, in draw order."""
         return tuple(self._instances)
+
+    @property
+    def instance_names(self) -> tuple[str | None, ...]:
+        """Each instance's name (a trimesh scene's node name), or None, in draw order."""
+        return tuple(self._instance_names)
+
+    @property
+    def geometry_names(self) -> tuple[str | None, ...]:
+        """Each instance's geometry name (a key of a trimesh scene's ``geometry``), or
+        None, in draw order (several instances may share one)."""
+        return tuple(self._geometry_names)
+
+    def geometry_of(self, ids: npt.ArrayLike) -> np.ndarray:
+        """Geometry names of triangle ids.
+
+        Args:
+            ids: integer array of any shape (e.g. a frame's ``triangle_id``), values in
+                [−1, n_faces), as `split_ids` takes them.
+
+        Returns:
+            An object array of the same shape: the `geometry_names` entry of each id's
+            instance (None for background, −1, and for instances without a name).
+        """
+        inst, _ = self.split_ids(ids)
+        names = np.empty(len(self._geometry_names) + 1, dtype=object)
+        names[:-1] = self._geometry_names
+        names[-1] = None
+        return names[inst]   # background (−1) picks the trailing None
 
     @property
     def n_instances(self) -> int:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -74,7 +74,7 @@ class OcclusionHistory:
         self._visible_key: tuple | None = None
         # world boxes of every key (float64 (K, 3) mins and maxs, bool (K,) bounded) + the
         # boxes in the Hi-Z test's layout, float32 (6, K), gathered per frame
-        self._boxes: tuple | None = None
+        self._boxes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._boxes_key: tuple | None = None
 
     def boxes(self, pool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -86,7 +86,7 @@ class OcclusionHistory:
             self._boxes = (wlo, whi, wbounded,
                            np.ascontiguousarray(np.vstack([wlo.T, whi.T]).astype(np.float32)))
             self._boxes_key = (scene, version)
-        return self._boxes
+        return cast("tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]", self._boxes)
 
     def last_visible(self, scene) -> np.ndarray | None:
         """bool (K,) keys visible at the end of the last frame of ``scene``, or None."""

@@ -71,6 +71,11 @@ class ViewError(ValueError):
         where = f"camera {index}" + (f": field {field!r}" if field else "")
         super().__init__(f"{where}: {message}")
 
+    def __reduce__(self):
+        # pickle by the three fields: the default would call __init__ with the formatted
+        # message alone, and a BrokenCamera in a camera list travels to Dask workers
+        return (type(self), (self.index, self.field, self.message))
+
 
 class CameraFileError(ValueError):
     """A camera list file that cannot be read as a list of entries at all (not JSON, or not
@@ -282,13 +287,12 @@ def check_render_kwargs(renderer: Renderer, render_kwargs: dict) -> None:
 
 
 def check_target(target: Any) -> None:
-    """ValueError now, not once per view, unless ``target`` is a Mesh or a Scene."""
-    from .mesh import Mesh
-    from .scene import Scene
+    """ValueError now, not once per view, unless ``target`` is a Mesh or a Scene (or a
+    trimesh Trimesh or Scene, converted here once: `clraster.inputs.as_target` keeps the
+    conversion for the views)."""
+    from .inputs import as_target
 
-    if not isinstance(target, (Mesh, Scene)):
-        raise ValueError(f"expected a clraster.Mesh or clraster.Scene, got "
-                         f"{type(target).__name__}")
+    as_target(target)
 
 
 def frames(renderer: Renderer, target: Any, cameras: Iterable[Any] | str | os.PathLike,

@@ -431,8 +431,9 @@ def test_pyopencl_ctx_garbage_names_the_platforms():
 # --- command line: output paths and errors ----------------------------------------------------
 
 @pytest.mark.parametrize("extra, what", [
-    (["--ids", "{d}/ids"], "must end in .npy"),
-    (["--depth", "{d}/depth.png"], "must end in .npy"),
+    # the extension names the format (clraster.outputs): none, or one that names no format
+    (["--ids", "{d}/ids"], "missing file extension"),
+    (["--depth", "{d}/depth.txt"], "unknown or missing file extension"),
     (["--ids", "{d}"], "is a folder"),
     (["--depth", "{d}/missing/depth.npy"], "does not exist"),
 ])

@@ -1,7 +1,9 @@
 """Smoke test of the benchmark harness: `clraster bench --quick` runs end to end.
 
 It checks that the harness works and writes what it promises (JSON schema, markdown, plots,
-peer present or skipped with a reason), never a speed.
+peer present or skipped with a reason), never a speed. A second run does the scale sweep
+alone (`--quick --sweeps scale`: instance grids of ~1M and ~2M triangles) and checks its
+rows, peak RSS and fit.
 """
 
 from __future__ import annotations
@@ -82,9 +84,12 @@ def test_json_schema(quick):
             assert pe["skipped"].startswith("peer skipped") and res["peer"]["reason"]
 
     names = {t["name"] for t in res["targets"]}
-    assert names == {"dragon_vs_twin", "dragon_vs_llvmpipe", "plant10m_occlusion_vs_llvmpipe"}
-    for t in res["targets"]:   # quick mode has neither the dragon at 1080p nor a 10M plant
-        assert t["met"] is None and t["note"]
+    assert names == {"dragon_vs_twin", "dragon_vs_llvmpipe", "plant10m_occlusion_vs_llvmpipe",
+                     "scale_200m_renders", "scale_200m_peak_rss", "scale_linear"}
+    for t in res["targets"]:   # quick mode has neither the dragon at 1080p nor a 10M plant,
+        assert t["met"] is None and t["note"]   # and the scale sweep runs only when named
+    assert res["scale"] is None
+    assert all("scale" not in c["sweeps"] for c in configs)
 
     for k in ("cold", "warm"):
         s = res["startup"][k]
@@ -118,3 +123,119 @@ def test_unwritable_out_is_one_error_line(tmp_path, capsys, where):
     assert err[0].startswith("clraster bench: error: ") and str(out) in err[0], err
     assert reason in err[0], err
     assert not out.is_dir() and blocker.read_text() == "not a folder"
+
+
+@pytest.fixture(scope="module")
+def quick_scale(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench_scale")
+    rc = main(["bench", "--quick", "--sweeps", "scale", "--no-startup", "--no-peer",
+               "--out", str(out)])
+    return rc, out
+
+
+def test_scale_sweep_alone(quick_scale):
+    """`--sweeps scale` runs the scale sweep alone: two grid scenes × (overview, inside),
+    frame times, triangles/s, a peak RSS per row, and the least-squares fit with its
+    residuals; the twin and peer sit out; the scale goals are reported."""
+    rc, out = quick_scale
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["errors"] == [] and res["startup"] is None
+    configs = res["configs"]
+    assert len(configs) == 4 and all(c["sweeps"] == ["scale"] for c in configs)
+    assert {c["scene"]["view"] for c in configs} == {"overview", "inside"}
+    assert len({c["triangles"] for c in configs}) == 2
+    assert min(c["triangles"] for c in configs) >= 900_000
+    for c in configs:
+        assert c["twin"]["skipped"].startswith("twin skipped: scale sweep")
+        assert len(c["opencl"]["runs_ms"]) == res["settings"]["scale_repeat"]
+        assert _positive(c["opencl"]["setup_triangles_per_s"])
+
+    sc = res["scale"]
+    assert [p["id"] for p in sc["planned"]] == [c["id"] for c in configs]
+    assert sc["failed"] == [] and sc["not_measured"] == []
+    for r in sc["rows"]:
+        assert _positive(r["median_ms"]) and _positive(r["peak_rss_mib"])
+        assert _positive(r["scene_triangles_per_s"]) and _positive(r["setup_triangles_per_s"])
+        assert 0 < r["triangles_to_setup"] <= r["triangles"]
+        # residual = measured − fit, also relative to the measurement
+        assert math.isclose(r["median_ms"] - r["fit_ms"], r["residual_ms"], abs_tol=1e-6)
+        assert math.isclose(r["residual_ms"] / r["median_ms"], r["relative_residual"],
+                            abs_tol=1e-9)
+    # inside the grid, object culling leaves fewer triangles than the overview
+    by = {(r["triangles"], r["view"]): r["triangles_to_setup"] for r in sc["rows"]}
+    for n in {c["triangles"] for c in configs}:
+        assert by[(n, "inside")] < by[(n, "overview")]
+    fit = sc["fit"]
+    assert fit["n_points"] == 4
+    for k in ("slope_ms_per_mtri", "intercept_ms", "r2", "rms_residual_ms",
+              "max_abs_relative_residual"):
+        assert isinstance(fit[k], float) and math.isfinite(fit[k]), k
+    assert fit["max_abs_relative_residual"] == pytest.approx(
+        max(abs(r["relative_residual"]) for r in sc["rows"]))
+    assert all(m["twin"]["skipped"] for m in res["memory"])
+
+    t = {t["name"]: t for t in res["targets"]}
+    for name in ("scale_200m_renders", "scale_200m_peak_rss"):   # no 200M scene here
+        assert t[name]["met"] is None and t[name]["note"], t[name]
+    lin = t["scale_linear"]
+    assert lin["value"] == pytest.approx(fit["max_abs_relative_residual"])
+    assert lin["met"] is (lin["value"] <= lin["threshold"])
+    md = (out / "results.md").read_text()
+    assert "## Scale sweep" in md and "Fit over 4 configurations" in md
+    if importlib.util.find_spec("matplotlib") is not None:
+        assert (out / "scale.png").stat().st_size > 1000
+
+
+def test_scale_targets_failed_200m():
+    """A 200M configuration that failed is a missed goal (not "not measured"), and so is
+    its peak RSS; a sweep without one says so."""
+    from clraster.bench.scale import scale_summary, scale_targets
+
+    planned = [{"id": "grid:dragon:8x5x6@overview/1920x1080/frustum",
+                "scene": "grid:dragon:8x5x6@overview", "triangles": 209_139_360}]
+    errors = [f"{planned[0]['id']}: MemoryError: out of memory"]
+    sc = scale_summary(planned, [], [], errors, 3)
+    t = {t["name"]: t for t in scale_targets(sc)}
+    assert t["scale_200m_renders"]["met"] is False
+    assert "MemoryError" in t["scale_200m_renders"]["note"]
+    assert t["scale_200m_peak_rss"]["met"] is False
+    assert t["scale_linear"]["met"] is None
+    t = {t["name"]: t for t in scale_targets(None)}
+    assert all(x["met"] is None and "--sweeps scale" in x["note"] for x in t.values())
+
+
+def _nothing_args(tmp_path: Path, *extra: str) -> list[str]:
+    return ["bench", "--sweeps", "triangles", "--scenes", "spot", "--no-startup",
+            "--no-memory", "--no-peer", "--no-plots", "--out", str(tmp_path / "out"), *extra]
+
+
+def test_nothing_to_measure_fails_loudly(tmp_path, capsys, monkeypatch):
+    """Every mesh missing: exit 1 and a message naming where the meshes were looked for,
+    not "0/0 done" and exit 0."""
+    empty = tmp_path / "no-meshes"
+    empty.mkdir()
+    assert main(_nothing_args(tmp_path, "--meshes", str(empty))) == 1
+    err = capsys.readouterr().err
+    assert "nothing to measure" in err and str(empty) in err and "--meshes" in err
+
+    monkeypatch.setenv("CLRASTER_MESHES", str(tmp_path / "typo"))   # named, so used alone
+    assert main(_nothing_args(tmp_path)) == 1
+    err = capsys.readouterr().err
+    assert str(tmp_path / "typo") in err and "missing" in err and "CLRASTER_MESHES" in err
+
+
+def test_meshes_found_from_the_current_folder(tmp_path, monkeypatch):
+    """Without --meshes or $CLRASTER_MESHES: ../shared/meshes from the current folder
+    (what an installed package run from a checkout's sibling folder needs)."""
+    from clraster.bench.cli import _default_meshes
+
+    monkeypatch.delenv("CLRASTER_MESHES", raising=False)
+    meshes = tmp_path / "shared" / "meshes"
+    meshes.mkdir(parents=True)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert _default_meshes() == meshes.resolve()
+    monkeypatch.setenv("CLRASTER_MESHES", str(tmp_path))
+    assert _default_meshes() == tmp_path

@@ -130,3 +130,79 @@ def test_wireframe_overlay(tmp_path, capsys):
     assert np.all(near[painted])
     assert np.array_equal(wire, wire_ref)
     assert "wireframe:" in capsys.readouterr().out
+
+
+def test_vectors_as_three_numbers(tmp_path):
+    """--eye X Y Z with negative numbers (and exponents) reads like the one-word forms."""
+    _, img, depth, ids = _render(tmp_path, "--eye=-6,3,6", "--target", "0,1,0")
+    for words in (["--eye", "-6", "3", "6", "--target", "0", "1", "0"],
+                  ["--eye", "-6,3,6", "--target", "0", "1.0", "0e0", "--up", "0", "1", "0"],
+                  ["--eye", "-0.6e1", "3", "6", "--target=0,1,0"]):
+        _, img2, depth2, ids2 = _render(tmp_path, *words)
+        np.testing.assert_array_equal(ids2, ids, err_msg=str(words))
+        np.testing.assert_array_equal(depth2, depth)
+        np.testing.assert_array_equal(img2, img)
+    # --eye 1 -2 3: the camera below the scene sees something else, but parses
+    _, _, _, below = _render(tmp_path, "--eye", "1", "-2", "3")
+    assert (below >= 0).any() and not np.array_equal(below, ids)
+
+
+@pytest.mark.parametrize("words", [["--eye", "1", "2"], ["--eye", "1", "x", "3"],
+                                   ["--up", "0", "nan", "1"], ["--target"]])
+def test_bad_vectors_exit_2(tmp_path, capsys, words):
+    assert main(["render", "example", "--out", str(tmp_path / "x.png"), *words]) == 2
+    assert "usage:" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_quiet_prints_nothing(tmp_path, capsys):
+    _render(tmp_path, "--quiet")
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+    assert (tmp_path / "img.png").is_file()
+
+
+def test_version(capsys):
+    import clraster
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"clraster {clraster.__version__}"
+
+
+def test_nothing_visible_exit_1_unless_allow_empty(tmp_path, capsys):
+    away = ["--eye", "0", "0", "-100", "--target", "0", "0", "-200"]
+    out = tmp_path / "img.png"
+    args = ["render", "example", "--size", "48x32", "--out", str(out), "--ids",
+            str(tmp_path / "ids.npy"), *away]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "nothing is visible" in err and "--allow-empty" in err and "outside the view" in err
+    assert not out.exists() and not (tmp_path / "ids.npy").exists()
+    assert main([*args, "--allow-empty", "--quiet"]) == 0
+    assert out.is_file() and np.all(np.load(tmp_path / "ids.npy") == -1)
+
+
+@pytest.mark.parametrize("name", ["image.ply", "image", "missing/image.png"])
+def test_output_checked_before_rendering(tmp_path, capsys, name):
+    assert main(["render", "example", "--size", "32x32", "--out", str(tmp_path / name)]) == 1
+    out = capsys.readouterr()
+    assert "--out" in out.err and "mesh:" not in out.out   # refused before loading
+
+
+def test_depth_and_ids_files_follow_the_extension(tmp_path, capsys):
+    """--depth/--ids write the file named, in the format its extension names
+    (clraster.outputs); an extension that cannot hold them is refused before rendering."""
+    _, _, depth, ids = _render(tmp_path)
+    d_png, i_png = tmp_path / "d.png", tmp_path / "i.png"
+    assert main(["render", "example", "--size", f"{SIZE[0]}x{SIZE[1]}", "--quiet", "--out",
+                 str(tmp_path / "x.png"), "--depth", str(d_png), "--ids", str(i_png)]) == 0
+    d16, i16 = iio.imread(d_png), iio.imread(i_png)
+    assert d16.dtype == np.uint16 and i16.dtype == np.uint16
+    np.testing.assert_array_equal(i16.astype(np.int64) - 1, ids)
+    np.testing.assert_array_equal(d16, np.round(depth.astype(np.float64) * 65535))
+    assert not (tmp_path / "d.png.npy").exists()
+    capsys.readouterr()
+    assert main(["render", "example", "--size", "32x32", "--out", str(tmp_path / "y.png"),
+                 "--depth", str(tmp_path / "d.txt")]) == 1
+    out = capsys.readouterr()
+    assert "--depth" in out.err and "mesh:" not in out.out

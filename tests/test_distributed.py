@@ -9,6 +9,11 @@
   `render_sort_last` equals the one-machine frame bit for bit (ids, depth, barycentrics)
   for 2, 3 and 4 parts on the bunny, an instance grid and the 200K-triangle plant from
   inside; the workers got their PoCL thread count; a file target is loaded on the workers.
+* Batch views on the same cluster (`clraster.distributed.render_views`): the files equal
+  `clraster.batch.render_views` on one machine byte for byte (failures.json included), a
+  re-run skips, broken cameras fail only their views; a worker process killed (SIGKILL)
+  mid-batch loses nothing and leaves nothing partial; the CLI with --workers and
+  --scheduler writes the one-machine files.
 
 Images are small (96×72) to keep the module fast: the cluster start and each worker's first
 OpenCL context are most of its time.
@@ -325,3 +330,155 @@ def test_sort_last_from_a_file(client, one_machine):
     assert same(out, one_machine.render(bunny, cam))
     with pytest.raises(ValueError, match="does not take"):
         render_sort_last(bunny, cam, client, parts=2, width=W, height=H, fates=True)
+
+
+# -- batch views on the LocalCluster -----------------------------------------------------------
+
+VIEW_OUTPUTS = ("depth", "ids", "bary", "shaded")
+
+
+def orbit_cameras(mesh: Mesh, n: int) -> list:
+    lo, hi = mesh.bounds()
+    return [Camera.framing(lo, hi, direction=(np.sin(a), 0.2 + 0.3 * np.cos(3 * a), np.cos(a)),
+                           fov_y=45.0, aspect=W / H)
+            for a in np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)]
+
+
+def folder_bytes(path) -> dict[str, bytes]:
+    """Every file of a folder (hidden ones too) → its bytes."""
+    return {p.name: p.read_bytes() for p in sorted(path.iterdir())}
+
+
+def test_render_views_equals_one_machine_and_reruns_skip(client, one_machine, tmp_path):
+    from clraster.batch import render_views as one_machine_views
+    from clraster.distributed import ViewsSummary
+    from clraster.distributed import render_views as dask_views
+
+    bunny = load_shared_mesh("stanford_bunny.ply")
+    cams: list = orbit_cameras(bunny, 11)
+    cams[3] = {"eye": [0, 0, 1], "target": [0, 0, 0], "near": -1.0}   # fails its view only
+    cams[8] = {"eye": [0, 0, 1], "target": [0, 0, 0], "fovy": 40}      # misspelt field
+    ref = one_machine_views(bunny, cams, tmp_path / "one", VIEW_OUTPUTS, renderer=one_machine)
+    out = dask_views(bunny, cams, client, tmp_path / "dask", VIEW_OUTPUTS, size=(W, H),
+                     chunk=2)
+    assert isinstance(out, ViewsSummary)
+    assert (out.views, out.rendered, out.skipped) == (11, 9, 0)
+    assert [f.index for f in out.failures] == [3, 8]
+    assert out.failures == ref.failures   # same messages, indices in the whole list
+    assert "field 'near'" in out.failures[0].message
+    assert [c.start for c in out.chunks] == [0, 2, 4, 6, 8, 10]
+    assert sum(w.rendered for w in out.per_worker) == 9
+    assert all(w.views_per_s > 0 for w in out.per_worker if w.rendered)
+    assert out.failures_file == tmp_path / "dask" / "failures.json"
+    # file by file, byte for byte (failures.json included; no temporary file anywhere)
+    assert folder_bytes(tmp_path / "dask") == folder_bytes(tmp_path / "one")
+    stamps = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "dask").glob("view_*")}
+    again = dask_views(bunny, cams, client, tmp_path / "dask", VIEW_OUTPUTS, size=(W, H))
+    assert (again.rendered, again.skipped, len(again.failures)) == (0, 9, 2)
+    assert stamps == {p.name: p.stat().st_mtime_ns for p in (tmp_path / "dask").glob("view_*")}
+    with pytest.raises(ValueError, match="chunk"):
+        dask_views(bunny, cams, client, tmp_path / "x", chunk=0)
+    with pytest.raises(TypeError, match="fates_please"):
+        dask_views(bunny, cams, client, tmp_path / "x", fates_please=True)
+
+
+def test_render_views_from_a_scene_file(client, one_machine, tmp_path):
+    from clraster.batch import render_views as one_machine_views
+    from clraster.distributed import render_views as dask_views
+
+    path = MESH_DIR / "stanford_bunny.ply"
+    if not path.is_file():
+        pytest.skip("shared meshes absent")
+    cams = orbit_cameras(Mesh.load(path), 4)
+    one_machine_views(Mesh.load(path), cams, tmp_path / "one", renderer=one_machine)
+    out = dask_views(str(path), cams, client, tmp_path / "dask", size=(W, H))
+    assert out.rendered == 4 and not out.failures
+    assert folder_bytes(tmp_path / "dask") == folder_bytes(tmp_path / "one")
+    with pytest.raises(ValueError, match="shaded"):
+        dask_views(str(path), cams, client, tmp_path / "x", outputs=("shaded",))
+
+
+def test_render_views_survives_a_lost_worker(client, one_machine, tmp_path):
+    """Kill one worker process (SIGKILL: no clean-up of its own) while the chunks run: Dask
+    runs its tasks again on the other worker (the Nanny restarts the dead one); every view's
+    files exist once, nothing temporary is left, and the files equal one machine's."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from clraster.batch import render_views as one_machine_views
+    from clraster.distributed import render_views as dask_views
+
+    bunny = load_shared_mesh("stanford_bunny.ply")
+    n = 64
+    cams = orbit_cameras(bunny, n)
+    out_dir = tmp_path / "dask"
+    result: list = []
+
+    def run() -> None:
+        try:
+            result.append(dask_views(bunny, cams, client, out_dir, ("depth", "ids"),
+                                     size=(W, H), chunk=2))
+        except BaseException as exc:   # handed to the test thread
+            result.append(exc)
+
+    pids = client.run(os.getpid)
+    thread = threading.Thread(target=run)
+    thread.start()
+    deadline = time.monotonic() + 60
+    while len(list(out_dir.glob("view_*_ids.npy"))) < 6 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    busy = [w for w, keys in client.processing().items() if keys and w in pids]
+    victim = busy[0] if busy else sorted(pids)[0]
+    written_before = len(list(out_dir.glob("view_*_ids.npy")))
+    os.kill(pids[victim], signal.SIGKILL)
+    thread.join(timeout=120)
+    assert not thread.is_alive()
+    summary = result[0]
+    if isinstance(summary, BaseException):
+        raise summary
+    assert written_before < n, "the worker was killed after the batch had finished"
+    assert summary.views == n and not summary.failures
+    assert summary.rendered + summary.skipped == n
+    names = sorted(p.name for p in out_dir.iterdir())
+    assert names == sorted(f"view_{k:05d}_{o}.npy" for k in range(n) for o in ("depth", "ids"))
+    one_machine_views(bunny, cams, tmp_path / "one", ("depth", "ids"), renderer=one_machine)
+    assert folder_bytes(out_dir) == folder_bytes(tmp_path / "one")
+    client.wait_for_workers(2, timeout=60)   # the Nanny's restart, for the tests after this
+
+
+def test_cli_views_on_workers(client, tmp_path):
+    import json
+
+    from clraster.cli import main
+
+    path = MESH_DIR / "stanford_bunny.ply"
+    if not path.is_file():
+        pytest.skip("shared meshes absent")
+    lo, hi = Mesh.load(path).bounds()
+    c = ((lo + hi) / 2).tolist()
+    r = float(np.linalg.norm(hi - lo))
+    entries = [{"eye": [c[0] + 1.5 * r * np.sin(a), c[1] + 0.3 * r, c[2] + 1.5 * r * np.cos(a)],
+                "target": c, "near": 0.05 * r, "far": 5.0 * r} for a in (0.0, 1.0, 2.0)]
+    entries.append({"eye": c, "target": c})   # broken: eye == target
+    cams = tmp_path / "cameras.json"
+    cams.write_text(json.dumps(entries))
+    common = ["render", str(path), "--views", str(cams), "--size", "48x36",
+              "--outputs", "depth,ids,shaded"]
+    assert main(common + ["--out", str(tmp_path / "one")]) == 1   # one view failed
+    assert main(common + ["--out", str(tmp_path / "local"), "--workers", "2",
+                          "--chunk", "1"]) == 1
+    assert main(common + ["--out", str(tmp_path / "remote"), "--scheduler",
+                          client.scheduler.address]) == 1
+    one = folder_bytes(tmp_path / "one")
+    assert len(one) == 3 * 3 + 1 and "failures.json" in one
+    assert folder_bytes(tmp_path / "local") == one
+    assert folder_bytes(tmp_path / "remote") == one
+    # a re-run skips everything it wrote; the Dask options need --views
+    assert main(common + ["--out", str(tmp_path / "remote"), "--scheduler",
+                          client.scheduler.address]) == 1
+    assert main(["render", str(path), "--out", str(tmp_path / "x.png"), "--workers", "2"]) == 2
+    assert main(common + ["--out", str(tmp_path / "y"), "--chunk", "2"]) == 2
+    assert main(common + ["--out", str(tmp_path / "y"), "--workers", "2", "--scheduler",
+                          client.scheduler.address]) == 2

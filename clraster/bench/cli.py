@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -29,7 +30,16 @@ from clraster.bench.measure import (
     probe,
     run_config,
 )
+from clraster.bench.scale import (
+    FULL_SCALE_REPEAT,
+    FULL_SCALE_SCENES,
+    SCALE_SKIP_TWIN,
+    quick_scale_scenes,
+    scale_only,
+    scale_summary,
+)
 from clraster.bench.spec import (
+    DEFAULT_SWEEPS,
     FULL_PIXEL_SIZES,
     FULL_TRIANGLE_SCENES,
     FULL_TWIN_MAX_TRIANGLES,
@@ -133,6 +143,12 @@ def _list(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+def _sweeps(text: str) -> list[str]:
+    """--sweeps: a comma-separated list, ``all`` for every sweep (the scale one included)."""
+    names = _list(text)
+    return list(SWEEPS) if names == ["all"] else names
+
+
 def _default_out() -> Path:
     """bench/results/ of the repository (a checkout or an editable install); from an
     installed package, ./clraster-bench-results."""
@@ -142,11 +158,37 @@ def _default_out() -> Path:
     return Path.cwd() / "clraster-bench-results"
 
 
+#: Environment variable naming the folder of the shared meshes (used when --meshes is not
+#: given; a folder named there is used even if it is missing, so a typo is reported).
+MESHES_ENV = "CLRASTER_MESHES"
+
+
+def _mesh_dirs() -> list[Path]:
+    """Where the shared meshes are looked for when --meshes is not given, in order:
+    $CLRASTER_MESHES alone if set; else ../shared/meshes and ./shared/meshes from the
+    current folder, then ../shared/meshes next to the repository (a checkout or an editable
+    install; an installed package has no repository, so it is not looked for under the
+    virtualenv)."""
+    env = os.environ.get(MESHES_ENV, "").strip()
+    if env:
+        return [Path(env).expanduser()]
+    cwd = Path.cwd()
+    cands = [cwd.parent / "shared" / "meshes", cwd / "shared" / "meshes"]
+    repo = Path(__file__).resolve().parents[2]   # clraster/bench/cli.py -> repository
+    if (repo / "pyproject.toml").is_file():
+        cands.append(repo.parent / "shared" / "meshes")
+    return list(dict.fromkeys(p.resolve() for p in cands))
+
+
 def _default_meshes() -> Path:
-    repo = Path(__file__).resolve().parents[2]
-    cands = [repo.parent / "shared" / "meshes", Path.cwd().parent / "shared" / "meshes",
-             Path.cwd() / "shared" / "meshes"]
+    cands = _mesh_dirs()
     return next((p for p in cands if p.is_dir()), cands[0])
+
+
+def _where_looked(a: argparse.Namespace) -> str:
+    """The mesh folder(s) searched, for messages."""
+    dirs = a.meshes_looked or [a.meshes]
+    return ", ".join(f"{d}{'' if d.is_dir() else ' (missing)'}" for d in dirs)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -162,9 +204,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="output folder (default bench/results/; with "
                                             "--quick a new temporary folder)")
     p.add_argument("--meshes", type=Path, default=None,
-                   help="folder of the shared meshes (default ../shared/meshes)")
-    p.add_argument("--sweeps", type=_list, default=list(SWEEPS),
-                   help="comma-separated subset of triangles,pixels,culling (default all)")
+                   help=f"folder of the shared meshes (default ${MESHES_ENV} if set, else "
+                        "the first of ../shared/meshes and ./shared/meshes from the current "
+                        "folder and ../shared/meshes next to a checkout that exists)")
+    p.add_argument("--sweeps", type=_sweeps, default=list(DEFAULT_SWEEPS),
+                   help="comma-separated subset of triangles,pixels,culling,scale, or all "
+                        f"(default {','.join(DEFAULT_SWEEPS)}: the scale sweep, 10M-200M "
+                        "triangles, runs only when named)")
     p.add_argument("--scenes", type=_list, help="scenes of the triangles sweep (comma-"
                    f"separated; default {','.join(FULL_TRIANGLE_SCENES)})")
     p.add_argument("--size", type=parse_size, help="image size of the triangles and culling "
@@ -176,6 +222,13 @@ def _parser() -> argparse.ArgumentParser:
                                            "plant:10.1M@inside, ≥ 10M triangles)")
     p.add_argument("--modes", type=_list, help="culling modes of the culling sweep "
                                                "(default off,frustum,occlusion)")
+    p.add_argument("--scale-scenes", type=_list,
+                   help="grid scenes of the scale sweep, each seen @overview and @inside "
+                        f"(comma-separated; default {','.join(FULL_SCALE_SCENES)}: 10.5M, "
+                        "52.3M, 104.6M, 209.1M triangles; quick: ~1M and ~2M)")
+    p.add_argument("--scale-repeat", type=int,
+                   help=f"timed frames per scale configuration (default {FULL_SCALE_REPEAT}: "
+                        "a 200M frame takes 10-20 s; quick: --repeat)")
     p.add_argument("--repeat", type=int, help="timed frames per configuration (default 5; "
                                               "quick 2)")
     p.add_argument("--warmup", type=int, default=1, help="warm-up frames (default 1)")
@@ -203,6 +256,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _fill_defaults(a: argparse.Namespace) -> None:
+    a.meshes_looked = None if a.meshes else _mesh_dirs()
     a.meshes = a.meshes or _default_meshes()
     if a.quick:
         small = "spot" if mesh_path("spot", a.meshes) else "example"
@@ -213,6 +267,9 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.sizes = a.sizes or [(320, 240), (640, 480)]
         a.culling_scene = a.culling_scene or "plant:20K@inside"
         a.repeat = a.repeat or 2
+        a.scale_scenes = a.scale_scenes or quick_scale_scenes(
+            lambda m: mesh_path(m, a.meshes) is not None)
+        a.scale_repeat = a.scale_repeat or a.repeat
         a.startup_scene = a.startup_scene or small
         a.startup_size = (320, 240)
     else:
@@ -222,6 +279,8 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.sizes = a.sizes or [parse_size(s) for s in FULL_PIXEL_SIZES]
         a.culling_scene = a.culling_scene or "plant:10.1M@inside"
         a.repeat = a.repeat or 5
+        a.scale_scenes = a.scale_scenes or list(FULL_SCALE_SCENES)
+        a.scale_repeat = a.scale_repeat or FULL_SCALE_REPEAT
         a.startup_scene = a.startup_scene or (
             "dragon" if mesh_path("dragon", a.meshes) else "example")
         a.startup_size = (1920, 1080)
@@ -236,8 +295,12 @@ def _bad_settings(a: argparse.Namespace) -> str | None:
     """Why the settings are unusable (a usage error), or None."""
     bad = [s for s in a.sweeps if s not in SWEEPS]
     bad += [m for m in a.modes if m not in MODES]
-    if bad or a.repeat < 1 or a.warmup < 0 or a.occlusion_warmup < 0:
-        return f"bad sweep/mode {bad}, or --repeat < 1, or a negative warm-up"
+    bad += [s for s in a.scale_scenes
+            if "scale" in a.sweeps and (not s.startswith("grid:") or "@" in s)]
+    if bad or a.repeat < 1 or a.scale_repeat < 1 or a.warmup < 0 or a.occlusion_warmup < 0:
+        return (f"bad sweep/mode/scale scene {bad} (scale scenes are grid:MESH:NXxNYxNZ, "
+                f"without @VIEW: both views run), or --repeat / --scale-repeat < 1, or a "
+                f"negative warm-up")
     return None
 
 
@@ -297,7 +360,7 @@ def _drop_missing(configs: list[Config], meshes: Path) -> tuple[list[Config], li
         if c.scene.kind in ("mesh", "grid") and c.scene.mesh != "example" \
                 and mesh_path(c.scene.mesh, meshes) is None:
             msg = (f"{c.id}: mesh {c.scene.mesh!r} not found in {meshes} "
-                   f"(set --meshes DIR)")
+                   f"(set --meshes DIR or ${MESHES_ENV})")
             skipped.append(msg)
             print(f"skipped {msg}", file=sys.stderr)
         else:
@@ -323,6 +386,14 @@ def _progress(runnable: list[Config], mem_jobs: list[Config],
     return Progress(steps)
 
 
+def _settings_for(c: Config, a: argparse.Namespace) -> argparse.Namespace:
+    """The settings a configuration is measured with: a scale-only one has its own repeat
+    count (its frames take seconds)."""
+    if scale_only(c.sweeps):
+        return argparse.Namespace(**{**vars(a), "repeat": a.scale_repeat})
+    return a
+
+
 def _measure_configs(runnable: list[Config], a: argparse.Namespace, argv: list[str],
                      peer: PeerRunner, prog: Progress, out: Path,
                      skipped: list[str]) -> tuple[list[dict], list[str]]:
@@ -338,8 +409,8 @@ def _measure_configs(runnable: list[Config], a: argparse.Namespace, argv: list[s
             if loaded is None or loaded.spec.geometry != c.scene.geometry:
                 loaded = None   # free the previous scene first (10M triangles are large)
                 loaded = load_scene(c.scene, a.meshes)
-            records.append(report.jsonable(run_config(c, loaded, a, peer, prog.log,
-                                                      prog.detail)))
+            records.append(report.jsonable(run_config(c, loaded, _settings_for(c, a), peer,
+                                                      prog.log, prog.detail)))
         except SceneMissing as exc:
             skipped.append(f"{c.id}: {exc}")
             prog.log(f"skipped {c.id}: {exc}")
@@ -362,7 +433,12 @@ def _measure_memory(mem_jobs: list[Config], records: list[dict], a: argparse.Nam
                    0)
         twin_ok = not a.no_twin and (a.twin_max_triangles is None
                                      or tri <= a.twin_max_triangles)
-        memory.append(measure_memory(c.scene.text, (c.width, c.height), c.mode, a, twin_ok))
+        if scale_only(c.sweeps):
+            memory.append(measure_memory(c.scene.text, (c.width, c.height), c.mode, a,
+                                         False, SCALE_SKIP_TWIN))
+        else:
+            memory.append(measure_memory(c.scene.text, (c.width, c.height), c.mode, a,
+                                         twin_ok))
         prog.finish_step()
     return memory
 
@@ -392,10 +468,16 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
     from clraster.bench.machine import describe
 
     t_start = time.perf_counter()
+    runnable, skipped = _drop_missing(configs, a.meshes)
+    if not runnable:
+        # a run that skips everything must not look like a successful one (exit 0)
+        why = (f"the {len(configs)} configuration(s) need mesh files that are not there; "
+               f"looked in {_where_looked(a)}. Give the folder with --meshes DIR or "
+               f"${MESHES_ENV}" if configs else "no configuration (see --sweeps, --list)")
+        print(f"clraster bench: error: nothing to measure: {why}", file=sys.stderr)
+        return 1
     peer = PeerRunner(not a.no_peer)
     print(f"llvmpipe: {peer.reason}", flush=True)
-
-    runnable, skipped = _drop_missing(configs, a.meshes)
     mem_jobs = [] if a.no_memory else memory_jobs(runnable)
     prog = _progress(runnable, mem_jobs, a)
     records, errors = _measure_configs(runnable, a, argv, peer, prog, out, skipped)
@@ -403,11 +485,15 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
     startup = _measure_startup(a, prog)
     prog.close()
 
+    planned = [{"id": c.id, "scene": c.scene.text,
+                "triangles": estimated_triangles(c.scene, a.meshes)}
+               for c in runnable if "scale" in c.sweeps]
+    scale = scale_summary(planned, records, memory, errors, a.scale_repeat)
     res = report.results_record(
         argv=argv, a=a, machine=describe(peer_renderer=peer.reason if peer.ok else None),
-        peer=peer.status(), configs=records, targets=evaluate_targets(records),
+        peer=peer.status(), configs=records, targets=evaluate_targets(records, scale),
         startup=startup, memory=memory, memory_method=MEMORY_METHOD, skipped=skipped,
-        errors=errors)
+        errors=errors, scale=scale)
     res["elapsed_s"] = time.perf_counter() - t_start
     plots = _plots(res, a, out)
     res["plots"] = plots
@@ -419,6 +505,11 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
     if errors:
         print(f"clraster bench: {len(errors)} configuration(s) failed:\n  "
               + "\n  ".join(errors), file=sys.stderr)
+        return 1
+    if not records:
+        print(f"clraster bench: error: nothing was measured: every configuration was "
+              f"skipped (meshes looked for in {_where_looked(a)}; see 'skipped' above)",
+              file=sys.stderr)
         return 1
     return 0
 

@@ -4,7 +4,7 @@
     clraster bench --quick         # the smoke mode CI runs (< 1 min; asserts it works)
     clraster bench --list          # print the configurations and exit
 
-The matrix is three sweeps, each a list of configurations (scene × image size × culling
+The matrix is four sweeps, each a list of configurations (scene × image size × culling
 mode); a configuration that belongs to two sweeps runs once:
 
 * ``triangles`` (time vs triangles): meshes from ``--meshes`` (spot … the 871K dragon), an
@@ -12,7 +12,10 @@ mode); a configuration that belongs to two sweeps runs once:
 * ``pixels`` (time vs pixels): ``--pixels-scene`` at each of ``--sizes``;
 * ``culling``: ``--culling-scene`` (the ≥ 10M plant seen from inside) at ``--size`` in each
   of ``--modes``: off (no object culling), frustum (BVH frustum + normal cones) and occlusion
-  (those + two-phase Hi-Z occlusion culling).
+  (those + two-phase Hi-Z occlusion culling);
+* ``scale`` (only when named: ``--sweeps scale`` or ``all``): instance grids of the dragon
+  of 10M to 200M triangles, overview and inside views, with peak RSS per configuration and
+  a line fitted to frame time over the triangles sent to setup (`clraster.bench.scale`).
 
 Per configuration: one Renderer, warm-up frames of the OpenCL path (occlusion gets
 ``--occlusion-warmup`` more, so its visible set from the previous frame is warm) and one of
@@ -35,6 +38,7 @@ Outputs in ``--out``: results.json, results.md, and PNG plots (with matplotlib).
 
 Where the code lives: `clraster.bench.spec` (scenes, configurations, sweeps, targets),
 `clraster.bench.measure` (one configuration, the llvmpipe peer, the subprocess probes),
+`clraster.bench.scale` (the scale sweep's scenes, inside camera, fit and goals),
 `clraster.bench.report` (results.json, results.md), `clraster.bench.plots` (PNG plots) and
 `clraster.bench.cli` (arguments, progress bar, :func:`main`). This module is the entry point
 ``clraster bench`` and ``bench/harness.py`` call, and re-exports the names below.

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from clraster.bench.report import jsonable
+from clraster.bench.scale import SCALE_SKIP_PEER, SCALE_SKIP_TWIN, scale_only
 from clraster.bench.spec import MODES, TWIN_MODE, Config, LoadedScene, SceneSpec, load_scene
 
 #: The module a probe subprocess runs (``-m``); its ``--probe JSON`` option calls `probe`.
@@ -102,6 +103,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     twin_skip = None
     if a.no_twin:
         twin_skip = "twin skipped: --no-twin"
+    elif scale_only(cfg.sweeps):
+        twin_skip = SCALE_SKIP_TWIN
     elif a.twin_max_triangles is not None and sc.triangles > a.twin_max_triangles:
         twin_skip = (f"twin skipped: {sc.triangles:,} triangles > --twin-max-triangles "
                      f"{a.twin_max_triangles:,}")
@@ -119,7 +122,10 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         twin_spent = time.perf_counter() - t0
         twin_warm_ms.append(twin_spent * 1e3)
 
-    cl_ms, cl_stages, tw_ms, tw_stages = [], [], [], []
+    cl_ms: list[float] = []
+    tw_ms: list[float] = []
+    cl_stages: list[dict] = []
+    tw_stages: list[dict] = []
     budget_hit = False
     for i in range(a.repeat):
         note(f"round {i + 1}/{a.repeat}")
@@ -146,6 +152,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         "stages_median_ms": _stage_medians(cl_stages), "stages_runs_ms": cl_stages,
         "host_cull_ms": _stage_medians(cl_stages).get("cull (host)"),
         "triangles_per_s": _rate(sc.triangles, cl_med), "pixels_per_s": _rate(w * h, cl_med),
+        # the triangles that survived object culling, per second (what the stages process)
+        "setup_triangles_per_s": _rate(counts["triangles_in"], cl_med),
         "counts": counts,
     }
     if cfg.mode == "occlusion":
@@ -180,7 +188,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
             log(f"WARNING {cfg.id}: OpenCL and twin triangle ids differ in "
                 f"{rec['agreement']['pixels_differing']} pixels")
     note("llvmpipe")
-    rec["peer"] = peer.measure(cfg, sc, cam, f.depth, a, cl_med)
+    rec["peer"] = ({"skipped": SCALE_SKIP_PEER} if scale_only(cfg.sweeps) and peer.ok
+                   else peer.measure(cfg, sc, cam, f.depth, a, cl_med))
     del r, f, g
     return rec
 
@@ -193,7 +202,7 @@ class PeerRunner:
     """Runs `clraster.bench.peer_llvmpipe` once per (scene, size) and caches the result."""
 
     def __init__(self, enabled: bool, disabled_reason: str = "--no-peer") -> None:
-        self.mod = None
+        self.mod: Any = None
         self.renderer: str | None = None
         self.cache: dict[tuple, dict] = {}
         if not enabled:
@@ -419,23 +428,26 @@ def measure_startup(scene: str, size: tuple[int, int], a: argparse.Namespace) ->
 def memory_jobs(configs: list[Config]) -> list[Config]:
     """The configurations whose peak memory is probed: one probe pair per geometry, on its
     heaviest configuration (most pixels, frustum mode, a view that sees it all rather than
-    the inside one)."""
+    the inside one), and every configuration of the scale sweep (its rows report their
+    own peak RSS)."""
     jobs: list[Config] = []
     for geo in dict.fromkeys(c.scene.geometry for c in configs):
         cs = [c for c in configs if c.scene.geometry == geo]
         jobs.append(max(cs, key=lambda c: (c.width * c.height, c.mode == "frustum",
                                            c.scene.view != "inside")))
+    jobs += [c for c in configs if "scale" in c.sweeps and c not in jobs]
     return jobs
 
 
 def measure_memory(scene: str, size: tuple[int, int], mode: str,
-                   a: argparse.Namespace, twin_ok: bool) -> dict:
+                   a: argparse.Namespace, twin_ok: bool,
+                   twin_why: str = "twin skipped (--no-twin or --twin-max-triangles)") -> dict:
     """Peak memory of a fresh process rendering `scene` on the OpenCL path, then (when
-    `twin_ok`) on the twin."""
+    `twin_ok`) on the twin; `twin_why` is recorded when not."""
     base = {"task": "memory", "scene": scene, "size": list(size), "mode": mode,
             "meshes": str(a.meshes), "cull": a.cull}
     rec: dict[str, Any] = {"scene": scene, "size": list(size), "mode": mode,
                            "opencl": run_probe({**base, "path": "opencl"})}
     rec["twin"] = (run_probe({**base, "path": "twin"}) if twin_ok
-                   else {"skipped": "twin skipped (--no-twin or --twin-max-triangles)"})
+                   else {"skipped": twin_why})
     return rec

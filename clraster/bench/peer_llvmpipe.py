@@ -47,6 +47,7 @@ import re
 import statistics
 import time
 from dataclasses import dataclass, field
+from typing import Any, cast
 
 import numpy as np
 
@@ -137,9 +138,11 @@ def _create_context():
     os.environ.setdefault("GALLIUM_DRIVER", "llvmpipe")
     reasons = []
     for dev in range(_EGL_DEVICES):
-        kw = {"device_index": dev} if dev else {}
+        kw: dict[str, Any] = {"device_index": dev} if dev else {}
         try:
-            ctx = moderngl.create_standalone_context(backend="egl", require=330, **kw)
+            # (moderngl's stub types **settings as dicts, hence the ignore)
+            ctx = moderngl.create_standalone_context(
+                backend="egl", require=330, **kw)  # type: ignore[arg-type]
         except Exception as exc:  # noqa: BLE001 - glcontext raises plain Exception
             reasons.append(f"EGL device {dev}: {type(exc).__name__}: {exc}")
             if dev == 0:
@@ -248,7 +251,12 @@ class _Group:
 
     def __init__(self) -> None:
         self.instances: list[int] = []
-        self.vbo = self.ibo = self.mvp = self.base = self.vao = None
+        # moderngl objects (Buffer, VertexArray), made by upload
+        self.vbo: Any = None
+        self.ibo: Any = None
+        self.mvp: Any = None
+        self.base: Any = None
+        self.vao: Any = None
         self.n_faces = 0
 
     def release(self) -> None:
@@ -313,7 +321,7 @@ class LlvmpipePeer:
             raise ValueError("triangle ids are int32: at most 2**31 - 1 faces")
         self._free_geometry()
         by_mesh: dict[int, _Group] = {}
-        order: list[tuple[_Group, object]] = []
+        order: list[tuple[_Group, Mesh]] = []
         for k, mesh in enumerate(meshes):
             g = by_mesh.get(id(mesh))
             if g is None:
@@ -400,7 +408,7 @@ class LlvmpipePeer:
             for _ in range(warmup):
                 frame()
             times, reads = [], []
-            depth = None
+            depth: np.ndarray | None = None
             for _ in range(repeat):
                 t0 = time.perf_counter()
                 frame()
@@ -408,6 +416,7 @@ class LlvmpipePeer:
                 t0 = time.perf_counter()
                 depth = self._read_depth()
                 reads.append((time.perf_counter() - t0) * 1e3)
+            depth = cast(np.ndarray, depth)   # repeat >= 1: read at least once
             tri = None
             if ids:
                 raw = fbo.read(components=1, attachment=0, dtype="i4")

@@ -1,7 +1,8 @@
 """PNG plots of a harness run (results.json as a dict): matplotlib, imported lazily.
 
-`make_all(results, out)` writes time_vs_triangles.png, time_vs_pixels.png, stages.png and
-funnel.png (each only when the run has the data) and returns (file names, message); without
+`make_all(results, out)` writes time_vs_triangles.png, time_vs_pixels.png, stages.png,
+funnel.png and scale.png (frame time vs triangles sent to setup, with the scale sweep's
+fit; each only when the run has the data) and returns (file names, message); without
 matplotlib it writes nothing and says how to install it.
 """
 
@@ -31,7 +32,8 @@ def make_all(res: dict[str, Any], out: Path) -> tuple[list[str], str | None]:
     written = []
     for name, fn in (("time_vs_triangles.png", _vs_triangles), ("time_vs_pixels.png",
                                                                _vs_pixels),
-                     ("stages.png", _stages), ("funnel.png", _funnel)):
+                     ("stages.png", _stages), ("funnel.png", _funnel),
+                     ("scale.png", _scale)):
         fig = fn(res, plt)
         if fig is None:
             continue
@@ -168,7 +170,7 @@ def _funnel(res, plt):
         k = c["opencl"]["counts"]
         vals = []
         for _, key, minus in _FUNNEL:
-            vals.append(k[key] if key else k["triangles_total"] - sum(k[m] for m in minus))
+            vals.append(k[key] if key else k["triangles_total"] - sum(k[m] for m in minus or ()))
         all_vals += vals
         ms = c["opencl"].get("median_ms")
         bars = ax.bar(x + (j - (n - 1) / 2) * width, vals, width,
@@ -190,5 +192,52 @@ def _funnel(res, plt):
                              f"{c0['size'][1]}"), fontsize=10)
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=9, loc="upper right")
+    fig.tight_layout()
+    return fig
+
+
+def _scale(res, plt):
+    """The scale sweep: frame time vs triangles sent to setup (marker = view), the fitted
+    line, and the residuals below it."""
+    sc = res.get("scale") or {}
+    rows = sc.get("rows") or []
+    if not rows:
+        return None
+    fig, (ax, axr) = plt.subplots(2, 1, figsize=(9, 7), sharex=True,
+                                  gridspec_kw={"height_ratios": [3, 1]})
+    marks = {"overview": ("o", "#1f77b4"), "inside": ("^", "#d62728")}
+    for view in dict.fromkeys(r["view"] for r in rows):
+        m, col = marks.get(view, ("s", "#555"))
+        pts = [r for r in rows if r["view"] == view]
+        ax.plot([r["triangles_to_setup"] / 1e6 for r in pts], [r["median_ms"] for r in pts],
+                ls="", marker=m, ms=8, color=col, label=f"{view} view")
+        if all(r.get("residual_ms") is not None for r in pts):
+            axr.plot([r["triangles_to_setup"] / 1e6 for r in pts],
+                     [r["residual_ms"] for r in pts], ls="", marker=m, ms=7, color=col)
+    for r in rows:
+        ax.annotate(f"{r['triangles'] / 1e6:.0f}M", (r["triangles_to_setup"] / 1e6,
+                                                     r["median_ms"]),
+                    textcoords="offset points", xytext=(6, -12), fontsize=7.5, color="#333")
+    fit = sc.get("fit")
+    if fit:
+        xmax = max(r["triangles_to_setup"] for r in rows) / 1e6 * 1.05
+        b0, b1 = fit["intercept_ms"], fit["slope_ms_per_mtri"]
+        ax.plot([0, xmax], [b0, b0 + b1 * xmax], color="k", lw=1.2, ls="--",
+                label=f"fit: {b0:.0f} ms + {b1:.1f} ms per million"
+                      + (f" (R² {fit['r2']:.3f})" if fit["r2"] is not None else ""))
+    axr.axhline(0.0, color="k", lw=0.8)
+    ax.set_ylabel("frame time, ms (median)")
+    axr.set_ylabel("residual, ms")
+    axr.set_xlabel("triangles sent to setup (after frustum + cone culling), millions")
+    size = rows and next((c["size"] for c in res["configs"] if c["id"] == rows[0]["id"]),
+                         None)
+    where = f" at {size[0]}×{size[1]}" if size else ""
+    ax.set_title(_title(res, f"Scale sweep{where}: frame time vs surviving triangles"),
+                 fontsize=10)
+    for a in (ax, axr):
+        a.grid(True, alpha=0.3)
+    ax.set_xlim(left=0)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=9, loc="upper left")
     fig.tight_layout()
     return fig

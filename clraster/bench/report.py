@@ -44,9 +44,11 @@ def hms(s: float) -> str:
 def results_record(*, argv: list[str], a: argparse.Namespace, machine: dict,
                    peer: dict, configs: list[dict], targets: list[dict],
                    startup: dict | None, memory: list[dict], memory_method: str,
-                   skipped: list[str], errors: list[str]) -> dict[str, Any]:
+                   skipped: list[str], errors: list[str],
+                   scale: dict | None = None) -> dict[str, Any]:
     """The results document of a run, less ``elapsed_s`` and ``plots`` (the caller adds them
-    last, in that order, then passes it through :func:`jsonable`)."""
+    last, in that order, then passes it through :func:`jsonable`). `scale` is the scale
+    sweep's summary (`clraster.bench.scale.scale_summary`; None without that sweep)."""
     return {
         "schema": SCHEMA,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -55,11 +57,14 @@ def results_record(*, argv: list[str], a: argparse.Namespace, machine: dict,
         "settings": {"repeat": a.repeat, "warmup": a.warmup,
                      "occlusion_warmup": a.occlusion_warmup, "twin_budget_s": a.twin_budget,
                      "twin_max_triangles": a.twin_max_triangles, "cull": a.cull,
-                     "sweeps": a.sweeps, "meshes": str(a.meshes), "no_twin": a.no_twin},
+                     "sweeps": a.sweeps, "meshes": str(a.meshes), "no_twin": a.no_twin,
+                     "scale_scenes": getattr(a, "scale_scenes", None),
+                     "scale_repeat": getattr(a, "scale_repeat", None)},
         "machine": machine,
         "peer": peer,
         "configs": configs,
         "targets": targets,
+        "scale": scale,
         "startup": startup,
         "memory": memory,
         "memory_method": memory_method,
@@ -114,7 +119,7 @@ def markdown(res: dict) -> str:
     """results.md of a results dict: one section after another, each a list of lines."""
     L: list[str] = []
     for section in (_md_header, _md_targets, _md_configs, _md_stages, _md_funnel,
-                    _md_startup, _md_memory, _md_lists):
+                    _md_scale, _md_startup, _md_memory, _md_lists):
         L += section(res)
     return "\n".join(L) + "\n"
 
@@ -132,15 +137,31 @@ def _md_header(res: dict) -> list[str]:
             f"llvmpipe: {res['peer']['reason']}.", ""]
 
 
+def target_value(v: float | None, unit: str = "×") -> str:
+    """A target's value or threshold in its unit ("×" ratios unless the target says)."""
+    if v is None:
+        return "—"
+    if unit == "MiB":
+        return f"{v:,.0f} MiB"
+    if unit == "triangles":
+        return f"{v / 1e6:,.1f}M triangles"
+    if unit == "fraction":
+        return f"{v:.1%}"
+    return f"{v:.2f}×" if unit == "×" else f"{v:g} {unit}"
+
+
 def _md_targets(res: dict) -> list[str]:
     L = ["## Targets", "", "| target | configuration | measured | threshold | status |",
          "|---|---|---:|---:|---|"]
     for t in res["targets"]:
         st = {True: "**met**", False: "**missed**", None: "not measured"}[t["met"]]
-        if t["met"] is None and t["note"]:
+        if t["note"]:
             st += f" ({t['note']})"
-        L.append(f"| {t['description']} | {t['config'] or '—'} | {_x(t['value'], '.2f')} | "
-                 f"{t['comparison']} {t['threshold']:g}× | {st} |")
+        unit = t.get("unit", "×")
+        thr = (f"{t['threshold']:g}×" if unit == "×"
+               else target_value(t["threshold"], unit))
+        L.append(f"| {t['description']} | {t['config'] or '—'} | "
+                 f"{target_value(t['value'], unit)} | {t['comparison']} {thr} | {st} |")
     return L
 
 
@@ -226,6 +247,41 @@ def _md_funnel(res: dict) -> list[str]:
     return L
 
 
+def _md_scale(res: dict) -> list[str]:
+    sc = res.get("scale")
+    if not sc:
+        return []
+    L = ["", "## Scale sweep", "", sc["method"], "",
+         "| configuration | instances | triangles | to setup | rasterized | frame ms "
+         "(median) | runs ms | tri/s (scene) | tri/s (to setup) | peak RSS MiB | fit ms | "
+         "residual |", "|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for r in sc["rows"]:
+        rss = _f(r["peak_rss_mib"], ",.0f") if r["peak_rss_mib"] is not None else \
+            (r["peak_rss_note"] or "—")
+        resid = ("—" if r.get("residual_ms") is None else
+                 f"{r['residual_ms']:+.1f} ms ({r['relative_residual']:+.1%})")
+        L.append(f"| {r['id']} | {r['instances']:,} | {r['triangles']:,} | "
+                 f"{r['triangles_to_setup']:,} | {r['rasterized']:,} | {_f(r['median_ms'])} | "
+                 f"{', '.join(f'{t:.0f}' for t in r['runs_ms'])} | "
+                 f"{_si(r['scene_triangles_per_s'])} | {_si(r['setup_triangles_per_s'])} | "
+                 f"{rss} | {_f(r.get('fit_ms'))} | {resid} |")
+    fit = sc.get("fit")
+    if fit:
+        r2 = f"{fit['r2']:.4f}" if fit["r2"] is not None else "—"
+        L += ["", f"Fit over {fit['n_points']} configurations: frame ms ≈ "
+                  f"{fit['intercept_ms']:.1f} + {fit['slope_ms_per_mtri']:.2f} × (million "
+                  f"triangles sent to setup); R² {r2}, RMS residual "
+                  f"{fit['rms_residual_ms']:.1f} ms, largest |residual| "
+                  f"{fit['max_abs_relative_residual']:.1%} of the measured frame time."]
+    else:
+        L += ["", "No fit: fewer than two scale configurations with distinct triangle "
+                  "counts were measured."]
+    for key, what in (("failed", "failed"), ("not_measured", "not measured")):
+        if sc.get(key):
+            L += [f"- {what}: {x}" for x in sc[key]]
+    return L
+
+
 def _md_startup(res: dict) -> list[str]:
     st = res.get("startup")
     if not st:
@@ -291,9 +347,19 @@ def summary_lines(res: dict) -> str:
         lines.append(f"{c['id']:<42} OpenCL {_f(c['opencl']['median_ms']):>8} ms  twin "
                      f"{_f(c['twin'].get('median_ms')):>9} ms  x{_f(c['speedup_vs_twin']):>6}"
                      f"  llvmpipe {_f(pe):>8} ms")
+    sc = res.get("scale")
+    if sc and sc.get("fit"):
+        fit = sc["fit"]
+        lines.append(f"scale fit: frame ms ≈ {fit['intercept_ms']:.1f} + "
+                     f"{fit['slope_ms_per_mtri']:.2f} per million triangles to setup "
+                     f"({fit['n_points']} points, largest |residual| "
+                     f"{fit['max_abs_relative_residual']:.1%})")
     for t in res["targets"]:
         st = {True: "MET", False: "MISSED", None: "not measured"}[t["met"]]
-        v = f"{t['value']:.2f}x" if t["value"] is not None else "—"
-        lines.append(f"target {t['name']}: {v} (needs {t['comparison']} {t['threshold']:g}x)"
+        unit = t.get("unit", "×")
+        v = target_value(t["value"], unit).replace("×", "x")
+        thr = (f"{t['threshold']:g}x" if unit == "×"
+               else target_value(t["threshold"], unit))
+        lines.append(f"target {t['name']}: {v} (needs {t['comparison']} {thr})"
                      f" {st}" + (f" — {t['note']}" if t["note"] else ""))
     return "\n".join(lines)

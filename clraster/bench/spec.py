@@ -4,7 +4,8 @@ Nothing here renders or times anything. A scene is named on the command line
 (:class:`SceneSpec`) and loaded once per geometry (:func:`load_scene`); a configuration
 (:class:`Config`) is scene × image size × culling mode (:data:`MODES`); :func:`build_matrix`
 turns the requested sweeps into the list of configurations; :func:`evaluate_targets` says,
-from the JSON records of a run, whether the issue's targets were met.
+from the JSON records of a run, whether the issue's targets were met. The scale sweep's
+scenes, views, fit and goals are `clraster.bench.scale`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from clraster.bench.scale import SCALE_VIEWS, scale_targets
 
 #: Short names of the meshes in ../shared/meshes (see meshes.json there).
 MESH_ALIASES = {
@@ -41,8 +44,11 @@ MODES: dict[str, dict[str, bool]] = {
 #: before it had one show "[frustum]" where the twin rendered the frustum mode instead.)
 TWIN_MODE = {"off": "off", "frustum": "frustum", "occlusion": "occlusion"}
 
-#: The sweeps `--sweeps` may name (see :func:`build_matrix`).
-SWEEPS = ("triangles", "pixels", "culling")
+#: The sweeps `--sweeps` may name (see :func:`build_matrix`); ``all`` names every one.
+SWEEPS = ("triangles", "pixels", "culling", "scale")
+#: The sweeps of a run without `--sweeps`: the scale sweep (10M-200M triangles, ~4.5 min on
+#: its own with its memory probes on 2 cores, see bench/README.md) runs only when named.
+DEFAULT_SWEEPS = ("triangles", "pixels", "culling")
 
 # plant(10_000_000) has 9,999,960 triangles: ask for a little more to be >= 10M.
 FULL_TRIANGLE_SCENES = ["spot", "bunny", "armadillo", "lucy", "dragon202k", "dragon",
@@ -70,10 +76,12 @@ class SceneSpec:
     """A scene named on the command line.
 
     Forms: ``NAME`` (an alias of :data:`MESH_ALIASES`, a file in ``--meshes`` with or without
-    ``.ply``, or a path), ``example`` (the built-in example mesh), ``grid:MESH:NXxNYxNZ``
-    (`clraster.scenes.instance_grid`), ``plant:N[@inside|@overview]`` (`clraster.scenes.plant`,
-    N may end in K or M; the camera is `plant_inside_camera` (default) or
-    `plant_overview_camera`).
+    ``.ply``, or a path), ``example`` (the built-in example mesh),
+    ``grid:MESH:NXxNYxNZ[@overview|@inside]`` (`clraster.scenes.instance_grid`; the camera
+    is `grid_camera` (no suffix: view "grid", or "overview") or
+    `clraster.bench.scale.grid_inside_camera`), ``plant:N[@inside|@overview]``
+    (`clraster.scenes.plant`, N may end in K or M; the camera is `plant_inside_camera`
+    (default) or `plant_overview_camera`).
     """
 
     text: str
@@ -101,13 +109,16 @@ class SceneSpec:
                 raise ValueError(f"plant view must be inside or overview, got {view!r}")
             return SceneSpec(t, "plant", count=parse_count(body), view=view)
         if t.startswith("grid:"):
-            parts = t.split(":")
+            body, at, view = t.partition("@")
+            if at and view not in ("inside", "overview"):
+                raise ValueError(f"grid view must be inside or overview, got {view!r}")
+            parts = body.split(":")
             if len(parts) != 3:
                 raise ValueError(f"expected grid:MESH:NXxNYxNZ, got {t!r}")
             dims = tuple(int(v) for v in parts[2].lower().split("x"))
             if len(dims) != 3 or min(dims) < 1:
                 raise ValueError(f"expected three positive counts NXxNYxNZ, got {parts[2]!r}")
-            return SceneSpec(t, "grid", mesh=parts[1], grid=dims, view="grid")
+            return SceneSpec(t, "grid", mesh=parts[1], grid=dims, view=view or "grid")
         if not t:
             raise ValueError("empty scene name")
         return SceneSpec(t, "mesh", mesh=t)
@@ -159,6 +170,12 @@ class LoadedScene:
         from clraster import scenes as sc
 
         v = view or self.spec.view
+        if self.spec.kind == "grid":
+            if v == "inside":
+                from clraster.bench.scale import grid_inside_camera
+
+                return grid_inside_camera(self.target, self.spec.grid, width, height)
+            return sc.grid_camera(self.target, width, height)
         if v == "inside":
             return sc.plant_inside_camera(self.target, width, height)
         if v == "overview":
@@ -248,6 +265,10 @@ def build_matrix(a: argparse.Namespace) -> list[Config]:
     if "culling" in a.sweeps:
         for m in a.modes:
             add(a.culling_scene, a.size, m, "culling")
+    if "scale" in a.sweeps:
+        for s in getattr(a, "scale_scenes", None) or []:
+            for view in SCALE_VIEWS:
+                add(f"{s}@{view}", a.size, "frustum", "scale")
     order: dict[tuple, int] = {}
     for c in out.values():
         order.setdefault(c.scene.geometry, len(order))
@@ -265,8 +286,9 @@ def _find(configs: list[dict], pred) -> dict | None:
     return max(found, key=lambda c: c["triangles"]) if found else None
 
 
-def evaluate_targets(configs: list[dict]) -> list[dict]:
-    """The issue's targets, each met / missed / not measured (met None) with the figures."""
+def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dict]:
+    """The issue's targets, each met / missed / not measured (met None) with the figures;
+    the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`)."""
     out = []
 
     def target(name, desc, cfg, value, threshold, ok_if, why_none):
@@ -295,4 +317,4 @@ def evaluate_targets(configs: list[dict]) -> list[dict]:
            "clraster time", plant, ps, 10.0, ">=",
            "no plant ≥ 10M triangles with occlusion mode in this run" if not plant else
            (plant.get("peer") or {}).get("skipped") or "llvmpipe not measured")
-    return out
+    return out + scale_targets(scale)

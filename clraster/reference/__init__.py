@@ -22,7 +22,7 @@ import numpy as np
 from ..config import RasterConfig
 from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
-from ..inputs import check_cull, check_flag, check_size
+from ..inputs import CameraLike, Target, check_cull, check_flag, check_size
 from ..params import FrameParams, FrameTotals
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
@@ -58,10 +58,10 @@ class Renderer:
         self._plans = PlanCache()
         self.history = OcclusionHistory()
 
-    def render(self, target, camera, *, cull: str = "back", frustum: bool = True,
-               cones: bool = True, occlusion: bool = False) -> Frame:
-        """Render ``target`` (Mesh or Scene); arguments and outputs as `clraster.Renderer.
-        render` (no overdraw or fates)."""
+    def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
+               frustum: bool = True, cones: bool = True, occlusion: bool = False) -> Frame:
+        """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
+        outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
         check_flag(occlusion, "occlusion")
         w, h, config = self.width, self.height, self.config
@@ -87,11 +87,12 @@ class Renderer:
         return Frame(depth, ids, bary, totals.stats(counts))
 
 
-def render(target, camera, width: int, height: int, *, cull: str = "back",
-           frustum: bool = True, cones: bool = True, occlusion: bool = False,
-           config: RasterConfig | None = None) -> Frame:
-    """Render ``target`` (Mesh or Scene) with the NumPy twin; same arguments and outputs as
-    `Renderer.render` (the same culling code decides what is drawn).
+def render(target: Target, camera: CameraLike, width: int, height: int, *,
+           cull: str = "back", frustum: bool = True, cones: bool = True,
+           occlusion: bool = False, config: RasterConfig | None = None) -> Frame:
+    """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene) with the NumPy
+    twin; same arguments and outputs as `Renderer.render` (the same culling code decides
+    what is drawn).
 
     ``config`` only matters for the tile size used by binning; like on the device, it never
     changes the image. ``occlusion``: two-phase occlusion culling with the OpenCL renderer's

@@ -170,7 +170,7 @@ def axis_frames(p0: np.ndarray, p1: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def cylinders(p0: npt.ArrayLike, p1: npt.ArrayLike, r: npt.ArrayLike, sides: int) -> VF:
     """K capped cylinders of radius r_k from p0_k to p1_k: 4·sides faces each."""
-    return bake(unit_cylinder(sides), axis_frames(np.asarray(p0), np.asarray(p1), r))
+    return bake(unit_cylinder(sides), axis_frames(np.asarray(p0), np.asarray(p1), np.asarray(r)))
 
 
 def transformed(vf: VF, m: np.ndarray) -> VF:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pyopencl as cl
@@ -42,7 +43,7 @@ class BinStage:
             cl.Kernel(prg, name)
             for name in ("bin_count", "bin_offsets", "bin_scan_tiles", "bin_scatter"))
         self.config = config
-        self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))
+        self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(5)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams,
             max_entries: int | None = None) -> tuple[BinBuffers, list[cl.Event]]:
@@ -71,7 +72,7 @@ class BinStage:
         head = np.zeros(1, np.int32)
         over = np.zeros(1, np.int32)
         wait(queue)   # interruptibly, with the GIL free (device.wait)
-        cl.enqueue_copy(queue, over, b.overflow.buf)
+        cl.enqueue_copy(queue, over, cast(cl.Buffer, b.overflow.buf))   # ensured above
         cl.enqueue_copy(queue, head, tile_start, src_offset=4 * n_tiles)
         if max_entries is not None and (over[0] or int(head[0]) > max_entries):
             raise BinBudgetExceeded(2**31 if over[0] else int(head[0]), max_entries, ev)

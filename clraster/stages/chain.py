@@ -11,6 +11,8 @@ so a frame drawn in several passes into the same frame buffers reports the sums.
 
 from __future__ import annotations
 
+from typing import Any, cast
+
 import numpy as np
 import pyopencl as cl
 
@@ -73,7 +75,7 @@ class StageChain:
 
     def device_bytes(self) -> int:
         """Bytes of device memory the chain's buffers hold now (pool included)."""
-        stages = [self.geometry, self.vertex, self.setup, self.binning]
+        stages: list[Any] = [self.geometry, self.vertex, self.setup, self.binning]
         if self.raster is not None:
             stages.append(self.raster)
         total = self.setup.partial.capacity
@@ -140,10 +142,11 @@ class StageChain:
             return into
         bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
         setup = self.setup.buffers
-        out, tstats, ev_r = self.raster.run(queue, setup, bins, params, into=into,
-                                            overdraw=overdraw)
+        raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
+        out, tstats, ev_r = raster.run(queue, setup, bins, params, into=into,
+                                       overdraw=overdraw)
         status = np.empty(setup.n_tris, np.uint8)
-        cl.enqueue_copy(queue, status, setup.status.buf, is_blocking=True)
+        cl.enqueue_copy(queue, status, cast(cl.Buffer, setup.status.buf), is_blocking=True)
         totals.add_status(status)
         totals.fragments_tested += int(tstats[:, 0].sum())
         totals.fragments_passed += int(tstats[:, 1].sum())

@@ -35,7 +35,7 @@ class GeometryBuffers:
 
 class GeometryStage:
     def __init__(self, ctx: cl.Context) -> None:
-        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(7)))
+        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(7)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self._pool: GeometryPool | None = None
 
     def upload_pool(self, queue: cl.CommandQueue, pool: GeometryPool) -> None:

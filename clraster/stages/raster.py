@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pyopencl as cl
@@ -76,7 +77,7 @@ class RasterStage:
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
         tstats = np.empty((n_tiles, 2), np.int64)
-        cl.enqueue_copy(queue, tstats, self.buffers.tile_stats.buf)
+        cl.enqueue_copy(queue, tstats, cast(cl.Buffer, self.buffers.tile_stats.buf))
         into.sync(queue)
         return into, tstats, ev
 

@@ -4,6 +4,7 @@ for unclipped survivors, then count → scan → write for clipped triangles."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pyopencl as cl
@@ -54,7 +55,7 @@ class SetupStage:
         self.k_clipped = cl.Kernel(prg, "setup_clipped")
         self.k_partials = cl.Kernel(prg, "scan_partials")
         self.k_offsets = cl.Kernel(prg, "scan_offsets")
-        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))
+        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.partial = GrowBuffer(ctx)
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
@@ -89,7 +90,7 @@ class SetupStage:
                                      np.uint32(m), chunks, part, b.clip_offset.ensure(4 * m),
                                      b.clip_total.ensure(4)))
             wait(queue)   # interruptibly, with the GIL free (device.wait)
-            cl.enqueue_copy(queue, total, b.clip_total.buf)
+            cl.enqueue_copy(queue, total, cast(cl.Buffer, b.clip_total.buf))   # ensured
         p = int(total[0])
         if max_pieces is not None and p > max_pieces:
             raise BinBudgetExceeded(p, max_pieces, ev)

@@ -1,0 +1,431 @@
+"""What a frame gives beyond its buffers — metric depth, distance, normals, point clouds —
+and the files they are written to.
+
+The command line (and `Frame.save`) call one function::
+
+    write_output(path, frame, what, *, target=None, camera=None, depth_scale=1000.0,
+                 **shade_options) -> Path
+
+``what`` (`OUTPUTS`) and what it needs:
+
+============== ============ =====================================================================
+what           needs        meaning
+============== ============ =====================================================================
+"depth"        —            window depth (z/w + 1)/2 in [0, 1], 1.0 on the background
+"linear_depth" camera       eye-space depth along the view axis, scene units, inf on the background
+"distance"     camera       distance from the eye along the pixel's ray, scene units, inf background
+"ids"          —            triangle ids, int32, −1 on the background
+"normals"      target       unit world-space face normals (``smooth=True``: interpolated vertex
+                            normals; ``space="camera"`` with a camera), zeros on the background
+"shaded"       target       `clraster.shade.shade(frame, target, **shade_options)`, uint8 RGB(A)
+"points"       target       the covered pixels' world positions (`Frame.points`)
+============== ============ =====================================================================
+
+With a ``target`` (the Mesh / Scene / trimesh object the frame was rendered from),
+"linear_depth" and "distance" come from the exact surface points (ids + barycentrics, float64)
+instead of the float32 window depth, whose metric error grows with the square of the distance.
+
+The file's extension picks the format, and the file written is exactly the file named (no
+extension is appended); an unknown extension or a format that cannot hold the data is refused
+before anything is computed or written. Files are written to a temporary name in the same
+folder and renamed, so a reader never sees half a file.
+
+* ``.png`` — what RGB-D datasets store. "linear_depth"/"distance": uint16 ``round(value ·
+  depth_scale)`` (default 1000: millimetres for a scene in metres; TUM uses 5000), 0 = no depth;
+  a value that does not fit 1..65535 is refused (choose a smaller scale, or .tiff / .npy).
+  "depth": uint16 ``round(d · 65535)`` (OpenGL's 16-bit unsigned-normalized depth; background
+  65535). "ids": uint16 ``id + 1`` (0 = background), only if every id fits, else refused.
+  "normals": RGB8 ``round((n + 1)/2 · 255)``, background 0. "shaded": RGB(A)8.
+* ``.tif`` / ``.tiff`` — float32 depth (window, linear, distance; inf on the background for
+  the metric ones), int32 ids, float32 (H, W, 3) normals, uint8 shaded. Written by imageio's
+  tifffile plugin where the `tifffile` package is installed; without it 2-D float32/int32 and
+  uint8 images go through Pillow, and (H, W, 3) float32 normals are refused with a message
+  naming tifffile.
+* ``.exr`` — float32, only where an imageio plugin writes EXR (else a clear error).
+* ``.npy`` — the array itself (points: (N, 3) float64). ``.npz`` — named arrays:
+  ``{what: array}``; points: ``points``, ``ids``, ``pixels``.
+* ``.ply`` — "points" only: a point cloud (via trimesh).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+
+from .mesh import Mesh
+from .scene import Scene
+
+if TYPE_CHECKING:
+    from .frame import Frame
+
+__all__ = ["FORMATS", "OUTPUTS", "FramePoints", "check_output_path", "distance",
+           "linear_depth", "normals", "points", "write_output"]
+
+#: What `write_output` can write.
+OUTPUTS = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "points")
+#: Extensions (lower case) and the outputs each can hold.
+FORMATS: dict[str, tuple[str, ...]] = {
+    ".png": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
+    ".tif": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
+    ".tiff": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
+    ".exr": ("depth", "linear_depth", "distance", "normals"),
+    ".npy": OUTPUTS,
+    ".npz": OUTPUTS,
+    ".ply": ("points",),
+}
+_NEEDS_CAMERA = ("linear_depth", "distance")
+_NEEDS_TARGET = ("normals", "shaded", "points")
+_U16_MAX = 65535
+
+
+class FramePoints(NamedTuple):
+    """A frame's covered pixels as a point cloud, in row-major pixel order.
+
+    Attributes:
+        points: (N, 3) float64 world positions of the visible surface at the pixel centres.
+        ids: (N,) int32 triangle ids (as in ``frame.triangle_id``).
+        pixels: (N, 2) int32 pixel coordinates (x, y), row 0 at the top.
+    """
+
+    points: np.ndarray
+    ids: np.ndarray
+    pixels: np.ndarray
+
+
+# -- geometry of the visible surface --------------------------------------------------------
+
+def _as_geometry(target: Any) -> Mesh | Scene:
+    """`target` as the Mesh or Scene the renderer drew (trimesh objects converted as
+    the renderer converts them, so ids match)."""
+    if isinstance(target, (Mesh, Scene)):
+        return target
+    module = type(target).__module__
+    if module.startswith("trimesh"):
+        import trimesh
+
+        if isinstance(target, trimesh.Trimesh):
+            return Mesh.from_trimesh(target)
+        if isinstance(target, trimesh.Scene):
+            return Scene.from_trimesh(target)
+    raise ValueError(f"expected the target the frame was rendered from (a clraster.Mesh, "
+                     f"clraster.Scene, trimesh.Trimesh or trimesh.Scene), got "
+                     f"{type(target).__name__}")
+
+
+def _covered(frame: Frame, n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ys, xs, ids) of the covered pixels, row-major; ids checked against the target."""
+    ids = np.asarray(frame.triangle_id)
+    ys, xs = np.nonzero(ids >= 0)
+    sel = ids[ys, xs]
+    if sel.size and int(sel.max()) >= n_faces:
+        raise ValueError(f"frame holds triangle id {int(sel.max())} but the target has "
+                         f"{n_faces} faces: was the frame rendered from this target?")
+    return ys, xs, sel
+
+
+def points(frame: Frame, target: Any) -> FramePoints:
+    """World positions of the covered pixels (see `FramePoints`): each pixel's barycentrics
+    (perspective-correct, relative to its face's own three vertices) applied to the face's
+    world-space vertices in float64 (a Scene's instance transform applied first)."""
+    geom = _as_geometry(target)
+    n_faces = geom.n_faces
+    ys, xs, ids = _covered(frame, n_faces)
+    bary = np.asarray(frame.barycentrics, np.float64)[ys, xs]        # (N, 3)
+    if isinstance(geom, Mesh):
+        tri = geom.vertices.astype(np.float64)[geom.faces[ids]]      # (N, 3, 3)
+        world = np.einsum("nk,nkc->nc", bary, tri)
+    else:
+        inst, face = geom.split_ids(ids)
+        world = np.empty((len(ids), 3))
+        for i in np.unique(inst):
+            sel = inst == i
+            instance = geom.instances[int(i)]
+            m = instance.mesh
+            tri = m.vertices.astype(np.float64)[m.faces[face[sel]]]
+            local = np.einsum("nk,nkc->nc", bary[sel], tri)
+            t = instance.transform
+            world[sel] = local @ t[:3, :3].T + t[:3, 3]
+    pixels = np.stack([xs, ys], axis=1).astype(np.int32)
+    return FramePoints(world, ids.astype(np.int32), pixels)
+
+
+def _camera_frame(camera: Any, width: int, height: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """(view, projection, eye, orthographic) of a clraster.Camera-like object."""
+    try:
+        view = np.asarray(camera.view, np.float64)
+        proj = np.asarray(camera.projection(width, height), np.float64)
+    except AttributeError:
+        raise ValueError(f"metric depth needs the camera the frame was rendered with (a "
+                         f"clraster.Camera, with view and projection), got "
+                         f"{type(camera).__name__}") from None
+    if view.shape != (4, 4) or proj.shape != (4, 4):
+        raise ValueError("camera.view and camera.projection() must be (4, 4) matrices")
+    if not np.all(view[3] == (0.0, 0.0, 0.0, 1.0)):
+        raise ValueError("metric depth needs an affine view matrix (last row 0 0 0 1)")
+    eye = -np.linalg.solve(view[:3, :3], view[:3, 3])
+    ortho = bool(np.all(proj[3, :3] == 0.0))
+    return view, proj, eye, ortho
+
+
+def _view_axis(view: np.ndarray) -> np.ndarray:
+    """Unit world-space direction the camera looks along (eye-space −Z)."""
+    fwd = np.linalg.solve(view[:3, :3], [0.0, 0.0, -1.0])
+    return fwd / np.linalg.norm(fwd)
+
+
+def _metric(frame: Frame, camera: Any, target: Any, kind: str) -> np.ndarray:
+    """(H, W) float32 linear depth or distance (`kind`), inf on the background."""
+    h, w = frame.triangle_id.shape
+    view, proj, eye, ortho = _camera_frame(camera, w, h)
+    fwd = _view_axis(view)
+    out = np.full((h, w), np.inf, np.float32)
+    if target is not None:
+        pts = points(frame, target)
+        ys, xs = pts.pixels[:, 1], pts.pixels[:, 0]
+        offset = pts.points - eye
+    else:
+        # Back through the projection: pixel centre (x + 0.5, y + 0.5) and window depth d
+        # → NDC (x_w/W·2 − 1, 1 − y_w/H·2, 2d − 1) → eye space → world offset from the eye.
+        ys, xs = np.nonzero(np.asarray(frame.triangle_id) >= 0)
+        d = np.asarray(frame.depth, np.float64)[ys, xs]
+        ndc = np.stack([(xs + 0.5) / w * 2.0 - 1.0, 1.0 - (ys + 0.5) / h * 2.0,
+                        2.0 * d - 1.0, np.ones_like(d)], axis=1)
+        e = ndc @ np.linalg.inv(proj).T
+        e = e[:, :3] / e[:, 3:]
+        offset = e @ np.linalg.inv(view[:3, :3]).T     # eye-space origin is the eye
+    along = offset @ fwd
+    if kind == "linear_depth" or ortho:
+        # an orthographic camera's rays are parallel to the view axis: the distance along
+        # a ray is the depth from the image plane through the eye
+        out[ys, xs] = along
+    else:
+        out[ys, xs] = np.linalg.norm(offset, axis=1)
+    return out
+
+
+def linear_depth(frame: Frame, camera: Any, target: Any = None) -> np.ndarray:
+    """(H, W) float32 depth along the camera's view axis, in scene units (for a rigid view:
+    −z in eye space); inf on the background. See `Frame.linear_depth`."""
+    return _metric(frame, camera, target, "linear_depth")
+
+
+def distance(frame: Frame, camera: Any, target: Any = None) -> np.ndarray:
+    """(H, W) float32 distance from the eye to the visible surface along each pixel's ray,
+    in scene units; inf on the background. See `Frame.distance`."""
+    return _metric(frame, camera, target, "distance")
+
+
+def normals(frame: Frame, target: Any, smooth: bool = False, space: str = "world",
+            camera: Any = None) -> np.ndarray:
+    """(H, W, 3) float32 unit normals of the visible surface, zeros on the background.
+
+    World space: `clraster.shade.pixel_normals` (face normals, or area-weighted vertex
+    normals interpolated with the barycentrics; a scene instance's through the inverse
+    transpose of its transform, outward also when it mirrors — glTF's rule). Camera space:
+    those rotated into OpenGL eye space (x right, y up, z towards the viewer) by the
+    inverse transpose of the view's 3×3 part, renormalized.
+    """
+    if space not in ("world", "camera"):
+        raise ValueError(f"space must be 'world' or 'camera', got {space!r}")
+    if space == "camera" and camera is None:
+        raise ValueError("normals in camera space need the camera: "
+                         "frame.normals(target, space='camera', camera=camera)")
+    from .shade import pixel_normals
+
+    n = pixel_normals(frame, _as_geometry(target), smooth=smooth)
+    if space == "world":
+        return n
+    h, w = frame.triangle_id.shape
+    view, _, _, _ = _camera_frame(camera, w, h)
+    m = np.linalg.inv(view[:3, :3]).T
+    flat = n.reshape(-1, 3).astype(np.float64) @ m.T
+    length = np.linalg.norm(flat, axis=1, keepdims=True)
+    flat = np.divide(flat, length, out=np.zeros_like(flat), where=length > 0)
+    return flat.reshape(n.shape).astype(np.float32)
+
+
+# -- files ----------------------------------------------------------------------------------
+
+def check_output_path(path: str | os.PathLike, what: str, *, target: Any = None,
+                      camera: Any = None) -> Path:
+    """Refuse, before any work, an output that cannot be written: unknown `what`, an
+    extension missing or unknown, one that cannot hold `what`, or a missing camera/target.
+    Returns the path. (The command line calls this before rendering.)"""
+    if what not in OUTPUTS:
+        raise ValueError(f"unknown output {what!r}; choose one of {', '.join(OUTPUTS)}")
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in FORMATS:
+        known = ", ".join(FORMATS)
+        raise ValueError(f"{str(p)!r}: unknown or missing file extension {ext or '(none)'!r}; "
+                         f"the extension picks the format: {known}")
+    if what not in FORMATS[ext]:
+        fits = ", ".join(e for e, ws in FORMATS.items() if what in ws)
+        raise ValueError(f"{str(p)!r}: a {ext} file cannot hold {what!r}; use one of {fits}")
+    if what in _NEEDS_CAMERA and camera is None:
+        raise ValueError(f"{what!r} needs the camera the frame was rendered with (camera=...)")
+    if what in _NEEDS_TARGET and target is None:
+        raise ValueError(f"{what!r} needs the target the frame was rendered from (target=...)")
+    return p
+
+
+def _image_array(frame: Frame, what: str, ext: str, *, target: Any, camera: Any,
+                 depth_scale: float, smooth: bool, space: str, shade_options: dict) -> Any:
+    """The array (or FramePoints) to write for `what` in format `ext`."""
+    if what == "points":
+        return points(frame, target)
+    if what == "depth":
+        a = np.asarray(frame.depth, np.float32)
+        if ext == ".png":
+            return np.round(np.clip(a.astype(np.float64), 0.0, 1.0) * _U16_MAX).astype(np.uint16)
+        return a
+    if what in _NEEDS_CAMERA:
+        a = _metric(frame, camera, target, what)
+        if ext != ".png":
+            return a
+        scale = float(depth_scale)
+        if not (np.isfinite(scale) and scale > 0.0):
+            raise ValueError(f"depth_scale must be a finite number > 0, got {depth_scale!r}")
+        fin = np.isfinite(a)
+        q = np.zeros(a.shape, np.float64)
+        q[fin] = np.round(a[fin].astype(np.float64) * scale)
+        if fin.any() and (q[fin].min() < 1 or q[fin].max() > _U16_MAX):
+            lo, hi = float(a[fin].min()), float(a[fin].max())
+            raise ValueError(f"{what} spans {lo:.6g}..{hi:.6g} scene units: at depth_scale="
+                             f"{scale:g} that is {q[fin].min():.0f}..{q[fin].max():.0f}, "
+                             f"outside a 16-bit PNG's 1..65535 (0 means no depth); choose "
+                             f"another depth_scale, or write .tiff / .npy (float32)")
+        return q.astype(np.uint16)
+    if what == "ids":
+        ids = np.asarray(frame.triangle_id, np.int32)
+        if ext != ".png":
+            return ids
+        top = int(ids.max()) if ids.size else -1
+        if top + 1 > _U16_MAX:
+            raise ValueError(f"triangle ids reach {top:,}: a 16-bit PNG holds id + 1 up to "
+                             f"65535 only; write the ids as .npy, .npz or .tiff (int32)")
+        return (ids + 1).astype(np.uint16)
+    if what == "normals":
+        n = normals(frame, target, smooth=smooth, space=space, camera=camera)
+        if ext == ".png":
+            rgb = np.round((n.astype(np.float64) + 1.0) * 0.5 * 255.0).astype(np.uint8)
+            rgb[~(np.asarray(frame.triangle_id) >= 0)] = 0
+            return rgb
+        return n
+    from .shade import shade  # "shaded"
+
+    return shade(frame, target, **shade_options)
+
+
+def _encode(arr: np.ndarray, ext: str, what: str) -> bytes:
+    """Image bytes of `arr` in format `ext` through imageio."""
+    import imageio.v3 as iio
+
+    if ext in (".tif", ".tiff"):
+        try:
+            import tifffile  # noqa: F401
+        except ImportError:
+            pillow_ok = ((arr.ndim == 2 and arr.dtype in (np.float32, np.int32, np.uint16))
+                         or (arr.dtype == np.uint8 and arr.ndim in (2, 3)))
+            if not pillow_ok:
+                raise ValueError(f"writing {what} ({arr.dtype}, shape {arr.shape}) as TIFF "
+                                 f"needs the tifffile package (pip install tifffile); or "
+                                 f"write .npy / .npz") from None
+            return iio.imwrite("<bytes>", arr, extension=ext, plugin="pillow")
+        return iio.imwrite("<bytes>", arr, extension=ext, plugin="tifffile")
+    if ext == ".exr":
+        try:
+            with warnings.catch_warnings():   # plugins that cannot write EXR warn first
+                warnings.simplefilter("ignore")
+                return iio.imwrite("<bytes>", arr.astype(np.float32), extension=ext)
+        except Exception as exc:   # imageio raises several types when no plugin can
+            raise ValueError(f"writing EXR needs an imageio plugin that writes OpenEXR (e.g. "
+                             f"FreeImage: imageio.plugins.freeimage.download()), and none "
+                             f"could ({type(exc).__name__}: {exc}); write .tiff or .npy "
+                             f"(float32) instead") from None
+    return iio.imwrite("<bytes>", arr, extension=ext)
+
+
+def _encode_points(pts: FramePoints, ext: str) -> bytes:
+    if ext == ".ply":
+        import trimesh
+
+        return trimesh.PointCloud(pts.points).export(file_type="ply")
+    buf = io.BytesIO()
+    if ext == ".npy":
+        np.save(buf, pts.points)
+    else:
+        np.savez(buf, points=pts.points, ids=pts.ids, pixels=pts.pixels)
+    return buf.getvalue()
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    """Write `data` to exactly `path` (temporary file in the same folder, then rename)."""
+    folder = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def write_output(path: str | os.PathLike, frame: Frame, what: str, *, target: Any = None,
+                 camera: Any = None, depth_scale: float = 1000.0, smooth: bool = False,
+                 space: str = "world", **shade_options: Any) -> Path:
+    """Write one output of `frame` to exactly `path`, in the format its extension names.
+
+    Args:
+        path: the file; its extension picks the format (module docstring).
+        frame: the rendered `Frame`.
+        what: one of `OUTPUTS`.
+        target: the Mesh / Scene / trimesh object the frame was rendered from ("normals",
+            "shaded", "points"; optional for "linear_depth"/"distance", which it makes exact).
+        camera: the camera it was rendered with ("linear_depth", "distance", camera-space
+            normals).
+        depth_scale: PNG units per scene unit for "linear_depth"/"distance" (1000: mm for a
+            scene in metres).
+        smooth, space: for "normals" (`Frame.normals`); `smooth` also for "shaded".
+        shade_options: passed to `clraster.shade.shade` for "shaded".
+
+    Returns:
+        The path written.
+
+    Raises:
+        ValueError: unknown `what` or extension, a format that cannot hold the data (ids
+            or depths beyond 16 bits in a PNG, EXR without a plugin, float normals TIFF
+            without tifffile), a missing camera/target — all before the file is touched.
+    """
+    p = check_output_path(path, what, target=target, camera=camera)
+    ext = p.suffix.lower()
+    if what == "shaded":
+        shade_options = {"smooth": smooth, **shade_options}
+    data = _image_array(frame, what, ext, target=target, camera=camera,
+                        depth_scale=depth_scale, smooth=smooth, space=space,
+                        shade_options=shade_options)
+    if isinstance(data, FramePoints):
+        blob = _encode_points(data, ext)
+    elif ext == ".npy":
+        buf = io.BytesIO()
+        np.save(buf, data)
+        blob = buf.getvalue()
+    elif ext == ".npz":
+        buf = io.BytesIO()
+        np.savez(buf, **{what: data})
+        blob = buf.getvalue()
+    else:
+        blob = _encode(np.ascontiguousarray(data), ext, what)
+    _write_atomic(p, blob)
+    return p
