@@ -4,7 +4,7 @@ One file set per view in ``out_dir``, named by the view's index in the camera li
 ``view_00000_depth.npy`` (float32 (H, W) window depth, 1.0 background),
 ``view_00000_ids.npy`` (int32 (H, W) triangle ids, −1 background),
 ``view_00000_bary.npy`` (float32 (H, W, 3) barycentrics) and ``view_00000_shaded.png``
-(flat-shaded RGB, `clraster.shade.shade`; Mesh targets only). Row 0 is the top row, as in
+(flat-shaded RGB, `clraster.shade.shade`). Row 0 is the top row, as in
 `clraster.Frame`. Each file is written to a temporary name in ``out_dir`` and renamed into
 place (os.replace), so a file under its final name is always complete, and a batch killed
 halfway leaves no half-written files under those names. A re-run skips the views whose
@@ -175,7 +175,7 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         cameras: a list of cameras (`clraster.Camera`, camera entry dicts, objects with
             ``view_projection``) or the path of a camera list file (`clraster.views`).
         out_dir: created if missing (its parent must exist).
-        outputs: any of "depth", "ids", "bary", "shaded" ("shaded" needs a Mesh).
+        outputs: any of "depth", "ids", "bary", "shaded".
         size: (width, height) of the images, when no ``renderer`` is given.
         renderer: a `clraster.Renderer` to render with (its size is used); default a new
             one of ``size``.
@@ -195,14 +195,10 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             rendered); CameraFileError: a camera list file that is not a list of entries.
             Errors writing files (OSError) stop the batch.
     """
-    from .mesh import Mesh
     from .renderer import Renderer
 
     outs = check_outputs(outputs)
     check_target(target)
-    if "shaded" in outs and not isinstance(target, Mesh):
-        raise ValueError("output 'shaded' needs a clraster.Mesh target (face normals of one "
-                         "mesh); write 'ids' and shade per instance with Scene.split_ids")
     if isinstance(start, bool) or not isinstance(start, int) or start < 0:
         raise ValueError(f"start must be an integer >= 0, got {start!r}")
     if renderer is None:

@@ -692,16 +692,8 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
         target = os.path.abspath(target)
         if not Path(target).is_file():
             raise FileNotFoundError(f"scene file not found: {target!r}")
-        if "shaded" in outs:
-            raise ValueError("output 'shaded' needs a clraster.Mesh target; load the mesh "
-                             "and pass it (it is scattered to the workers once)")
     else:
         check_target(target)
-        # (the workers' clraster.batch has the last word on other targets)
-        if "shaded" in outs and isinstance(target, Scene):
-            raise ValueError("output 'shaded' needs a clraster.Mesh target (face normals of "
-                             "one mesh); write 'ids' and shade per instance with "
-                             "Scene.split_ids")
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int)
                               or chunk < 1):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")

@@ -101,21 +101,11 @@ class FramePoints(NamedTuple):
 # -- geometry of the visible surface --------------------------------------------------------
 
 def _as_geometry(target: Any) -> Mesh | Scene:
-    """`target` as the Mesh or Scene the renderer drew (trimesh objects converted as
-    the renderer converts them, so ids match)."""
-    if isinstance(target, (Mesh, Scene)):
-        return target
-    module = type(target).__module__
-    if module.startswith("trimesh"):
-        import trimesh
+    """`target` as the Mesh or Scene the renderer drew: trimesh objects through the same
+    cached conversion as the renderer (`clraster.inputs.as_target`), so ids match."""
+    from .inputs import as_target
 
-        if isinstance(target, trimesh.Trimesh):
-            return Mesh.from_trimesh(target)
-        if isinstance(target, trimesh.Scene):
-            return Scene.from_trimesh(target)
-    raise ValueError(f"expected the target the frame was rendered from (a clraster.Mesh, "
-                     f"clraster.Scene, trimesh.Trimesh or trimesh.Scene), got "
-                     f"{type(target).__name__}")
+    return as_target(target)
 
 
 def _covered(frame: Frame, n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

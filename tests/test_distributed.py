@@ -394,8 +394,10 @@ def test_render_views_from_a_scene_file(client, one_machine, tmp_path):
     out = dask_views(str(path), cams, client, tmp_path / "dask", size=(W, H))
     assert out.rendered == 4 and not out.failures
     assert folder_bytes(tmp_path / "dask") == folder_bytes(tmp_path / "one")
-    with pytest.raises(ValueError, match="shaded"):
-        dask_views(str(path), cams, client, tmp_path / "x", outputs=("shaded",))
+    shaded = dask_views(str(path), cams, client, tmp_path / "x", outputs=("shaded",))
+    assert shaded.rendered == 4 and not shaded.failures
+    assert sorted(p.name for p in (tmp_path / "x").glob("*.png")) == [
+        f"view_{k:05d}_shaded.png" for k in range(4)]
 
 
 def test_render_views_survives_a_lost_worker(client, one_machine, tmp_path):
