@@ -37,7 +37,7 @@ from . import __version__
 from .camera import Camera
 from .config import RasterConfig
 from .device import NoDeviceError
-from .inputs import parse_size
+from .inputs import parse_positive_int, parse_size
 from .mesh import Mesh
 
 if TYPE_CHECKING:
@@ -133,16 +133,6 @@ def _positive(text: str) -> float:
         v = float("nan")
     if not (np.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
-
-
-def _at_least_one(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
     return v
 
 
@@ -256,13 +246,13 @@ def _parser() -> argparse.ArgumentParser:
                       help="show a progress bar on stderr even when it is not a terminal "
                            "(with --workers/--scheduler: Dask's, on stdout)")
     where = many.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=_at_least_one, metavar="N",
+    where.add_argument("--workers", type=parse_positive_int, metavar="N",
                        help="render on a local Dask cluster of N worker processes (PoCL "
                             "threads per worker = cores // N); each writes its views' files")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="render on a running Dask cluster (e.g. tcp://host:8786); --out "
                             "must be a folder every worker sees under the same path")
-    many.add_argument("--chunk", type=_at_least_one, metavar="N",
+    many.add_argument("--chunk", type=parse_positive_int, metavar="N",
                       help="with --workers/--scheduler: cameras per Dask task (default up to "
                            "16, fewer for short lists)")
     cam = r.add_argument_group(

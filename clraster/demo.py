@@ -49,7 +49,7 @@ from .annotate import (
 )
 from .camera import Camera
 from .fates import Fate
-from .inputs import parse_size
+from .inputs import parse_positive_int, parse_size
 from .mesh import Mesh
 from .scene import Scene
 
@@ -250,7 +250,7 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"plant size in triangles, 2000..{MAX_TRIANGLES:,} (default "
                         f"1000000); the cap bounds host memory, about 300 bytes per "
                         f"triangle (some 15 GiB at the cap)")
-    p.add_argument("--frames", type=_frames, default=3, metavar="N",
+    p.add_argument("--frames", type=parse_positive_int, default=3, metavar="N",
                    help="first-person frames to render, >= 1 (default 3); the images show "
                         "the last one, whose occlusion culling reuses the previous frame's "
                         "visibility")
@@ -271,16 +271,6 @@ def _triangles(text: str) -> int:
         raise argparse.ArgumentTypeError(
             f"at most {MAX_TRIANGLES:,} triangles (the demo needs about 300 bytes of host "
             f"memory per triangle, some 15 GiB at the cap), got {text!r}")
-    return v
-
-
-def _frames(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
     return v
 
 

@@ -66,6 +66,17 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def parse_positive_int(text: str) -> int:
+    """A command-line count: an integer >= 1; argparse's ArgumentTypeError otherwise."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return v
+
+
 def check_int(value: object, name: str, minimum: int) -> int:
     """An integer (not a bool) >= ``minimum``, as a plain int."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
