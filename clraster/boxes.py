@@ -15,7 +15,7 @@ from enum import IntEnum
 import numpy as np
 
 from .config import CLUSTER_MAX, DRAW_DTYPE
-from .drawlist import FrameDraws
+from .drawlist import FrameDraws, depth_rows
 from .layout import BOX_TRIS, OCC_OCCLUDED, OCC_VIEW_CULLED, OCC_VISIBLE
 
 __all__ = ["BOX_FACES", "CLUSTER_BOXES", "BoxGeometry", "Occlusion", "box_corners",
@@ -110,4 +110,8 @@ def box_geometry(mins: np.ndarray, maxs: np.ndarray, view_proj: np.ndarray
     draws["vert_base"] = clusters[:, 2]
     draws["tri_base"] = clusters[:, 0]
     mvp = np.ascontiguousarray(np.asarray(view_proj, F32).reshape(1, 16))
-    return pool, FrameDraws(draws, int(v.shape[0]), n_boxes * BOX_TRIS, mvp)
+    # the query's values come from the float32 matrix it was given (as before float64
+    # matrices reached setup): its depth test compares with a frame drawn from it
+    mvp64 = mvp.astype(np.float64)
+    return pool, FrameDraws(draws, int(v.shape[0]), n_boxes * BOX_TRIS, mvp, mvp64,
+                            depth_rows(mvp64))

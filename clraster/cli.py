@@ -195,13 +195,14 @@ def _render_views(args: argparse.Namespace) -> int:
             summary = dask_render_views(mesh, args.views, client, args.out, args.outputs,
                                         chunk=args.chunk, size=(width, height), config=config,
                                         progress=True if args.progress else None,
-                                        cull=args.cull)
+                                        cull=args.cull, reversed_z=args.reversed_z)
         print(summary)
         print(f"wrote {', '.join(args.outputs)} per view to {args.out}")
     else:
         renderer = Renderer(width, height, config=config)
         summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
-                               progress=True if args.progress else None, cull=args.cull)
+                               progress=True if args.progress else None, cull=args.cull,
+                               reversed_z=args.reversed_z)
         print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
     if summary.failures:
         for f in summary.failures:
@@ -277,6 +278,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="also save the (H, W) window depth (1.0 background); the extension "
                         "names the format: .npy/.npz/.tif float32, .png 16-bit (see "
                         "clraster.outputs)")
+    r.add_argument("--reversed-z", action="store_true",
+                   help="depth as reversed-Z, (1 - z/w)/2: 1 at the near plane, 0 at the far "
+                        "plane and on the background; float32 keeps far depths distinct "
+                        "(the depth test uses it too)")
     r.add_argument("--ids", type=Path, metavar="FILE",
                    help="also save the (H, W) triangle ids: .npy/.npz/.tif int32 (-1 "
                         "background), .png uint16 id + 1 (0 background)")
@@ -368,7 +373,8 @@ def _render(args: argparse.Namespace) -> int:
         info("pipeline: NumPy reference")
 
         def draw() -> Frame:
-            return reference_render(mesh, camera, width, height, cull=args.cull)
+            return reference_render(mesh, camera, width, height, cull=args.cull,
+                                    reversed_z=args.reversed_z)
     else:
         from .renderer import Renderer
 
@@ -376,7 +382,7 @@ def _render(args: argparse.Namespace) -> int:
         info(f"device: {renderer.context.devices[0].name.strip()}")
 
         def draw() -> Frame:
-            return renderer.render(mesh, camera, cull=args.cull)
+            return renderer.render(mesh, camera, cull=args.cull, reversed_z=args.reversed_z)
 
     times = []
     frame = None

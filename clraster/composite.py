@@ -69,12 +69,16 @@ def _check_pair(a: Frame, b: Frame) -> None:
                              f"{f.depth.dtype} {f.depth.shape}, {f.triangle_id.dtype} "
                              f"{f.triangle_id.shape}, {f.barycentrics.dtype} "
                              f"{f.barycentrics.shape}")
+    if a.reversed_z != b.reversed_z:
+        raise ValueError("cannot composite a reversed-Z frame with an ordinary one: render "
+                         "every part with the same reversed_z")
 
 
 def _b_wins(a: Frame, b: Frame) -> np.ndarray:
     """bool (H, W): where ``(b.depth, b.id)`` is lexicographically below ``(a.depth, a.id)``,
-    ids compared as uint32 (background −1 is the largest)."""
-    da, db = a.depth, b.depth
+    ids compared as uint32 (background −1 is the largest). Reversed-Z frames (nearer is
+    larger) compare −depth, the renderer's own depth-test key."""
+    da, db = (-a.depth, -b.depth) if a.reversed_z else (a.depth, b.depth)
     ia = a.triangle_id.view(np.uint32)
     ib = b.triangle_id.view(np.uint32)
     return (db < da) | ((db == da) & (ib < ia))
@@ -132,7 +136,8 @@ def composite(a: Frame, b: Frame) -> Frame:
     """
     _check_pair(a, b)
     out = Frame(a.depth.copy(), a.triangle_id.copy(), a.barycentrics.copy(), a.stats,
-                overdraw=None if a.overdraw is None else a.overdraw.copy())
+                overdraw=None if a.overdraw is None else a.overdraw.copy(),
+                reversed_z=a.reversed_z)
     return composite_into(out, b)
 
 
@@ -150,7 +155,8 @@ def composite_tree(frames: Sequence[Frame]) -> Frame:
     if len(level) == 1:
         f = level[0]
         return Frame(f.depth.copy(), f.triangle_id.copy(), f.barycentrics.copy(), f.stats,
-                     overdraw=None if f.overdraw is None else f.overdraw.copy())
+                     overdraw=None if f.overdraw is None else f.overdraw.copy(),
+                     reversed_z=f.reversed_z)
     owned = [False] * len(level)   # a result of this function may be composited in place
     while len(level) > 1:
         nxt, nxt_owned = [], []
@@ -192,7 +198,7 @@ def _sub(f: Frame, x0: int, y0: int, x1: int, y1: int, copy: bool) -> Frame:
         return v.copy() if copy else v
 
     return Frame(take(f.depth), take(f.triangle_id), take(f.barycentrics), f.stats,
-                 overdraw=take(f.overdraw))
+                 overdraw=take(f.overdraw), reversed_z=f.reversed_z)
 
 
 def crop(frame: Frame) -> Crop:
@@ -209,8 +215,9 @@ def crop(frame: Frame) -> Crop:
     return Crop(_sub(frame, x0, y0, x1, y1, True), x0, y0, frame.width, frame.height)
 
 
-def _blank(width: int, height: int, overdraw: bool, stats: FrameStats) -> Frame:
-    f = Frame.empty(width, height, stats)
+def _blank(width: int, height: int, overdraw: bool, stats: FrameStats,
+           reversed_z: bool = False) -> Frame:
+    f = Frame.empty(width, height, stats, reversed_z)
     if overdraw:
         f.overdraw = np.zeros((height, width), np.int32)
     return f
@@ -218,7 +225,8 @@ def _blank(width: int, height: int, overdraw: bool, stats: FrameStats) -> Frame:
 
 def uncrop(c: Crop) -> Frame:
     """The full ``c.width`` × ``c.height`` frame of a `Crop` (background outside it)."""
-    out = _blank(c.width, c.height, c.frame.overdraw is not None, c.frame.stats)
+    out = _blank(c.width, c.height, c.frame.overdraw is not None, c.frame.stats,
+                 c.frame.reversed_z)
     x0, y0, x1, y1 = c.rect
     v = _sub(out, x0, y0, x1, y1, False)
     for dst, src in ((v.depth, c.frame.depth), (v.triangle_id, c.frame.triangle_id),
@@ -237,6 +245,9 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
                          f"{b.width}x{b.height} frame")
     for c in (a, b):
         _check_pair(c.frame, c.frame)
+    if a.frame.reversed_z != b.frame.reversed_z:
+        raise ValueError("cannot composite a reversed-Z frame with an ordinary one: render "
+                         "every part with the same reversed_z")
     empty_a, empty_b = a.frame.depth.size == 0, b.frame.depth.size == 0
     od = a.frame.overdraw is not None and b.frame.overdraw is not None
     if empty_a or empty_b:
@@ -244,12 +255,13 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
         f = keep.frame
         out = Frame(f.depth.copy(), f.triangle_id.copy(), f.barycentrics.copy(),
                     merge_stats(a.frame.stats, b.frame.stats),
-                    overdraw=f.overdraw.copy() if od and f.overdraw is not None else None)
+                    overdraw=f.overdraw.copy() if od and f.overdraw is not None else None,
+                    reversed_z=f.reversed_z)
         return Crop(out, keep.x0, keep.y0, keep.width, keep.height)
     ra, rb = a.rect, b.rect
     x0, y0 = min(ra[0], rb[0]), min(ra[1], rb[1])
     x1, y1 = max(ra[2], rb[2]), max(ra[3], rb[3])
-    out = _blank(x1 - x0, y1 - y0, od, a.frame.stats)
+    out = _blank(x1 - x0, y1 - y0, od, a.frame.stats, a.frame.reversed_z)
     va = _sub(out, ra[0] - x0, ra[1] - y0, ra[2] - x0, ra[3] - y0, False)
     va.depth[...] = a.frame.depth
     va.triangle_id[...] = a.frame.triangle_id

@@ -149,16 +149,22 @@ class Frame:
 
     Attributes:
         depth: (H, W) float32 window depth (z/w + 1)/2 in [0, 1]; 1.0 where nothing was drawn.
+            With ``reversed_z`` (``render(..., reversed_z=True)``): (1 − z/w)/2, 1 at the near
+            plane, 0 at the far plane and where nothing was drawn.
             Row 0 is the top row; pixel (x, y) is sampled at (x + 0.5, y + 0.5).
         triangle_id: (H, W) int32 face index of the visible triangle, −1 for background.
         barycentrics: (H, W, 3) float32 perspective-correct barycentrics of the pixel centre
             relative to the visible face's three vertices (in the face's own vertex order,
-            also for clipped triangles); zeros for background.
+            also for clipped triangles); zeros for background. Depth and barycentrics are
+            interpolated from the unsnapped vertex positions (coverage uses the 1/256-px
+            snapped ones), so at a covered pixel centre just outside the unsnapped triangle
+            (at most sqrt(2)/512 px) a weight can be slightly negative.
         stats: counts per stage (`FrameStats`).
         overdraw: (H, W) int32 fragments tested per pixel (depth complexity), when asked for
             (``render(..., overdraw=True)``); else None.
         fates: the fate of every cluster of the scene (`clraster.fates.ClusterFates`),
             when asked for (``render(..., fates=True)``); else None.
+        reversed_z: whether ``depth`` is reversed-Z (see depth).
     """
 
     depth: np.ndarray
@@ -167,12 +173,17 @@ class Frame:
     stats: FrameStats
     overdraw: np.ndarray | None = None
     fates: ClusterFates | None = None
+    reversed_z: bool = False
 
     @classmethod
-    def empty(cls, width: int, height: int, stats: FrameStats | None = None) -> Frame:
-        """A frame with nothing drawn: depth 1.0, ids −1, barycentrics 0."""
-        return cls(np.ones((height, width), np.float32), np.full((height, width), -1, np.int32),
-                   np.zeros((height, width, 3), np.float32), stats or FrameStats())
+    def empty(cls, width: int, height: int, stats: FrameStats | None = None,
+              reversed_z: bool = False) -> Frame:
+        """A frame with nothing drawn: depth 1.0 (0.0 with reversed_z), ids −1,
+        barycentrics 0."""
+        depth = np.full((height, width), 0.0 if reversed_z else 1.0, np.float32)
+        return cls(depth, np.full((height, width), -1, np.int32),
+                   np.zeros((height, width, 3), np.float32), stats or FrameStats(),
+                   reversed_z=bool(reversed_z))
 
     @property
     def width(self) -> int:

@@ -156,7 +156,8 @@ def query(renderer_or_context, depth: npt.ArrayLike, boxes_min: npt.ArrayLike,
     Args:
         renderer_or_context: a `clraster.Renderer` (its context and tile config are used),
             a `pyopencl.Context`, or None for the default context.
-        depth: float32 (H, W) window depths, e.g. ``Frame.depth`` (1.0 = nothing drawn);
+        depth: float32 (H, W) window depths, e.g. ``Frame.depth`` of an ordinary (not
+            reversed-Z) frame (1.0 = nothing drawn);
             only read.
         boxes_min, boxes_max: (K, 3) box corners in world space (float32; per axis either
             order gives the same box).

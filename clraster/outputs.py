@@ -12,6 +12,7 @@ The command line (and `Frame.save`) call one function::
 what           needs        meaning
 ============== ============ =====================================================================
 "depth"        —            window depth (z/w + 1)/2 in [0, 1], 1.0 on the background
+                            (reversed-Z frames: (1 − z/w)/2, 0.0 on the background)
 "linear_depth" camera       eye-space depth along the view axis, scene units, inf on the background
 "distance"     camera       distance from the eye along the pixel's ray, scene units, inf background
 "ids"          —            triangle ids, int32, −1 on the background
@@ -185,8 +186,9 @@ def _metric(frame: Frame, camera: Any, target: Any, kind: str) -> np.ndarray:
         # → NDC (x_w/W·2 − 1, 1 − y_w/H·2, 2d − 1) → eye space → world offset from the eye.
         ys, xs = np.nonzero(np.asarray(frame.triangle_id) >= 0)
         d = np.asarray(frame.depth, np.float64)[ys, xs]
+        zn = 1.0 - 2.0 * d if frame.reversed_z else 2.0 * d - 1.0   # (1 − z/w)/2 or (z/w + 1)/2
         ndc = np.stack([(xs + 0.5) / w * 2.0 - 1.0, 1.0 - (ys + 0.5) / h * 2.0,
-                        2.0 * d - 1.0, np.ones_like(d)], axis=1)
+                        zn, np.ones_like(d)], axis=1)
         e = ndc @ np.linalg.inv(proj).T
         e = e[:, :3] / e[:, 3:]
         offset = e @ np.linalg.inv(view[:3, :3]).T     # eye-space origin is the eye

@@ -25,7 +25,11 @@ class FrameParams:
     width, height: image size in pixels. cull: "none", "back" or "front" (cull mode of
     triangle setup). kx, ky: float32 clip-space guard-band factors
     (`config.guard_band_factors`: the x/y clipping planes are ±k·w). tiles_x, tiles_y:
-    tiles covering the image at the config's tile size.
+    tiles covering the image at the config's tile size. reversed_z: the frame's depth
+    convention (`Renderer.render`): the kernels' z-buffer holds a key where less is nearer,
+    window depth (z/w + 1)/2 by default, or minus the reversed-Z depth (1 − z/w)/2, whose
+    float32 values keep their relative precision far away; `finish_depth` turns the key
+    buffer into the depth the frame returns.
     """
 
     width: int
@@ -35,13 +39,21 @@ class FrameParams:
     ky: np.float32
     tiles_x: int
     tiles_y: int
+    reversed_z: bool = False
 
     @classmethod
-    def make(cls, width: int, height: int, config: RasterConfig, cull: str = "back"
-             ) -> FrameParams:
+    def make(cls, width: int, height: int, config: RasterConfig, cull: str = "back",
+             reversed_z: bool = False) -> FrameParams:
         kx, ky = guard_band_factors(width, height)
         tiles_x, tiles_y = config.tiles(width, height)
-        return cls(int(width), int(height), cull, kx, ky, tiles_x, tiles_y)
+        return cls(int(width), int(height), cull, kx, ky, tiles_x, tiles_y, bool(reversed_z))
+
+    @property
+    def zoff(self) -> float:
+        """The depth key as a function of z/w, key = (z/w)/2 + zoff: the Hi-Z box test's
+        (kernels/pyramid.cl) bound for either convention (setup computes the key itself
+        from its depth rows, kernels/setup.cl DEPTH_MODE)."""
+        return -0.5 if self.reversed_z else 0.5
 
     @property
     def n_tiles(self) -> int:
@@ -104,3 +116,13 @@ class FrameTotals:
                                           fragments_passed=self.fragments_passed)
         s.timings_ms = dict(self.timings_ms)
         return s
+
+
+def finish_depth(key: np.ndarray, ids: np.ndarray, reversed_z: bool) -> np.ndarray:
+    """The frame's depth from the raster's key buffer (float32 (H, W), in place): unchanged
+    for ordinary depth; for reversed-Z, −key where a triangle was drawn (near → 1, far → 0)
+    and 0.0 (the far plane) where nothing was (the key buffer's clear value is 1.0)."""
+    if reversed_z:
+        np.negative(key, out=key)
+        key[ids < 0] = 0.0
+    return key

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import threading
 import time
@@ -17,7 +18,7 @@ from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
 from .inputs import CameraLike, Target, check_cull, check_flag, check_size
-from .params import FrameParams, FrameTotals
+from .params import FrameParams, FrameTotals, finish_depth
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
 from .stages.raster import RasterOutput
@@ -44,11 +45,12 @@ class Renderer:
 
         frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
                        NumPy arrays, used in place by a CPU device)
-      + per pass       ≤ 207·M + 164·E bytes (535 MiB at the defaults; draws, vertex stream,
+      + per pass       ≤ 239·M + 228·E bytes (695 MiB at the defaults; draws, vertex stream,
                        setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
       + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and
-                       64 bytes per instance (its matrix) — not per drawn triangle
+                       96 bytes per instance (its matrix and depth rows) — not per drawn
+                       triangle
       + pyramid        ≈ 5.3·W·H bytes (its levels, level 0 included) and 25 bytes per
                        tested cluster box, when occlusion culling is on
 
@@ -80,7 +82,7 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               overdraw: bool = False, fates: bool = False) -> Frame:
+               overdraw: bool = False, fates: bool = False, reversed_z: bool = False) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
         or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
         by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
@@ -102,6 +104,13 @@ class Renderer:
             fates: also return ``frame.fates``, a `clraster.fates.ClusterFates`: the fate
                 of every cluster of every instance (drawn, frustum-, cone- or
                 occlusion-culled); its counts equal the stats' culling funnel.
+            reversed_z: depth as reversed-Z, (1 − z/w)/2: 1 at the near plane, 0 at the far
+                plane and where nothing was drawn (``frame.reversed_z`` says which). The
+                depth test runs on it too, computed in double per triangle and stored in
+                float32, whose precision near 0 keeps far depths distinct where window
+                depth rounds to 1.0 (with near = 0.1, a float32 window depth cannot tell
+                1,000 from 1,000.1 units; reversed-Z separates them). Ids and barycentrics
+                are the same except where the finer far-depth test breaks ties differently.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -111,12 +120,13 @@ class Renderer:
         """
         check_cull(cull)
         for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
-                            ("overdraw", overdraw), ("fates", fates)):
+                            ("overdraw", overdraw), ("fates", fates),
+                            ("reversed_z", reversed_z)):
             check_flag(value, name)
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates)
+                                fates, reversed_z)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -141,7 +151,8 @@ class Renderer:
         return render_many(self, target, cameras, **render_kwargs)
 
     def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
-                cones: bool, occlusion: bool, overdraw: bool, fates: bool) -> Frame:
+                cones: bool, occlusion: bool, overdraw: bool, fates: bool,
+                reversed_z: bool = False) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -150,13 +161,14 @@ class Renderer:
         counts = dict(plan.draw_list.counts)
         fd = plan.frame
         if fd.n_tris == 0:
-            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
+            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                             reversed_z)
             if overdraw:
                 fr.overdraw = np.zeros((h, w), np.int32)
             if fates:
                 fr.fates = ClusterFates.from_plan(plan)
             return fr
-        params = FrameParams.make(w, h, self.config, cull)
+        params = FrameParams.make(w, h, self.config, cull, reversed_z)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
         occluded = None
         config = self.config
@@ -175,20 +187,24 @@ class Renderer:
             if not occlusion:
                 out = draw(fd, None)
             else:
-                res = two_phase(plan, self._occlusion, draw, self._hiz, totals, counts)
+                res = two_phase(plan, self._occlusion, draw,
+                                functools.partial(self._hiz, zoff=params.zoff), totals, counts)
                 out, occluded = res.out, res.occluded_keys
         finally:
             self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
-        return Frame(out.depth, out.ids, out.bary, totals.stats(counts), overdraw=out.overdraw,
-                     fates=ClusterFates.from_plan(plan, occluded) if fates else None)
+        return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
+                     totals.stats(counts), overdraw=out.overdraw,
+                     fates=ClusterFates.from_plan(plan, occluded) if fates else None,
+                     reversed_z=reversed_z)
 
-    def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray
+    def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5
              ) -> tuple[np.ndarray, float]:
-        """Pyramid of ``out``'s depth and the Hi-Z test of boxes ``rows`` (float32 (6, K))
-        under ``vp32`` (float32 (16,)): `Occlusion` codes uint8 (K,) and device ms."""
+        """Pyramid of ``out``'s depth (key) buffer and the Hi-Z test of boxes ``rows``
+        (float32 (6, K)) under ``vp32`` (float32 (16,)): `Occlusion` codes uint8 (K,) and
+        device ms. zoff: the key's offset (`FrameParams.zoff`)."""
         w, h = self.width, self.height
         pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
-        verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h)
+        verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h, zoff)
         return verdict, event_ms([*pyr.events, ev] if ev else pyr.events)
 
 

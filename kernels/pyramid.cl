@@ -115,11 +115,14 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
  * which is what the bounds below take. HIZ_EPS = 2^-18 = 64u.
  * (HIZ_EPS, HIZ_DEPTH_SLACK and HIZ_PIXEL_SLACK are defined in clraster/layout.py.)
  *
- * Window depth of a drawn fragment is a convex combination of its piece's vertex depths
- * (barycentrics of a covered pixel are >= 0) up to float rounding: the viewport transform
- * (3 roundings of values <= 1) and the interpolation z0 + l1·dz10 + l2·dz20 (l from a
- * rounded int→float and 1/area, l1 + l2 may exceed 1 by a few u): ~20u absolute. 2^-18
- * (64u) is subtracted from the box's nearest depth: HIZ_DEPTH_SLACK = 2^-18.
+ * Window depth of a drawn fragment is never below its piece's least vertex depth: the raster
+ * raises the interpolated plane to zlo (setup.cl value_planes),
+ * because a pixel centre the snapped coverage takes in may lie up to 1/512 px outside the
+ * unsnapped triangle, where the plane extrapolates by |grad z|/362 — unbounded for steep
+ * triangles. A vertex's window depth is computed in double from its exact float32 inputs
+ * and rounded once, so what remains is the vertex's own rounding (the box bounds above) and
+ * the viewport transform's (<= 1u): 2^-18 (64u) subtracted from the box's nearest depth
+ * covers it many times over: HIZ_DEPTH_SLACK = 2^-18.
  *
  * Window x/y of a vertex: rounded (~3 ulp of |x_win| <= 2^14 px on screen: < 0.01 px) and
  * then snapped to 1/256 px by rint (<= 1/512 px). 1/16 px covers both several times:
@@ -152,7 +155,8 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
 __kernel void hiz_test_boxes(__global const float *boxes, const int n_pad,
                              __constant float *vp, const int width, const int height,
                              __global const float *pyr, __constant int *levels,
-                             const int n_levels, __global uchar *result)
+                             const int n_levels, const float zoff,
+                             __global uchar *result)
 {
     int g = get_global_id(0);
     if (8 * g >= n_pad) return;
@@ -262,7 +266,9 @@ __kernel void hiz_test_boxes(__global const float *boxes, const int n_pad,
                      p[ay1[l] * lw + ax0[l]], p[ay1[l] * lw + ax1[l]]);
     }
     float8 zmax = vload8(0, zm);
-    float8 dnear = (zl * 0.5f + 0.5f) - HIZ_DEPTH_SLACK;
+    /* in the z-buffer's key (zoff = 0.5: window depth; -0.5: minus reversed-Z depth, see
+     * setup.cl value_planes); either way one rounding of <= 2^-26, inside the slack */
+    float8 dnear = (zl * 0.5f + zoff) - HIZ_DEPTH_SLACK;
     int8 r = select((int8)OCC_VISIBLE, (int8)OCC_OCCLUDED, dnear > zmax);
     r = select(r, (int8)OCC_OCCLUDED, empty > zero);
     r = select(r, (int8)OCC_VISIBLE, cross > zero);

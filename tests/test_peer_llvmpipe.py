@@ -269,7 +269,7 @@ def test_scene_instances_agree_with_clraster(peer):
     cam = Camera.framing(lo, hi, direction=(0.3, 0.5, 1.0), aspect=W / H)
     f = _clraster(scene, cam, W, H)
     peer.upload(scene)
-    assert peer.n_draws == 2          # one instanced draw per distinct mesh
+    assert peer.n_draws == 3          # one instanced draw per distinct mesh and mirroring
     pf = peer.render(cam.view_projection(W, H), repeat=1, ids=True)
     r = coverage_agreement(f, pf)
     assert r["agree"] >= 0.999 and r["both"] > 10000, r

@@ -245,12 +245,14 @@ class PeerFrame:
 
 
 class _Group:
-    """The GL objects of one distinct mesh and the scene instances that draw it."""
+    """The GL objects of one distinct mesh and the scene instances that draw it, all
+    mirroring (negative determinant: drawn with glFrontFace(GL_CW)) or none."""
 
-    __slots__ = ("instances", "vbo", "ibo", "mvp", "base", "vao", "n_faces")
+    __slots__ = ("instances", "vbo", "ibo", "mvp", "base", "vao", "n_faces", "mirrored")
 
-    def __init__(self) -> None:
+    def __init__(self, mirrored: bool = False) -> None:
         self.instances: list[int] = []
+        self.mirrored = mirrored
         # moderngl objects (Buffer, VertexArray), made by upload
         self.vbo: Any = None
         self.ibo: Any = None
@@ -302,9 +304,12 @@ class LlvmpipePeer:
     def upload(self, target) -> None:
         """Upload a `clraster.Mesh` or `clraster.Scene` (replacing what was uploaded).
 
-        Each distinct mesh's vertices (float32) and faces (uint32) are uploaded once; the
-        scene's instances are grouped by mesh, each group drawn with one instanced call.
-        Meshes without faces are skipped.
+        Each distinct mesh's vertices (float32) and faces (uint32) are uploaded once (twice
+        when it has both mirroring and ordinary instances); the scene's instances are grouped
+        by mesh and by whether their transform mirrors, each group drawn with one instanced
+        call. Mirroring groups are drawn with the front face clockwise, so their faces keep
+        their outward side, the Scene rule clraster follows (glTF 2.0). Meshes without
+        faces are skipped.
         """
         from clraster.mesh import Mesh
         from clraster.scene import Scene
@@ -320,12 +325,14 @@ class LlvmpipePeer:
         if int(target.n_faces) >= 2**31:
             raise ValueError("triangle ids are int32: at most 2**31 - 1 faces")
         self._free_geometry()
-        by_mesh: dict[int, _Group] = {}
+        by_mesh: dict[tuple[int, bool], _Group] = {}
         order: list[tuple[_Group, Mesh]] = []
+        mirrored = np.linalg.det(transforms[:, :3, :3]) < 0.0
         for k, mesh in enumerate(meshes):
-            g = by_mesh.get(id(mesh))
+            key = (id(mesh), bool(mirrored[k]))
+            g = by_mesh.get(key)
             if g is None:
-                g = by_mesh[id(mesh)] = _Group()
+                g = by_mesh[key] = _Group(key[1])
                 order.append((g, mesh))
             g.instances.append(k)
         ctx = self.ctx
@@ -351,7 +358,8 @@ class LlvmpipePeer:
 
     @property
     def n_draws(self) -> int:
-        """Draw calls per frame (one instanced draw per distinct non-empty mesh)."""
+        """Draw calls per frame (one instanced draw per distinct non-empty mesh, and per
+        mirroring or not)."""
         return len(self._groups)
 
     # -- frames -----------------------------------------------------------------------------
@@ -397,11 +405,13 @@ class LlvmpipePeer:
             else:
                 ctx.enable(moderngl.CULL_FACE)
                 ctx.cull_face = cull
-            draws = [(g.vao, len(g.instances)) for g in self._groups]
+            draws = [(g.vao, len(g.instances), "cw" if g.mirrored else "ccw")
+                     for g in self._groups]
 
             def frame() -> None:
                 fbo.clear(depth=1.0)
-                for vao, n in draws:
+                for vao, n, front in draws:
+                    ctx.front_face = front
                     vao.render(moderngl.TRIANGLES, instances=n)
                 ctx.finish()
 

@@ -23,7 +23,7 @@ from ..config import RasterConfig
 from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
 from ..inputs import CameraLike, Target, check_cull, check_flag, check_size
-from ..params import FrameParams, FrameTotals
+from ..params import FrameParams, FrameTotals, finish_depth
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
 from . import bin as bin_
@@ -59,11 +59,13 @@ class Renderer:
         self.history = OcclusionHistory()
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
-               frustum: bool = True, cones: bool = True, occlusion: bool = False) -> Frame:
+               frustum: bool = True, cones: bool = True, occlusion: bool = False,
+               reversed_z: bool = False) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
         check_flag(occlusion, "occlusion")
+        check_flag(reversed_z, "reversed_z")
         w, h, config = self.width, self.height, self.config
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -72,8 +74,9 @@ class Renderer:
         pool, fd = plan.pool, plan.frame
         counts = dict(plan.draw_list.counts)
         if fd.n_tris == 0:
-            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
-        params = FrameParams.make(w, h, config, cull)
+            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                               reversed_z)
+        params = FrameParams.make(w, h, config, cull, reversed_z)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
 
         def draw(draws: FrameDraws, into: Images | None) -> Images:
@@ -82,14 +85,16 @@ class Renderer:
         if not occlusion:
             depth, ids, bary = draw(fd, None)
         else:
-            res = two_phase(plan, self.history, draw, _hiz(w, h), totals, counts)
+            res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts)
             depth, ids, bary = res.out
-        return Frame(depth, ids, bary, totals.stats(counts))
+        return Frame(finish_depth(depth, ids, reversed_z), ids, bary,
+                     totals.stats(counts), reversed_z=reversed_z)
 
 
 def render(target: Target, camera: CameraLike, width: int, height: int, *,
            cull: str = "back", frustum: bool = True, cones: bool = True,
-           occlusion: bool = False, config: RasterConfig | None = None) -> Frame:
+           occlusion: bool = False, config: RasterConfig | None = None,
+           reversed_z: bool = False) -> Frame:
     """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene) with the NumPy
     twin; same arguments and outputs as `Renderer.render` (the same culling code decides
     what is drawn).
@@ -101,7 +106,8 @@ def render(target: Target, camera: CameraLike, width: int, height: int, *,
     frames after that, keep a `Renderer` (this module's) across calls.
     """
     return Renderer(width, height, config=config).render(
-        target, camera, cull=cull, frustum=frustum, cones=cones, occlusion=occlusion)
+        target, camera, cull=cull, frustum=frustum, cones=cones, occlusion=occlusion,
+        reversed_z=reversed_z)
 
 
 def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
@@ -135,7 +141,9 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     clip, oc, win = vertex_.transform_draws(pool, fd, params.kx, params.ky, w, h)
     t1 = time.perf_counter()
     tri_verts, ids = setup_.draw_triangles(pool, fd)
-    st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky)
+    st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky,
+                      setup_.object_clip(pool, fd, params.reversed_z),
+                      setup_.draw_mirrored(pool, fd), params.reversed_z)
     t2 = time.perf_counter()
     if max_entries is not None and st.clip_pieces.size > max_entries:
         raise BinBudgetExceeded(st.clip_pieces.size, max_entries)
@@ -157,16 +165,17 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     return depth, ids_img, bary
 
 
-def _hiz(width: int, height: int):
+def _hiz(width: int, height: int, zoff: float = 0.5):
     """The twin's Hi-Z step for `clraster.twophase.two_phase`: the NumPy pyramid of the
-    images' depth and the NumPy box test (twins of kernels/pyramid.cl)."""
+    images' depth (key) buffer and the NumPy box test (twins of kernels/pyramid.cl); zoff:
+    the key's offset (`FrameParams.zoff`)."""
 
     def hiz(images: Images, rows: np.ndarray, vp32: np.ndarray
             ) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
         levels = pyramid_.build(images[0])
         verdict = pyramid_.test_boxes(levels, rows[:3].T, rows[3:].T, vp32.reshape(4, 4),
-                                      width, height)
+                                      width, height, zoff)
         return verdict, (time.perf_counter() - t0) * 1e3
 
     return hiz

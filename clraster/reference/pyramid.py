@@ -58,13 +58,16 @@ def build(depth: np.ndarray) -> list[np.ndarray]:
 
 
 def test_boxes(levels: list[np.ndarray], mins: np.ndarray, maxs: np.ndarray,
-               view_proj: np.ndarray, width: int, height: int) -> np.ndarray:
+               view_proj: np.ndarray, width: int, height: int, zoff: float = 0.5
+               ) -> np.ndarray:
     """Twin of hiz_test_boxes: uint8 (K,) `Occlusion` codes for world-space boxes.
 
     Args:
         levels: the pyramid (`build`) of the depth buffer, level 0 (H, W) first.
         mins, maxs: (K, 3) box corners (float32). view_proj: (4, 4) row-major float32
             world → clip matrix. width, height: the image size (level 0's shape).
+        zoff: the depth buffer's key offset (0.5: window depth; -0.5: minus reversed-Z
+            depth, `clraster.params.FrameParams.zoff`).
 
     See kernels/pyramid.cl for the rules; every float operation here is float32, in the
     kernel's order.
@@ -164,6 +167,6 @@ def test_boxes(levels: list[np.ndarray], mins: np.ndarray, maxs: np.ndarray,
         tx0, tx1, ty0, ty1 = x0[s] >> L, x1[s] >> L, y0[s] >> L, y1[s] >> L
         zmax[s] = _farther(_farther(p[ty0, tx0], p[ty0, tx1]),
                            _farther(p[ty1, tx0], p[ty1, tx1]))
-    dnear = (zl * half + half) - HIZ_DEPTH_SLACK
+    dnear = (zl * half + F32(zoff)) - HIZ_DEPTH_SLACK
     res[todo] = np.where(dnear > zmax, Occlusion.OCCLUDED, Occlusion.VISIBLE)
     return res

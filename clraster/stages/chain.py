@@ -54,9 +54,9 @@ class StageChain:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
         least one triangle), vertex stream 34 bytes × 3·M vertices (a draw has at most 3
-        vertices per triangle), setup 73·M (record, status, clip count and offset),
-        clipped pieces 100·E (record + barycentrics; a pass with more pieces than E is
-        split like one with too many entries), bin entries 64·E. The per-tile buffers
+        vertices per triangle), setup 105·M (96-byte record, status, clip count and
+        offset), clipped pieces 132·E (record + barycentrics; a pass with more pieces than
+        E is split like one with too many entries), bin entries 96·E. The per-tile buffers
         (C·T counts, tile starts, tile stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
         g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,

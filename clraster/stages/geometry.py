@@ -16,7 +16,8 @@ class GeometryBuffers:
     """Scene → vertex/setup boundary (see drawlist.GeometryPool for shapes and dtypes).
 
     positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
-    draws: DRAW_DTYPE (D,) and mvps: float32 (I, 16), uploaded for every pass.
+    draws: DRAW_DTYPE (D,), mvps: float32 (I, 16), mvps64: float64 (I, 16) and zrows:
+    float64 (I, 4) (drawlist.FrameDraws), uploaded for every pass.
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
     uploaded last (drawlist.FrameDraws).
     """
@@ -28,6 +29,8 @@ class GeometryBuffers:
     face_ids: GrowBuffer
     draws: GrowBuffer
     mvps: GrowBuffer
+    mvps64: GrowBuffer
+    zrows: GrowBuffer
     n_draws: int = 0
     n_verts: int = 0
     n_tris: int = 0
@@ -35,7 +38,7 @@ class GeometryBuffers:
 
 class GeometryStage:
     def __init__(self, ctx: cl.Context) -> None:
-        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(7)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(9)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self._pool: GeometryPool | None = None
 
     def upload_pool(self, queue: cl.CommandQueue, pool: GeometryPool) -> None:
@@ -55,7 +58,8 @@ class GeometryStage:
         """Upload the draw records of ``fd`` (a frame's draws, or any subset of them);
         returns the buffers, the vertex and setup stages' input."""
         b = self.buffers
-        for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps)):
+        for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps), (b.mvps64, fd.mvps64),
+                        (b.zrows, fd.zrows)):
             buf = gb.ensure(arr.nbytes)
             if arr.nbytes:
                 cl.enqueue_copy(queue, buf, arr, is_blocking=True)

@@ -179,11 +179,12 @@ class PyramidStage:
                                       height)
 
     def enqueue_test_rows(self, queue: cl.CommandQueue, pyramid: Pyramid, rows: np.ndarray,
-                          vp: np.ndarray, width: int, height: int
+                          vp: np.ndarray, width: int, height: int, zoff: float = 0.5
                           ) -> tuple[np.ndarray, cl.Event | None]:
         """`enqueue_test` with the boxes already in the kernel's layout: float32 (6, K)
         rows min x, y, z, max x, y, z; vp float32 (16,) row-major. For callers that keep
-        their boxes that way (the renderer's occlusion culling, every frame)."""
+        their boxes that way (the renderer's occlusion culling, every frame). zoff: the
+        pyramid's depth key (`clraster.params.FrameParams.zoff`; 0.5 = window depth)."""
         k = rows.shape[1]
         if k == 0:
             return np.empty(0, np.uint8), None
@@ -202,7 +203,7 @@ class PyramidStage:
         gsize = -(-n_wi // TEST_LOCAL) * TEST_LOCAL
         ev = self.k_test(queue, (gsize,), (TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
                          np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
-                         np.int32(pyramid.n_levels), bres)
+                         np.int32(pyramid.n_levels), np.float32(zoff), bres)
         res = np.empty(n_pad, np.uint8)
         cl.enqueue_copy(queue, res, bres, is_blocking=True)
         return res[:k], ev

@@ -71,15 +71,18 @@ class SetupStage:
         n_draws, m = geo.n_draws, geo.n_tris
         clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
         kx, ky = params.kx, params.ky
+        # the pool and matrices too: the clipper recomputes its inputs in double from the
+        # object-space positions (kernels/setup.cl object_clip)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
-                     geo.face_ids.buf)
+                     geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, geo.mvps64.buf,
+                     geo.zrows.buf)
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
         ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
-                           b.pieces.ensure(rec * m, "setup buffer"), b.status.ensure(m),
-                           b.clip_count.ensure(4 * m))]
+                           np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
+                           b.status.ensure(m), b.clip_count.ensure(4 * m))]
         total = np.zeros(1, np.int32)
         if m:
             chunks = np.uint32(min(SCAN_CHUNKS, m))
@@ -96,7 +99,8 @@ class SetupStage:
             raise BinBudgetExceeded(p, max_pieces, ev)
         if p:
             ev.append(self.k_clipped(queue, gsize, lsize, clip, outcode, *draw_args, *size,
-                                     np.float32(kx), np.float32(ky), b.clip_count.buf,
+                                     np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
+                                     b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))
         else:  # the kernels still need valid buffer arguments downstream
