@@ -17,7 +17,8 @@ views failed (a summary line on stderr says how many and where their messages ar
 command-line arguments (argparse's usage message); 130 interrupted (Ctrl-C).
 
 Vectors (``--eye``, ``--target``, ``--up``) are three numbers, ``--eye 1 -2 3``; the older
-one-word form ``--eye 1,-2,3`` (or ``--eye=-1,2,3``) is accepted too.
+one-word form ``--eye 1,-2,3`` (or ``--eye=-1,2,3``) is accepted too. A user clip plane
+(``--clip-plane A B C D``, repeatable up to 8 times) is four numbers the same way.
 """
 
 from __future__ import annotations
@@ -48,8 +49,8 @@ __all__ = ["main"]
 EXAMPLE = "example"
 
 
-#: options that take a vector of three numbers
-_VECTOR_OPTIONS = ("--eye", "--target", "--up")
+#: options that take a vector of numbers → how many
+_VECTOR_OPTIONS = {"--eye": 3, "--target": 3, "--up": 3, "--clip-plane": 4}
 
 
 def _vec3(text: str) -> np.ndarray:
@@ -64,6 +65,24 @@ def _vec3(text: str) -> np.ndarray:
     return v
 
 
+def _plane(text: str) -> np.ndarray:
+    """``--clip-plane``: four finite numbers A B C D with a non-zero normal (A, B, C)."""
+    try:
+        v = np.array([float(t) for t in text.split(",")])
+    except ValueError:
+        v = np.array([])
+    shown = text.replace(",", " ")
+    if v.shape != (4,) or not np.all(np.isfinite(v)):
+        raise argparse.ArgumentTypeError(
+            f"expected four finite numbers A B C D (keeping A*x + B*y + C*z + D >= 0), e.g. "
+            f"0 -1 0 2.5, got {shown!r}")
+    if not np.any(v[:3] != 0.0):
+        raise argparse.ArgumentTypeError(
+            f"the plane's normal A B C is zero ({shown!r}): it would keep everything or "
+            f"nothing")
+    return v
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text)
@@ -74,8 +93,9 @@ def _is_number(text: str) -> bool:
 
 def _join_vectors(argv: list[str]) -> list[str]:
     """``--eye X Y Z`` (three words, negatives included) and ``--eye X,Y,Z`` as the one
-    word ``--eye=X,Y,Z`` that `_vec3` parses. Done before argparse, which would read a
-    word such as ``-1e-3`` or ``-1,2,3`` as an unknown option, not as a value."""
+    word ``--eye=X,Y,Z`` that `_vec3` parses (``--clip-plane A B C D`` likewise, four words
+    for `_plane`). Done before argparse, which would read a word such as ``-1e-3`` or
+    ``-1,2,3`` as an unknown option, not as a value."""
     out: list[str] = []
     i = 0
     while i < len(argv):
@@ -92,10 +112,10 @@ def _join_vectors(argv: list[str]) -> list[str]:
             i += 1
             continue
         words: list[str] = []
-        while i < len(argv) and len(words) < 3 and _is_number(argv[i]):
+        while i < len(argv) and len(words) < _VECTOR_OPTIONS[tok] and _is_number(argv[i]):
             words.append(argv[i])
             i += 1
-        # fewer than three numbers: _vec3 says what was expected
+        # fewer numbers than the option takes: _vec3 (_plane) says what was expected
         out.append(f"{tok}={','.join(words)}" if words else tok)
     return out
 
@@ -195,14 +215,15 @@ def _render_views(args: argparse.Namespace) -> int:
             summary = dask_render_views(mesh, args.views, client, args.out, args.outputs,
                                         chunk=args.chunk, size=(width, height), config=config,
                                         progress=True if args.progress else None,
-                                        cull=args.cull, reversed_z=args.reversed_z)
+                                        cull=args.cull, reversed_z=args.reversed_z,
+                                        clip_planes=args.clip_planes)
         print(summary)
         print(f"wrote {', '.join(args.outputs)} per view to {args.out}")
     else:
         renderer = Renderer(width, height, config=config)
         summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
                                progress=True if args.progress else None, cull=args.cull,
-                               reversed_z=args.reversed_z)
+                               reversed_z=args.reversed_z, clip_planes=args.clip_planes)
         print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
     if summary.failures:
         for f in summary.failures:
@@ -282,6 +303,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="depth as reversed-Z, (1 - z/w)/2: 1 at the near plane, 0 at the far "
                         "plane and on the background; float32 keeps far depths distinct "
                         "(the depth test uses it too)")
+    r.add_argument("--clip-plane", type=_plane, action="append", metavar="A B C D",
+                   help="user clip plane in world space: keep the points with a*x + b*y + "
+                        "c*z + d >= 0 (as OpenGL's gl_ClipDistance; points on the plane are "
+                        "kept); repeat for up to 8 planes, a point must be kept by all. The "
+                        "wireframe is clipped too")
     r.add_argument("--ids", type=Path, metavar="FILE",
                    help="also save the (H, W) triangle ids: .npy/.npz/.tif int32 (-1 "
                         "background), .png uint16 id + 1 (0 background)")
@@ -374,7 +400,7 @@ def _render(args: argparse.Namespace) -> int:
 
         def draw() -> Frame:
             return reference_render(mesh, camera, width, height, cull=args.cull,
-                                    reversed_z=args.reversed_z)
+                                    reversed_z=args.reversed_z, clip_planes=args.clip_planes)
     else:
         from .renderer import Renderer
 
@@ -382,7 +408,8 @@ def _render(args: argparse.Namespace) -> int:
         info(f"device: {renderer.context.devices[0].name.strip()}")
 
         def draw() -> Frame:
-            return renderer.render(mesh, camera, cull=args.cull, reversed_z=args.reversed_z)
+            return renderer.render(mesh, camera, cull=args.cull, reversed_z=args.reversed_z,
+                                   clip_planes=args.clip_planes)
 
     times = []
     frame = None
@@ -408,7 +435,7 @@ def _render(args: argparse.Namespace) -> int:
         edges = mesh_edges(mesh)
         draw_edges = reference_lines if args.reference else draw_lines
         lines = draw_edges(edges, camera, width, height, depth=frame.depth,
-                           depth_bias=args.wireframe_bias)
+                           depth_bias=args.wireframe_bias, clip_planes=args.clip_planes)
         image = overlay(image, lines, (20, 20, 20))
         info(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
     iio.imwrite(args.out, image)
@@ -478,6 +505,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print(f"clraster: error: --repeat must be >= 1, got {args.repeat}", file=sys.stderr)
         return 2
+    from .layout import USER_PLANES_MAX
+
+    if args.clip_plane is not None and len(args.clip_plane) > USER_PLANES_MAX:
+        parser.print_usage(sys.stderr)
+        print(f"clraster: error: at most {USER_PLANES_MAX} --clip-plane options, got "
+              f"{len(args.clip_plane)}", file=sys.stderr)
+        return 2
+    # (K, 4) float64 world planes for every render call, or None
+    args.clip_planes = None if args.clip_plane is None else np.stack(args.clip_plane)
     if args.views is not None:
         given = [opt for dest, opt in _SINGLE_VIEW.items()
                  if getattr(args, dest) is not None and getattr(args, dest) is not False]

@@ -195,6 +195,7 @@ class _SceneCull:
             else np.zeros((0, 3))
         hi_c = np.concatenate([mc.cm.aabb_max for mc in umesh]).astype(np.float64) if umesh \
             else np.zeros((0, 3))
+        self.g_lo, self.g_hi = lo_c, hi_c   # object-space cluster boxes (user clip planes)
         for p0 in range(0, pi.size, 1 << 16):  # bounded temporaries
             sl = slice(p0, p0 + (1 << 16))
             g, lin, am = self.flat_g[sl], self.m[pi[sl]], self.abs_m[pi[sl]]
@@ -543,7 +544,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     max_vertices: int = 128, inside_margin: float = DEFAULT_MARGIN,
                     outside_margin: float = DEFAULT_MARGIN,
                     cone_margin: float = DEFAULT_CONE_MARGIN,
-                    keep_cone_culled: bool = False) -> DrawList:
+                    keep_cone_culled: bool = False,
+                    clip_planes: np.ndarray | None = None) -> DrawList:
     """The (instance, cluster) pairs of `scene` to draw for one view.
 
     Args:
@@ -568,6 +570,9 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             :mod:`clraster.frustum`).
         cone_margin: radians, >= 0.
         keep_cone_culled: also return the cone-culled pairs (``DrawList.cone_culled``).
+        clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`)
+            or None: clusters whose box lies wholly outside one of them are culled too, and
+            counted with the frustum-culled ones (`_clip_plane_cull`).
 
     Returns:
         A `DrawList`.
@@ -621,9 +626,66 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
 
     t_order = time.perf_counter()
     inst, cl, ins = pairs.in_draw_order(prep)
+    counts = pairs.counts(prep, inst_state, int(cl.size))
+    if clip_planes is not None and cl.size:
+        t_planes = time.perf_counter()
+        inst, cl, ins = _clip_plane_cull(prep, scene, inst, cl, ins, clip_planes,
+                                         inst_state, counts)
+        timings["clip planes"] = (time.perf_counter() - t_planes) * 1e3
     t_end = time.perf_counter()
     timings.update(clusters=pairs.t_clusters * 1e3, cones=pairs.t_cones * 1e3,
                    order=(t_end - t_order) * 1e3, total=(t_end - t_start) * 1e3)
     return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
-                    inside=ins.astype(bool), counts=pairs.counts(prep, inst_state, int(cl.size)),
+                    inside=ins.astype(bool), counts=counts,
                     timings_ms=timings, cone_culled=pairs.cone_culled())
+
+
+#: Relative margin of the clip-plane cluster test: the kernels evaluate a vertex's distance
+#: in double from its float32 position and the float64 object-space plane (common.h
+#: user_dist), off by a few 1e-16 of the terms' magnitude; the box bound here is exact up to
+#: the same rounding, so 1e-9 of the magnitude keeps the test conservative many times over.
+CLIP_PLANE_MARGIN = 1e-9
+
+
+def _clip_plane_cull(prep: _SceneCull, scene: Scene, inst: np.ndarray, cl: np.ndarray,
+                     ins: np.ndarray, planes: np.ndarray, inst_state: np.ndarray,
+                     counts: dict[str, int]):
+    """Drop the (instance, cluster) pairs whose object-space cluster box lies wholly on the
+    removed side of a user clip plane (moved to the instance's object space: plane ·
+    model), updating ``counts`` in place: the clusters and triangles dropped move from drawn
+    to frustum-culled, and instances whose world box lies wholly outside a plane (and were
+    not frustum-culled already) count as frustum-culled. Unbounded clusters (NaN/Inf
+    vertices) are never dropped. A post-filter over the frustum test's survivors, O(pairs),
+    not through the BVH's plane masks (they hold the 6 frustum planes). Returns the kept
+    (inst, cl, ins)."""
+    g = prep.mesh_base[prep.inst_umesh[inst]] + cl
+    keep = np.ones(inst.size, bool)
+    for p0 in range(0, inst.size, 1 << 16):   # bounded temporaries
+        sl = slice(p0, p0 + (1 << 16))
+        lo, hi = prep.g_lo[g[sl]], prep.g_hi[g[sl]]
+        q = np.einsum("kj,pjl->pkl", planes, prep.m[inst[sl]])    # (P, K, 4) object space
+        n = q[:, :, :3]
+        with np.errstate(invalid="ignore", over="ignore"):   # NaN/Inf boxes: kept
+            centre, half = (lo + hi) * 0.5, (hi - lo) * 0.5
+            top = (np.einsum("pkj,pj->pk", n, centre)
+                   + np.einsum("pkj,pj->pk", np.abs(n), half) + q[:, :, 3])
+            mag = (np.einsum("pkj,pj->pk", np.abs(n), np.abs(centre) + half)
+                   + np.abs(q[:, :, 3]))
+            out = top < -CLIP_PLANE_MARGIN * mag
+        keep[sl] = ~out.any(axis=1)
+    dropped = ~keep
+    if dropped.any():
+        n_cl, n_tri = int(dropped.sum()), int(prep.g_tri[g[dropped]].sum())
+        counts["clusters_frustum_culled"] += n_cl
+        counts["clusters_drawn"] -= n_cl
+        counts["triangles_frustum_culled"] += n_tri
+        counts["triangles_drawn"] -= n_tri
+        lo_w, hi_w = scene.world_aabbs()
+        c_w, h_w = (lo_w + hi_w) * 0.5, (hi_w - lo_w) * 0.5
+        with np.errstate(invalid="ignore"):
+            top_w = (c_w @ planes[:, :3].T + h_w @ np.abs(planes[:, :3]).T + planes[:, 3])
+            mag_w = ((np.abs(c_w) + h_w) @ np.abs(planes[:, :3]).T + np.abs(planes[:, 3]))
+            outside = (top_w < -CLIP_PLANE_MARGIN * mag_w).any(axis=1)
+        newly = outside & (inst_state != OUTSIDE) & prep.nonempty
+        counts["instances_frustum_culled"] += int(newly.sum())
+    return inst[keep], cl[keep], ins[keep]

@@ -11,9 +11,11 @@ history; the later ones reuse it), and writes into ``--out``:
 * ``overdraw.png``: fragments tested per pixel (depth complexity) as a heat map, with a
   colour bar;
 * ``inspector.png``: the same ground floor from a third-person camera above and behind,
-  storeys above it cut away, every cluster coloured by its fate in the first-person frame
-  (drawn, frustum-culled, back-face (cone) culled, occlusion-culled), lightly shaded, with
-  the first-person view frustum drawn as lines.
+  everything above a horizontal user clip plane `INSPECTOR_CUT` over the floor cut away
+  (``render(..., clip_planes=...)``: instances crossing the plane are cut open, not
+  dropped), every cluster coloured by its fate in the first-person frame (drawn,
+  frustum-culled, back-face (cone) culled, occlusion-culled), lightly shaded, with the
+  first-person view frustum drawn as lines.
 
 It prints the culling funnel (`FrameStats`), the frame times, the fate counts and the
 files written. The lettering, panels, colour ramps and colour bars in the images come from
@@ -72,8 +74,9 @@ FATE_LABELS = {
 FRUSTUM_COLOR = (255, 240, 60)
 FRUSTUM_HIDDEN_COLOR = (165, 150, 70)
 INSPECTOR_BACKGROUND = (28, 30, 36)
-#: The inspector leaves out every instance whose lowest point is above this height over
-#: the first-person storey's floor (the ceiling pipes, lamps, slabs and storeys above), so
+#: The inspector cuts the plant with a horizontal clip plane this height (metres) over the
+#: first-person storey's floor, keeping what lies below it: the ceiling pipes, lamps, slabs
+#: and storeys above go, walls and machines that reach through the plane are cut open, so
 #: the corridor and the rooms around it can be seen from above.
 INSPECTOR_CUT = 2.6
 #: Largest ``--triangles``: the demo holds the plant flattened into one world mesh
@@ -156,14 +159,30 @@ def _grow(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def inspector_scene(scene: Scene, floor_y: float, cut: float = INSPECTOR_CUT
-                    ) -> tuple[Scene, np.ndarray]:
-    """The instances of `scene` whose lowest point lies below ``floor_y + cut``: a
-    cut-away of one storey. Returns (scene, int64 index of each kept instance in
-    `scene`)."""
-    lo, _ = scene.world_aabbs()
-    keep = np.flatnonzero(np.asarray(lo)[:, 1] < floor_y + cut)
-    return Scene([scene.instances[i] for i in keep]), keep
+def inspector_plane(floor_y: float, cut: float = INSPECTOR_CUT) -> np.ndarray:
+    """(1, 4) float64 clip plane (a, b, c, d) = (0, −1, 0, floor_y + cut) for
+    ``render(..., clip_planes=...)``: keeps the world points with y <= floor_y + cut, a
+    cut-away of everything above one storey's lower ``cut`` metres."""
+    return np.array([[0.0, -1.0, 0.0, float(floor_y) + float(cut)]])
+
+
+def cut_instances(scene: Scene, plane: np.ndarray, world: Mesh | None = None
+                  ) -> tuple[int, int]:
+    """(instances cut open, instances wholly removed) by a horizontal clip ``plane`` from
+    `inspector_plane`: those with faces on both sides of it, and those whose faces all lie
+    above it, from their world-space faces (``world``: `world_mesh` of `scene`, made here
+    if not given). Instances without faces count in neither."""
+    if world is None:
+        world = world_mesh(scene)
+    y = np.asarray(world.vertices, np.float64)[np.asarray(world.faces), 1]   # (F, 3)
+    n = scene.n_instances
+    inst = np.repeat(np.arange(n), np.diff(np.append(scene.face_base, scene.n_faces)))
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    np.minimum.at(lo, inst, y.min(axis=1))
+    np.maximum.at(hi, inst, y.max(axis=1))
+    cut = float(plane[0, 3])
+    return int(np.count_nonzero((lo <= cut) & (hi > cut))), int(np.count_nonzero(lo > cut))
 
 
 def inspector_camera(scene: Scene, floor_y: float, width: int, height: int,
@@ -177,21 +196,22 @@ def inspector_camera(scene: Scene, floor_y: float, width: int, height: int,
                           aspect=width / height)
 
 
-def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: Mesh,
-                      scene: Scene, view_proj: np.ndarray, fp_view_proj: np.ndarray,
-                      width: int, height: int, context=None
-                      ) -> tuple[np.ndarray, dict[Fate, int]]:
-    """Colour the third-person `frame` of `sub_scene` (instances ``keep`` of `scene`) by
+def inspector_picture(frame, fates, world: Mesh, scene: Scene, view_proj: np.ndarray,
+                      fp_view_proj: np.ndarray, width: int, height: int, context=None,
+                      note: str | None = None) -> tuple[np.ndarray, dict[Fate, int]]:
+    """Colour the third-person `frame` of `scene` (rendered cut by `inspector_plane`) by
     the fate of each pixel's cluster in `fates`, shade it lightly (|n·l| of `world`'s
     faces, see `world_mesh`), draw the first-person frustum (``fp_view_proj``) seen through
     ``view_proj`` — depth-tested in `FRUSTUM_COLOR` over its hidden parts in
-    `FRUSTUM_HIDDEN_COLOR` — and the legend. Returns (image, pixels per fate)."""
+    `FRUSTUM_HIDDEN_COLOR` — and the legend, with ``note`` (e.g. where the clip plane cuts)
+    as its last line where the legend then still fits in the top half of the image (on
+    small images it would hide the picture). Returns (image, pixels per fate)."""
     from .lines import LineRenderer, frustum_segments, overlay
     from .shade import DEFAULT_LIGHT_DIR
 
-    sub_inst, face = sub_scene.split_ids(frame.triangle_id)
-    hit = sub_inst >= 0
-    inst = keep[sub_inst[hit]]
+    all_inst, face = scene.split_ids(frame.triangle_id)
+    hit = all_inst >= 0
+    inst = all_inst[hit]
     fate = fates.face_fate(inst, face[hit])
     light = np.asarray(DEFAULT_LIGHT_DIR, np.float64)
     light /= np.linalg.norm(light)
@@ -223,13 +243,18 @@ def inspector_picture(frame, sub_scene: Scene, keep: np.ndarray, fates, world: M
     pad = 6 * s
     panel_w = pad * 3 + box + max(text_width(t, s) for _, t in rows)
     title = "culling inspector: clusters by fate in the first-person view"
-    panel(img, 0, 0, max(panel_w, text_width(title, s) + 2 * pad),
-          pad * 2 + line_h * (len(rows) + 1))
+    if note and pad * 2 + line_h * (len(rows) + 2) > height // 2:
+        note = None
+    texts = [title] + ([note] if note else [])
+    panel(img, 0, 0, max(panel_w, max(text_width(t, s) for t in texts) + 2 * pad),
+          pad * 2 + line_h * (len(rows) + len(texts)))
     draw_text(img, pad, pad, title, (240, 240, 240), s)
     for k, (col, txt) in enumerate(rows):
         y = pad + line_h * (k + 1)
         img[y:y + box - s, pad:pad + box] = col
         draw_text(img, pad * 2 + box, y, txt, (230, 230, 230), s)
+    if note:
+        draw_text(img, pad, pad + line_h * (len(rows) + 1), note, (200, 200, 200), s)
     return img, per_fate
 
 
@@ -328,12 +353,15 @@ def _run(args: argparse.Namespace) -> int:
     depth = depth_picture(frame.depth, cam.projection(w, h))
     over, top = overdraw_picture(cast(np.ndarray, frame.overdraw))   # overdraw=True
     floor_y = float(cam.eye[1]) - EYE_HEIGHT
-    sub, keep = inspector_scene(scene, floor_y)
+    plane = inspector_plane(floor_y)
+    crossing, above = cut_instances(scene, plane, world)
     icam = inspector_camera(scene, floor_y, w, h)
-    iframe = renderer.render(sub, icam)
+    # the whole plant, cut by the plane: what crosses it is cut open, not left out
+    iframe = renderer.render(scene, icam, clip_planes=plane)
     inspector, per_fate = inspector_picture(
-        iframe, sub, keep, frame.fates, world, scene, icam.view_projection(w, h),
-        cam.view_projection(w, h), w, h, context=renderer.context)
+        iframe, frame.fates, world, scene, icam.view_projection(w, h),
+        cam.view_projection(w, h), w, h, context=renderer.context,
+        note=f"clip plane: everything above {INSPECTOR_CUT:g} m over the floor cut away")
     t_img = (time.perf_counter() - t0) * 1e3
     args.out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -345,8 +373,9 @@ def _run(args: argparse.Namespace) -> int:
     o = cast(np.ndarray, frame.overdraw)
     print(f"overdraw: mean {o[o > 0].mean():.2f} fragments per covered pixel, max "
           f"{int(o.max())}; heat scale 0..{top} (black = none, white = {top} or more)")
-    print(f"inspector: {sub.n_instances:,} of {scene.n_instances:,} instances (the storey "
-          f"above {INSPECTOR_CUT} m cut away); pixels " + ", ".join(
+    print(f"inspector: clip plane y <= {float(plane[0, 3]):.2f} ({INSPECTOR_CUT:g} m over the "
+          f"floor): {above:,} of {scene.n_instances:,} instances wholly above it, "
+          f"{crossing:,} cut open; pixels " + ", ".join(
               f"{FATE_LABELS[f].split(' (')[0]} {per_fate[f]:,}" for f in Fate))
     print(f"images: {t_img:.0f} ms")
     print("wrote " + ", ".join(str(p) for p in written))

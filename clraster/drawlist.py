@@ -8,7 +8,7 @@ renderer uploads these arrays; the NumPy twin reads the very same ones.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -160,7 +160,10 @@ class FrameDraws:
     triangle streams. mvps: float32 (I, 16) row-major view-projection · model per instance
     (the vertex stage's: coverage). mvps64: the same float64 (I, 16) before rounding
     (setup's value planes and clipper, kernels/setup.cl object_clip). zrows: float64 (I, 4)
-    per instance its w row minus its z row (reversed-Z depth numerator w − z, ClipIn)."""
+    per instance its w row minus its z row (reversed-Z depth numerator w − z, ClipIn).
+    uplanes: float64 (I, K, 4) the frame's K user clip planes moved to each instance's
+    object space (world plane · model, so distances are evaluated from object-space
+    positions: common.h user_dist); K = 0 without clip planes."""
 
     draws: np.ndarray
     n_verts: int
@@ -168,9 +171,16 @@ class FrameDraws:
     mvps: np.ndarray
     mvps64: np.ndarray
     zrows: np.ndarray
+    uplanes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 4)))
+
+    @property
+    def n_user(self) -> int:
+        """K, the number of user clip planes."""
+        return int(self.uplanes.shape[1])
 
 
-def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> FrameDraws:
+def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
+                clip_planes: np.ndarray | None = None) -> FrameDraws:
     """Lay out ``draw_list`` (instance, cluster, inside) as `Draw` records.
 
     view_proj: float64 (4, 4). Each instance's matrix (view-projection · model · the
@@ -179,6 +189,8 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> 
     origin cancel there, in float64, before anything becomes float32 (camera-relative
     rendering). Draws of instances whose transform has a negative determinant get
     DRAW_MIRRORED: their faces keep their outward side (the Scene rule, as glTF).
+    clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`),
+    moved to each instance's object space in float64 (`FrameDraws.uplanes`).
     """
     inst = np.asarray(draw_list.instance, np.int64)
     gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(draw_list.cluster,
@@ -206,8 +218,13 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> 
     if not np.all(np.isfinite(mvps)):
         raise ValueError("an instance's view-projection · model matrix is not finite in "
                          "float32")
+    model = np.matmul(mats, origin)
+    # plane · model: the distance of an object-space point p is plane · (model · [p, 1])
+    uplanes = (np.einsum("kj,ijl->ikl", clip_planes, model) if clip_planes is not None
+               else np.zeros((len(mats), 0, 4)))
     return FrameDraws(d, n_verts, n_tris, np.ascontiguousarray(mvps.reshape(-1, 16)),
-                      np.ascontiguousarray(mvps64.reshape(-1, 16)), depth_rows(mvps64))
+                      np.ascontiguousarray(mvps64.reshape(-1, 16)), depth_rows(mvps64),
+                      np.ascontiguousarray(uplanes))
 
 
 def depth_rows(m64: np.ndarray) -> np.ndarray:
@@ -226,7 +243,8 @@ def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
     nv, nt = info[:, 3], info[:, 1]
     d["vert_base"] = np.cumsum(nv) - nv
     d["tri_base"] = np.cumsum(nt) - nt
-    return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps, fd.mvps64, fd.zrows)
+    return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps, fd.mvps64, fd.zrows,
+                      fd.uplanes)
 
 
 def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -291,16 +309,19 @@ class PlanCache:
 
 
 def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
-               cones: bool, cache: PlanCache, keep_cone_culled: bool = False) -> FramePlan:
+               cones: bool, cache: PlanCache, keep_cone_culled: bool = False,
+               clip_planes: np.ndarray | None = None) -> FramePlan:
     """Cull ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene: converted once by
     `inputs.as_target`, before the cache, so the cache keys on the converted object) for
     ``camera`` and lay out this frame's draws (``keep_cone_culled``: see
-    `cull.build_draw_list`)."""
+    `cull.build_draw_list`). ``clip_planes``: float64 (K, 4) world-space user clip planes
+    (checked, `inputs.check_clip_planes`) or None: clusters wholly outside one are culled
+    and the rest clipped."""
     from .cull import build_draw_list
 
     vp = view_projection(camera, width, height)
     scene, pool = cache.scene_and_pool(as_target(target))
     check_depth_range(camera, width, height, scene)
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
-                         keep_cone_culled=keep_cone_culled)
-    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp), vp)
+                         keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
+    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp, clip_planes), vp)

@@ -49,7 +49,8 @@ class FrameStats:
         triangles_total, triangles_frustum_culled, triangles_cone_culled
         triangles_in: sent to setup.
         invalid: dropped because a vertex (or its clip position) is NaN/Inf.
-        trivially_rejected: all three vertices outside one frustum plane (outcode AND ≠ 0).
+        trivially_rejected: all three vertices outside one frustum plane (outcode AND ≠ 0) or
+            one user clip plane.
         backface_culled: facing away under the cull mode.
         degenerate: zero area (edge-on, or after the 1/256-pixel snap).
         no_sample: bounding box contains no pixel centre, so it covers nothing.

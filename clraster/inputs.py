@@ -124,6 +124,39 @@ def check_boxes(mins: npt.ArrayLike, maxs: npt.ArrayLike, dtype: type = np.float
     return lo, hi
 
 
+def check_clip_planes(planes: Any) -> np.ndarray | None:
+    """User clip planes: None (or an empty list) → None, else float64 (K, 4) rows
+    (a, b, c, d), 1 <= K <= USER_PLANES_MAX (8), each keeping the world-space points with
+    a·x + b·y + c·z + d >= 0. ValueError for another shape, non-finite values, more than 8
+    planes, or a zero normal (a, b, c) (such a plane keeps everything or nothing)."""
+    from .layout import USER_PLANES_MAX
+
+    if planes is None:
+        return None
+    try:
+        p = np.array(planes, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"clip_planes must be (K, 4) numbers (a, b, c, d), got "
+                         f"{planes!r}") from None
+    if p.size == 0:
+        return None
+    if p.ndim == 1 and p.shape[0] == 4:
+        p = p.reshape(1, 4)
+    if p.ndim != 2 or p.shape[1] != 4:
+        raise ValueError(f"clip_planes must have shape (K, 4): rows (a, b, c, d) keeping "
+                         f"a*x + b*y + c*z + d >= 0; got shape {p.shape}")
+    if p.shape[0] > USER_PLANES_MAX:
+        raise ValueError(f"at most {USER_PLANES_MAX} clip planes (as OpenGL's "
+                         f"GL_MAX_CLIP_DISTANCES), got {p.shape[0]}: combine or drop some")
+    if not np.isfinite(p).all():
+        raise ValueError("clip_planes must be finite (no NaN or Inf)")
+    zero = ~np.any(p[:, :3] != 0.0, axis=1)
+    if zero.any():
+        raise ValueError(f"clip plane {int(np.flatnonzero(zero)[0])} has a zero normal "
+                         "(a, b, c) = 0: it would keep everything or nothing")
+    return np.ascontiguousarray(p)
+
+
 def check_cull(cull: str) -> str:
     """A face-culling mode: one of CULL_MODES ("back", "front", "none")."""
     if not isinstance(cull, str) or cull not in CULL_MODES:

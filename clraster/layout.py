@@ -30,11 +30,15 @@ import numpy as np
 #: Vertices snap to 1/256 pixel, as D3D11 requires (a rule, not a tunable: see config).
 SUBPIXEL_BITS = 8
 SUBPIXEL_ONE = 1 << SUBPIXEL_BITS
-#: Triangles clipped by near, far and 4 guard-band planes have at most 3 + 6 vertices.
-MAX_CLIP_VERTICES = 9
+#: User clip planes per frame (`Renderer.render(clip_planes=...)`), as OpenGL's minimum
+#: GL_MAX_CLIP_DISTANCES: one bit each in the vertex stage's ucode.
+USER_PLANES_MAX = 8
+#: Triangles clipped by near, far, 4 guard-band planes and the user planes have at most
+#: 3 + 6 + 8 vertices.
+MAX_CLIP_VERTICES = 3 + 6 + USER_PLANES_MAX
 #: Vertex slots of the clipper's polygon (kernels/setup.cl, reference/setup.py). More than
-#: 3 + 6: float rounding can make a clipped polygon a hair non-convex.
-POLY_MAX = 16
+#: MAX_CLIP_VERTICES: float rounding can make a clipped polygon a hair non-convex.
+POLY_MAX = 24
 
 # ---- Vertex stage ------------------------------------------------------------------------
 
@@ -55,7 +59,7 @@ OC_NEEDS_CLIP = OC_Z_NEG | OC_Z_POS | OC_GB_X_NEG | OC_GB_X_POS | OC_GB_Y_NEG | 
 ST_RASTER = 0  #: unclipped, one setup record at its own slot, sent to binning
 ST_CLIPPED = 1  #: went through the clipper; 0..7 pieces in the clipped-piece buffer
 ST_INVALID = 2  #: a vertex is NaN/Inf (or its clip position is): dropped and counted
-ST_TRIVIAL_REJECT = 3  #: all three vertices outside one frustum plane
+ST_TRIVIAL_REJECT = 3  #: all three vertices outside one frustum plane or one user clip plane
 ST_BACKFACE = 4  #: culled by the cull mode
 ST_DEGENERATE = 5  #: zero area after the fixed-point snap
 ST_NO_SAMPLE = 6  #: bounding box holds no pixel centre: covers nothing (exact, not a guess)
@@ -190,8 +194,8 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Piece flags; clipped pieces: flags >> PF_INDEX_SHIFT = index into the clipped-bary buffer",
      ("PF_SWAPPED", "PF_CLIPPED", "PF_INDEX_SHIFT")),
     ("Cull modes", ("CULL_NONE", "CULL_BACK", "CULL_FRONT")),
-    ("Clipping: vertices of a clipped triangle (3 + 6 planes) and of the clipper's polygon",
-     ("MAX_CLIP_VERTICES", "POLY_MAX")),
+    ("Clipping: user clip planes; vertices of a clipped triangle and of the clipper's polygon",
+     ("USER_PLANES_MAX", "MAX_CLIP_VERTICES", "POLY_MAX")),
     ("Clusters (meshlets): at most CLUSTER_MAX triangles and vertices; draw flags",
      ("CLUSTER_LOG2", "CLUSTER_MAX", "DRAW_INSIDE", "DRAW_MIRRORED")),
     ("Depth pyramid: levels per launch; Hi-Z test results and error model (pyramid.cl)",

@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_mat4, check_size
+from .inputs import check_clip_planes, check_mat4, check_size
 from .layout import (
     LS_ACCEPTED,
     LS_ACCEPTED_DEGENERATE,
@@ -79,6 +79,70 @@ MAX_SEGMENTS = int(np.iinfo(np.int32).max)
 
 STAT_KEYS = ("segments", "invalid", "trivially_rejected", "trivially_accepted", "clipped",
              "clipped_away", "degenerate", "rasterized", "fragments", "fragments_passed")
+
+
+def clip_to_planes(seg: np.ndarray, planes: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Clip world-space segments against user clip planes before the view volume (both
+    renderers call this, so they see the same segments), as OpenGL clips lines against
+    gl_ClipDistance: the part of each segment with a·x + b·y + c·z + d >= 0 for every plane.
+
+    Per segment, the kept parameter range [t0, t1] of p0 + t·(p1 − p0) is narrowed plane by
+    plane (Liang–Barsky) with distances in float64 from the float32 endpoints; a clipped
+    endpoint is formed in float64 and rounded to float32 once.
+
+    Args:
+        seg: float32 (N, 2, 3) (`check_segments`). planes: float64 (K, 4) or None.
+
+    Returns:
+        (segments float32 (M, 2, 3) to draw, their indices into ``seg`` int64 (M,),
+        status uint8 (N,): LS_REJECTED where both endpoints lie outside one plane,
+        LS_CLIPPED_AWAY where the planes together leave nothing, LS_CLIPPED where a plane
+        cut the segment (refined by the view-volume result, `merge_plane_status`), 255
+        where no plane touched it).
+    """
+    n = seg.shape[0]
+    status = np.full(n, 255, np.uint8)
+    if planes is None or n == 0:
+        return seg, np.arange(n, dtype=np.int64), status
+    p = seg.astype(np.float64)
+    with np.errstate(all="ignore"):   # NaN/Inf endpoints: no plane test, the kernel says
+        d = np.einsum("nej,kj->nek", p, planes[:, :3]) + planes[:, 3]   # (N, 2, K)
+        out0, out1 = d[:, 0] < 0.0, d[:, 1] < 0.0
+        t = d[:, 0] / (d[:, 0] - d[:, 1])
+        t0 = np.where(out0 & ~out1, t, 0.0).max(axis=1)
+        t1 = np.where(out1 & ~out0, t, 1.0).min(axis=1)
+    rejected = (out0 & out1).any(axis=1)
+    cut = (out0 | out1).any(axis=1) & ~rejected
+    away = cut & ~(t0 <= t1)
+    status[cut] = LS_CLIPPED
+    status[away] = LS_CLIPPED_AWAY
+    status[rejected] = LS_REJECTED
+    keep = np.flatnonzero((status == 255) | (status == LS_CLIPPED))
+    out = seg[keep].copy()
+    c = np.flatnonzero(status[keep] == LS_CLIPPED)
+    if c.size:
+        a, b = p[keep[c], 0], p[keep[c], 1]
+        out[c, 0] = (a + t0[keep[c], None] * (b - a)).astype(np.float32)
+        out[c, 1] = (a + t1[keep[c], None] * (b - a)).astype(np.float32)
+    return np.ascontiguousarray(out), keep, status
+
+
+def merge_plane_status(pre: np.ndarray, keep: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Per-segment status (uint8 (N,)) from `clip_to_planes`' ``pre`` and the view-volume
+    status ``kernel`` of the drawn segments ``keep``: untouched segments take the kernel's;
+    a segment a user plane cut counts as clipped (its view-volume result moved to the
+    clipped codes: accepted → LS_CLIPPED, degenerate → LS_CLIPPED_DEGENERATE, rejected or
+    clipped away → LS_CLIPPED_AWAY)."""
+    st = pre.copy()
+    k = np.asarray(kernel, np.uint8)
+    cut = st[keep] == LS_CLIPPED
+    moved = np.select([k == LS_ACCEPTED, k == LS_ACCEPTED_DEGENERATE,
+                       (k == LS_REJECTED) | (k == LS_CLIPPED_AWAY)],
+                      [LS_CLIPPED, LS_CLIPPED_DEGENERATE, LS_CLIPPED_AWAY],
+                      k.astype(np.int64)).astype(np.uint8)
+    st[keep] = np.where(cut, moved, k).astype(np.uint8)
+    return st
 
 
 def stats_from_status(status: np.ndarray, fragments: int, passed: int) -> dict[str, int]:
@@ -229,7 +293,8 @@ class LineRenderer:
         self.stage = LineStage(self.context)
 
     def render(self, segments: npt.ArrayLike, view_proj: Any, *,
-               depth: np.ndarray | None = None, depth_bias: float = 0.0) -> LineFrame:
+               depth: np.ndarray | None = None, depth_bias: float = 0.0,
+               clip_planes: Any = None) -> LineFrame:
         """Draw world-space segments seen through ``view_proj``.
 
         Args:
@@ -241,6 +306,9 @@ class LineRenderer:
                 fragment is drawn only where its depth ≤ ``depth[y, x] + depth_bias``.
                 Without it every fragment is drawn (nearest wins among the segments).
             depth_bias: added to the buffer's depth (float32) in the test.
+            clip_planes: up to 8 world-space planes (a, b, c, d) keeping a·x + b·y + c·z + d
+                >= 0, as `Renderer.render`'s: segments are clipped against them first
+                (`clip_to_planes`); line ids stay the input indices.
 
         Returns:
             A `LineFrame`. See the module docstring for the rules; results are deterministic
@@ -255,19 +323,26 @@ class LineRenderer:
         m = check_view_proj(view_proj, w, h)
         dbuf = check_depth(depth, w, h)
         bias = check_bias(depth_bias)
+        planes = check_clip_planes(clip_planes)
         if seg.shape[0] == 0:
             return LineFrame.empty(w, h)
-        line_id, zbuf, status, frags, passed = self.stage.run(self.queue, seg, m, w, h, dbuf,
-                                                              bias)
+        drawn, keep, pre = clip_to_planes(seg, planes)
+        if drawn.shape[0] == 0:
+            return LineFrame.empty(w, h, stats_from_status(pre, 0, 0))
+        line_id, zbuf, status, frags, passed = self.stage.run(self.queue, drawn, m, w, h,
+                                                              dbuf, bias)
+        if planes is not None:
+            line_id = np.where(line_id >= 0, keep[np.maximum(line_id, 0)], -1).astype(np.int32)
+            status = merge_plane_status(pre, keep, status)
         return LineFrame(line_id, zbuf, stats_from_status(status, frags, passed))
 
 
 def render_lines(segments: npt.ArrayLike, view_proj: Any, width: int, height: int, *,
                  depth: np.ndarray | None = None, depth_bias: float = 0.0,
-                 context: cl.Context | None = None) -> LineFrame:
+                 context: cl.Context | None = None, clip_planes: Any = None) -> LineFrame:
     """Convenience: `LineRenderer(width, height).render(...)` for one call."""
     return LineRenderer(width, height, context=context).render(
-        segments, view_proj, depth=depth, depth_bias=depth_bias)
+        segments, view_proj, depth=depth, depth_bias=depth_bias, clip_planes=clip_planes)
 
 
 # -- geometry helpers -----------------------------------------------------------------------

@@ -17,7 +17,7 @@ from .device import check_process, default_context, event_ms
 from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .inputs import CameraLike, Target, check_cull, check_flag, check_size
+from .inputs import CameraLike, Target, check_clip_planes, check_cull, check_flag, check_size
 from .params import FrameParams, FrameTotals, finish_depth
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
@@ -45,7 +45,7 @@ class Renderer:
 
         frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
                        NumPy arrays, used in place by a CPU device)
-      + per pass       ≤ 239·M + 228·E bytes (695 MiB at the defaults; draws, vertex stream,
+      + per pass       ≤ 242·M + 228·E bytes (698 MiB at the defaults; draws, vertex stream,
                        setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
       + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and
@@ -82,7 +82,8 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               overdraw: bool = False, fates: bool = False, reversed_z: bool = False) -> Frame:
+               overdraw: bool = False, fates: bool = False, reversed_z: bool = False,
+               clip_planes: Any = None) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
         or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
         by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
@@ -111,6 +112,14 @@ class Renderer:
                 depth rounds to 1.0 (with near = 0.1, a float32 window depth cannot tell
                 1,000 from 1,000.1 units; reversed-Z separates them). Ids and barycentrics
                 are the same except where the finer far-depth test breaks ties differently.
+            clip_planes: up to 8 world-space planes (a, b, c, d), array-like (K, 4), keeping
+                the points with a·x + b·y + c·z + d >= 0, as OpenGL's gl_ClipDistance: the
+                vertex stage computes each vertex's distances (in double, from its
+                object-space position), setup rejects triangles wholly outside one plane
+                and clips the others with Sutherland–Hodgman after the view volume (pieces
+                keep the parent's id and barycentrics), and clusters wholly outside one
+                plane are culled before anything is drawn (counted as frustum-culled).
+                None or [] for none.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -119,6 +128,7 @@ class Renderer:
             and counted in ``stats.invalid``.
         """
         check_cull(cull)
+        planes = check_clip_planes(clip_planes)
         for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
                             ("overdraw", overdraw), ("fates", fates),
                             ("reversed_z", reversed_z)):
@@ -126,7 +136,7 @@ class Renderer:
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates, reversed_z)
+                                fates, reversed_z, planes)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -152,11 +162,11 @@ class Renderer:
 
     def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
                 cones: bool, occlusion: bool, overdraw: bool, fates: bool,
-                reversed_z: bool = False) -> Frame:
+                reversed_z: bool = False, clip_planes: np.ndarray | None = None) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans, keep_cone_culled=fates)
+                          cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes)
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
         fd = plan.frame

@@ -18,6 +18,7 @@
  * argument is bound to the id buffer.)
  */
 #pragma OPENCL FP_CONTRACT OFF
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable   /* the clipper and user clip distances */
 
 #ifndef TILE_LOG2
 #error "TILE_LOG2 must be defined (see clraster/config.py RasterConfig.build_options)"
@@ -73,6 +74,15 @@ inline float4 clip_transform(__global const float *m, float px, float py, float 
     c.z = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
     c.w = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
     return c;
+}
+
+/* Signed distance of an object-space vertex to a user clip plane q (a, b, c, d, already in
+ * the instance's object space: world plane · model, float64 on the host), >= 0 kept. The
+ * vertex stage (ucode bits) and setup's clipper (vertex distances) evaluate exactly this,
+ * so the two never disagree on a vertex's side. */
+inline double user_dist(__global const double *q, float px, float py, float pz)
+{
+    return ((q[0] * (double)px + q[1] * (double)py) + q[2] * (double)pz) + q[3];
 }
 
 /* The classic 6-bit frustum outcode of a clip-space point: bit k set iff the signed distance

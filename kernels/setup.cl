@@ -235,8 +235,21 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1
 /* Clip triangle (c0, c1, c2) against the planes in `planes`, fan the polygon and snap each
  * piece. Returns the number of surviving pieces; with write != 0 also stores them (and their
  * parent barycentrics, 9 floats per piece) at index base, base+1, ... */
+/* Distance of a polygon vertex to user plane k: the parent's vertex distances ud[3k..3k+2]
+ * weighted by the vertex's parent barycentrics. Distances are affine in position and the
+ * barycentrics are the clip-space interpolation weights, so this is the distance at the
+ * clipped vertex (OpenGL interpolates gl_ClipDistance the same way); at the triangle's own
+ * vertices (barycentrics 1, 0, 0...) it is exactly the vertex stage's user_dist. */
+inline double user_plane_dist(const double *ud, int k, ClipVert v)
+{
+    return (v.b0 * ud[3 * k] + v.b1 * ud[3 * k + 1]) + v.b2 * ud[3 * k + 2];
+}
+
+/* Clip triangle (c0, c1, c2) against the planes in `planes` (frustum/guard-band bits, in
+ * PLANE_BIT order) and then the user planes in `umask` (bit k: plane k, vertex distances
+ * ud[3k..3k+2]), fan the polygon and snap each piece. */
 inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, ClipIn d2,
-                         uint planes, float kx, float ky,
+                         uint planes, uint umask, const double *ud, float kx, float ky,
                          int width, int height, double zs, double zo, int id, int write,
                          __global Piece *out, __global float *out_bary, int base)
 {
@@ -250,13 +263,15 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
     poly[1].b0 = 0.0; poly[1].b1 = 1.0; poly[1].b2 = 0.0;
     poly[2].b0 = 0.0; poly[2].b1 = 0.0; poly[2].b2 = 1.0;
     int n = 3;
-    for (int p = 0; p < 6 && n >= 3; ++p) {
-        if (!(planes & PLANE_BIT[p])) continue;
+    for (int p = 0; p < 6 + USER_PLANES_MAX && n >= 3; ++p) {
+        bool user = p >= 6;
+        if (user ? !(umask & (1u << (p - 6))) : !(planes & PLANE_BIT[p])) continue;
         for (int i = 0; i < n; ++i) tmp[i] = poly[i];
         int m = 0;
         for (int i = 0; i < n && m < POLY_MAX; ++i) {
             ClipVert a = tmp[i], b = tmp[i + 1 == n ? 0 : i + 1];
-            double da = plane_dist(p, a.p, kxd, kyd), db = plane_dist(p, b.p, kxd, kyd);
+            double da = user ? user_plane_dist(ud, p - 6, a) : plane_dist(p, a.p, kxd, kyd);
+            double db = user ? user_plane_dist(ud, p - 6, b) : plane_dist(p, b.p, kxd, kyd);
             bool ain = da >= 0.0, bin = db >= 0.0;
             if (ain) poly[m++] = a;
             if (ain != bin && m < POLY_MAX) {
@@ -264,7 +279,8 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
                 double di = ain ? da : db, dout = ain ? db : da;
                 double t = di / (di - dout);
                 ClipVert r;
-                r.p = onto_plane(p, vi.p + t * (vo.p - vi.p), kxd, kyd);
+                r.p = vi.p + t * (vo.p - vi.p);
+                if (!user) r.p = onto_plane(p, r.p, kxd, kyd);
                 r.r = vi.r + t * (vo.r - vi.r);
                 r.b0 = vi.b0 + t * (vo.b0 - vi.b0);
                 r.b1 = vi.b1 + t * (vo.b1 - vi.b1);
@@ -340,7 +356,25 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
     __global const int *restrict face_ids, __global const float *restrict pos,             \
     __global const int *restrict vert_ids, __global const double *restrict mvps,           \
-    __global const double *restrict zrows
+    __global const double *restrict zrows, __global const double *restrict uplanes,       \
+    const int n_user, __global const uchar *restrict ucode
+
+/* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
+ * ud[3k + j] (vertex j, plane k): user_dist, as the vertex stage's ucode. */
+inline void user_dists(__global const float *pos, __global const int *vert_ids,
+                       __global const int4 *clusters, __global const double *uplanes,
+                       int n_user, uint umask, Draw dr, int i0, int i1, int i2, double *ud)
+{
+    int vb = clusters[dr.cluster].z - dr.vert_base;
+    int v[3] = {vert_ids[vb + i0], vert_ids[vb + i1], vert_ids[vb + i2]};
+    __global const double *q = uplanes + 4 * n_user * dr.instance;
+    for (int k = 0; k < n_user; ++k) {
+        if (!(umask & (1u << k))) continue;
+        for (int j = 0; j < 3; ++j)
+            ud[3 * k + j] = user_dist(q + 4 * k, pos[3 * v[j]], pos[3 * v[j] + 1],
+                                      pos[3 * v[j] + 2]);
+    }
+}
 
 /* The frame's depth convention (kernel argument `reversed`): value_planes' scale and
  * offset of the depth key (see ClipIn and value_planes). */
@@ -361,23 +395,32 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         return;
     uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
     uint o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
+    /* user clip planes: all three vertices outside one → rejected; any outside → clipped */
+    uint u_or = 0, u_and = 0;
+    if (n_user > 0) {
+        uint u0 = ucode[i0], u1 = ucode[i1], u2 = ucode[i2];
+        u_or = u0 | u1 | u2;
+        u_and = u0 & u1 & u2;
+    }
     int st, nclip = 0;
     if (o_or & OC_INVALID) {
         st = ST_INVALID;
-    } else if (o_and & OC_FRUSTUM) {
+    } else if ((o_and & OC_FRUSTUM) || u_and) {
         st = ST_TRIVIAL_REJECT;
     } else {
         float4 c0 = clip[i0], c1 = clip[i1], c2 = clip[i2];
         st = facing(c0, c1, c2, draw_cull(cull, dflags));
         if (st != ST_RASTER) {
-        } else if (o_or & OC_NEEDS_CLIP) {
+        } else if ((o_or & OC_NEEDS_CLIP) || u_or) {
             st = ST_CLIPPED;
             Draw dr = draws[get_group_id(0)];
+            double ud[3 * USER_PLANES_MAX];
+            user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
             nclip = clip_and_emit(c0, c1, c2,
                                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i0),
                                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i1),
                                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i2),
-                                  o_or & OC_NEEDS_CLIP, kx, ky, width, height, zs, zo,
+                                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
                                   id, 0, pieces, 0, 0);
         } else if (o_or & OC_W_NONPOS) {
             st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
@@ -419,12 +462,15 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
                      &i0, &i1, &i2, &id, &dflags) || clip_count[t] == 0)
         return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
+    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) : 0u;
     Draw dr = draws[get_group_id(0)];
+    double ud[3 * USER_PLANES_MAX];
+    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
     clip_and_emit(clip[i0], clip[i1], clip[i2],
                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i0),
                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i1),
                   object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i2),
-                  o_or & OC_NEEDS_CLIP, kx, ky, width, height, zs, zo,
+                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
                   id, 1, clip_pieces, clip_bary, clip_offset[t]);
 }
 

@@ -5,7 +5,11 @@
  * transformed once per cluster, bit-identically.
  * Also the viewport transform (WinVert) of every vertex that can be drawn unclipped.
  * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
- * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree. */
+ * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree.
+ * User clip planes (n_user of them): ucode bit k is set iff the vertex's distance to plane
+ * k, in double from its object-space position and the instance's object-space plane
+ * (uplanes[(instance·n_user + k)·4 ..]), is negative: user_dist, the expression setup.cl
+ * evaluates for the same vertex. */
 #include "common.h"
 
 __kernel void vertex_transform(__global const float *restrict pos,
@@ -16,7 +20,9 @@ __kernel void vertex_transform(__global const float *restrict pos,
                                const float ky, const int width, const int height,
                                __global float4 *restrict clip,
                                __global ushort *restrict outcode,
-                               __global WinVert *restrict win)
+                               __global WinVert *restrict win,
+                               __global const double *restrict uplanes, const int n_user,
+                               __global uchar *restrict ucode)
 {
     /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
      * per draw (record, cluster, matrix) is uniform over the group and PoCL hoists it */
@@ -47,7 +53,15 @@ __kernel void vertex_transform(__global const float *restrict pos,
     WinVert v = {0, 0, 0.0f, 0.0f};
     if (!(oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)))
         v = viewport_vertex(c, 0.5f * (float)width, 0.5f * (float)height);
+    uint uc = 0;
+    if (n_user > 0 && !(oc & OC_INVALID)) {
+        __global const double *q = uplanes + 4 * n_user * dr.instance;
+        for (int k = 0; k < n_user; ++k)
+            uc |= user_dist(q + 4 * k, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]) < 0.0
+                  ? 1u << k : 0u;
+    }
     clip[i] = c;
     outcode[i] = (ushort)oc;
     win[i] = v;
+    ucode[i] = (uchar)uc;
 }

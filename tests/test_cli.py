@@ -206,3 +206,125 @@ def test_depth_and_ids_files_follow_the_extension(tmp_path, capsys):
                  "--depth", str(tmp_path / "d.txt")]) == 1
     out = capsys.readouterr()
     assert "--depth" in out.err and "mesh:" not in out.out
+
+
+# -- user clip planes ------------------------------------------------------------------------
+
+# keeps x + z <= 1: a vertical plane through the example scene (x, z in [-4, 4]), cutting
+# the ground and the objects on it
+CUT_PLANE = (-1.0, 0.0, -1.0, 1.0)
+CUT = ["--clip-plane", "-1", "0", "-1", "1"]
+
+
+def _near_drawn(ids: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels drawn or next to a drawn one."""
+    drawn = np.pad(ids >= 0, 1)
+    h, w = ids.shape
+    near = np.zeros_like(ids, dtype=bool)
+    for dy in range(3):
+        for dx in range(3):
+            near |= drawn[dy:dy + h, dx:dx + w]
+    return near
+
+
+def test_clip_plane_cuts_the_image(tmp_path):
+    """--clip-plane A B C D removes what lies on the plane's negative side: less coverage,
+    the same cut with OpenCL and the NumPy twin, either way of writing the numbers, and a
+    plane that keeps everything changes nothing."""
+    _, img, depth, ids = _render(tmp_path)
+    _, img_c, depth_c, ids_c = _render(tmp_path, *CUT)
+    whole, cut = int((ids >= 0).sum()), int((ids_c >= 0).sum())
+    assert 0 < cut < 0.9 * whole
+    # nothing new appears: a cut pixel shows what the uncut image shows there, or a
+    # surface that was hidden behind the removed part (farther away)
+    drawn = ids_c >= 0
+    assert np.all(depth_c[drawn] >= depth[drawn] - 1e-6)
+    assert np.all(img_c[~drawn] == WHITE)
+    _, _, depth_r, ids_r = _render(tmp_path, *CUT, "--reference")
+    np.testing.assert_array_equal(ids_r, ids_c)
+    np.testing.assert_array_equal(depth_r, depth_c)
+    _, _, _, ids_w = _render(tmp_path, "--clip-plane=-1,0,-1,1")
+    np.testing.assert_array_equal(ids_w, ids_c)
+    _, _, _, ids_all = _render(tmp_path, "--clip-plane", "0", "-1", "0", "1e3")
+    np.testing.assert_array_equal(ids_all, ids)
+    # two planes cut more than one: keep x + z <= 1 and y <= 0.5
+    _, _, _, ids_2 = _render(tmp_path, *CUT, "--clip-plane", "0", "-1", "0", "0.5")
+    assert 0 < (ids_2 >= 0).sum() < cut
+    assert np.all(ids_c[ids_2 >= 0] >= 0)
+
+
+@pytest.mark.parametrize("extra", [(), ("--reference",)], ids=["opencl", "reference"])
+def test_clip_plane_clips_the_wireframe(tmp_path, extra):
+    """The wireframe is cut by the same planes: the edges of the removed part would paint
+    the background far from any drawn pixel. (With --cull none: the cut opens closed
+    objects, and with back-face culling the edges of their inside faces would show through
+    the opening over the background.)"""
+    _, plain, _, ids = _render(tmp_path, *CUT, "--cull", "none", *extra)
+    _, wire, _, _ = _render(tmp_path, *CUT, "--cull", "none", "--wireframe", *extra)
+    painted = np.any(wire != plain, axis=2)
+    assert painted.sum() > 0.05 * (ids >= 0).sum()
+    assert np.all(_near_drawn(ids)[painted])
+
+
+@pytest.mark.parametrize("words, message", [
+    (["--clip-plane", "0", "0", "0", "1"], "normal"),
+    (["--clip-plane", "0", "1", "0"], "four finite numbers"),
+    (["--clip-plane", "a", "b", "c", "d"], "four finite numbers"),
+    (["--clip-plane", "0", "nan", "0", "1"], "four finite numbers"),
+    (["--clip-plane=1,2,3"], "four finite numbers"),
+    (CUT * 9, "at most 8"),
+])
+def test_bad_clip_planes_exit_2(tmp_path, capsys, words, message):
+    assert main(["render", "example", "--out", str(tmp_path / "x.png"), *words]) == 2
+    err = capsys.readouterr().err
+    assert "usage:" in err and "Traceback" not in err
+    errors = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(errors) == 1 and "--clip-plane" in errors[0] and message in errors[0], err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_clip_planes_reach_the_views_paths(tmp_path, monkeypatch, capsys):
+    """--views renders every view with the planes, on the local and on the Dask path."""
+    import json
+
+    from clraster import Camera, Renderer
+    from clraster.examples import example_mesh
+
+    w, h = SIZE
+    cams = [Camera.look_at((6.0, 3.0, 5.0), (0, 0.8, 0), fov_y=50, near=0.5, far=30),
+            Camera.look_at((-5.0, 2.0, 6.0), (0, 0.8, 0), fov_y=50, near=0.5, far=30)]
+    f = tmp_path / "cams.json"
+    f.write_text(json.dumps([{"eye": c.eye.tolist(), "target": [0, 0.8, 0], "up": [0, 1, 0],
+                              "fov_y": 50, "near": 0.5, "far": 30} for c in cams]))
+    out = tmp_path / "views"
+    assert main(["render", "example", "--views", str(f), "--out", str(out), "--size",
+                 f"{w}x{h}", "--outputs", "ids", *CUT]) == 0
+    from clraster.batch import view_files
+
+    r, mesh = Renderer(w, h), example_mesh()
+    for k, cam in enumerate(cams):
+        got = np.load(view_files(out, k, ("ids",))["ids"])
+        np.testing.assert_array_equal(got, r.render(mesh, cam, clip_planes=[CUT_PLANE])
+                                      .triangle_id)
+        assert (got >= 0).sum() < (r.render(mesh, cam).triangle_id >= 0).sum()
+
+    # the Dask path: the planes go to clraster.distributed.render_views with the rest
+    import types
+
+    import clraster.cli as cli
+    import clraster.distributed as dist
+
+    seen = {}
+
+    def fake_render_views(target, cameras, client, out_dir, outputs, **kw):
+        seen.update(kw)
+        return types.SimpleNamespace(failures=[])
+
+    monkeypatch.setattr(cli, "_dask_client", lambda args, stack: None)
+    monkeypatch.setattr(dist, "render_views", fake_render_views)
+    assert main(["render", "example", "--views", str(f), "--out", str(tmp_path / "v2"),
+                 "--size", f"{w}x{h}", "--workers", "2", *CUT, *CUT[:1], "1", "0", "0",
+                 "0"]) == 0
+    np.testing.assert_array_equal(seen["clip_planes"], [CUT_PLANE, [1, 0, 0, 0]])
+    assert seen["cull"] == "back" and seen["reversed_z"] is False
+    capsys.readouterr()

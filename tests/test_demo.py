@@ -6,8 +6,10 @@
   front (drawn), behind the eye (every cluster frustum-culled), facing away (cone-culled),
   hidden behind a wall (occlusion-culled on the second frame).
 * The demo: writes the four images at the requested size; the inspector shows fate colours
-  and the frustum lines; bad arguments exit with 2 and a message; a triangle count above
-  the cap is refused while the arguments are parsed, before the plant is built.
+  and the frustum lines, and cuts the plant with a horizontal clip plane (instances crossing
+  it are cut open: their faces below it drawn, none wholly above); bad arguments exit with
+  2 and a message; a triangle count above the cap is refused while the arguments are
+  parsed, before the plant is built.
 * The picture helpers (`clraster.annotate`): text lands where the layout puts it, in its
   colour, clipped at the edges; colour ramps hit their stops; tick steps are 1, 2, 5 × 10^k.
 """
@@ -167,7 +169,7 @@ def test_demo_writes_the_images(tmp_path, capsys):
                       "--frames", "2"]) == 0
     text = capsys.readouterr().out
     for word in ("frustum culled", "occlusion culled", "frame 2", "cluster fates",
-                 "inspector.png"):
+                 "inspector.png", "cut open"):
         assert word in text
     imgs = {}
     for name in ("shaded", "depth", "overdraw", "inspector"):
@@ -198,23 +200,31 @@ def test_inspector_picture_colours_by_fate(small_plant, renderer):
 
     cam = plant_inside_camera(small_plant, W, H)
     fr = renderer.render(small_plant, cam, occlusion=True, fates=True)
-    sub, keep = demo.inspector_scene(small_plant, 0.0)
-    assert 0 < sub.n_instances < small_plant.n_instances
+    plane = demo.inspector_plane(0.0)
+    np.testing.assert_array_equal(plane, [[0.0, -1.0, 0.0, demo.INSPECTOR_CUT]])
+    crossing, above = demo.cut_instances(small_plant, plane)
+    assert crossing > 0 and above > 0
     icam = demo.inspector_camera(small_plant, 0.0, W, H)
-    ifr = renderer.render(sub, icam)
+    ifr = renderer.render(small_plant, icam, clip_planes=plane)
+    world = demo.world_mesh(small_plant)
     img, per_fate = demo.inspector_picture(
-        ifr, sub, keep, fr.fates, demo.world_mesh(small_plant), small_plant,
-        icam.view_projection(W, H), cam.view_projection(W, H), W, H,
-        context=renderer.context)
+        ifr, fr.fates, world, small_plant, icam.view_projection(W, H),
+        cam.view_projection(W, H), W, H, context=renderer.context, note="clip plane")
     assert sum(per_fate.values()) == int(ifr.mask.sum())
+    # cut, not dropped: faces crossing the plane are drawn (their lower part), no face
+    # wholly above it is
+    y = world.vertices[world.faces[np.unique(ifr.triangle_id[ifr.mask])], 1]
+    top = demo.INSPECTOR_CUT
+    assert (y.min(axis=1) <= top + 1e-4).all()
+    assert ((y.min(axis=1) < top) & (y.max(axis=1) > top + 0.05)).sum() > 5
     # a covered pixel away from the legend and the lines: its colour is its fate's, lit
-    inst, face = sub.split_ids(ifr.triangle_id)
+    inst, face = small_plant.split_ids(ifr.triangle_id)
     fate = np.full(inst.shape, -1)
-    fate[inst >= 0] = fr.fates.face_fate(keep[inst[inst >= 0]], face[inst >= 0])
+    fate[inst >= 0] = fr.fates.face_fate(inst[inst >= 0], face[inst >= 0])
     ys, xs = np.nonzero(fate >= 0)
     pal = np.array([demo.FATE_COLORS[f] for f in Fate], np.float64)
     checked = 0
-    legend_rows = 90  # the legend panel covers the top rows at this size
+    legend_rows = 90  # the legend panel covers the top rows at this size (no note line)
     for y, x in zip(ys[::29], xs[::29], strict=True):
         px = img[y, x].astype(np.float64)
         if y < legend_rows or tuple(px) in (demo.FRUSTUM_COLOR, demo.FRUSTUM_HIDDEN_COLOR):

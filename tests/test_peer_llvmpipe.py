@@ -43,8 +43,9 @@ def small_peer():
     p.release()
 
 
-def _clraster(target, cam, w, h, cull="back"):
-    return get_renderer(w, h).render(target, cam, cull=cull)
+def _clraster(target, cam, w, h, cull="back", clip_planes=None):
+    kw = {} if clip_planes is None else {"clip_planes": clip_planes}
+    return get_renderer(w, h).render(target, cam, cull=cull, **kw)
 
 
 def _spot_camera(mesh):
@@ -247,8 +248,8 @@ def test_spot_agrees_with_clraster(peer, cull):
         assert np.mean(f.triangle_id[both] == other.triangle_id[both]) < 0.5
 
 
-@needs_gl
-def test_scene_instances_agree_with_clraster(peer):
+def _instances_scene():
+    """Three spots (one mirrored: negative determinant) and a quad behind them."""
     spot = load_shared_mesh("spot.ply")
     quad = Mesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]])
 
@@ -261,10 +262,15 @@ def test_scene_instances_agree_with_clraster(peer):
 
     mirror = rot_y(0.0, (0.0, 0.0, -1.2))
     mirror[0, 0] = -1.0    # negative determinant: flips the winding on screen
-    scene = Scene([(spot, rot_y(0.3, (-0.8, 0.0, 0.0))),
-                   (quad, rot_y(0.0, (0.0, 0.0, -2.0), 1.5)),
-                   (spot, rot_y(-0.9, (0.8, 0.1, 0.2), 0.8)),
-                   (spot, mirror)])
+    return Scene([(spot, rot_y(0.3, (-0.8, 0.0, 0.0))),
+                  (quad, rot_y(0.0, (0.0, 0.0, -2.0), 1.5)),
+                  (spot, rot_y(-0.9, (0.8, 0.1, 0.2), 0.8)),
+                  (spot, mirror)])
+
+
+@needs_gl
+def test_scene_instances_agree_with_clraster(peer):
+    scene = _instances_scene()
     lo, hi = scene.bounds()
     cam = Camera.framing(lo, hi, direction=(0.3, 0.5, 1.0), aspect=W / H)
     f = _clraster(scene, cam, W, H)
@@ -281,6 +287,85 @@ def test_scene_instances_agree_with_clraster(peer):
     assert set(np.unique(inst).tolist()) == {0, 1, 2, 3}
 
 
+# -- user clip planes -----------------------------------------------------------------------
+
+def _plane(normal, point):
+    """(a, b, c, d) of the plane through ``point`` keeping the side ``normal`` points to."""
+    n = np.asarray(normal, np.float64)
+    return [*n, -float(n @ np.asarray(point, np.float64))]
+
+
+def _spot_cuts(mesh):
+    """1, 2 or 3 planes through spot, tilted so the camera of `_spot_camera` looks into the
+    opened shell (cull="none" then draws inside faces that cull="back" drops)."""
+    lo, hi = mesh.bounds()
+    c = (lo + hi) / 2
+    return {
+        1: [_plane((-0.7, -0.4, -1.0), c)],
+        2: [_plane((-0.4, -1.0, -0.5), c + (0.0, 0.2, 0.0)),
+            _plane((1.0, 0.0, -0.3), c + (0.15, 0.0, 0.0))],
+        3: [_plane((-0.3, -1.0, -0.4), c + (0.0, 0.25, 0.0)),
+            _plane((-1.0, 0.0, 0.4), c + (0.3, 0.0, 0.0)),
+            _plane((0.2, 0.3, -1.0), c + (0.0, 0.0, 0.4))],
+    }
+
+
+@needs_gl
+@pytest.mark.parametrize("k", [1, 2, 3])
+@pytest.mark.parametrize("cull", ["none", "back"])
+def test_spot_cut_by_clip_planes_agrees_with_clraster(peer, cull, k):
+    mesh = load_shared_mesh("spot.ply")
+    cam = _spot_camera(mesh)
+    vp = cam.view_projection(W, H)
+    planes = _spot_cuts(mesh)[k]
+    whole = _clraster(mesh, cam, W, H, cull=cull)
+    f = _clraster(mesh, cam, W, H, cull=cull, clip_planes=planes)
+    peer.upload(mesh)
+    pf = peer.render(vp, cull=cull, repeat=1, ids=True, clip_planes=planes)
+    r = coverage_agreement(f, pf)
+    assert r["agree"] >= 0.999 and r["both"] >= 1000, r
+    assert r["depth_diff_median"] < 2e-6, r
+    # the cut removes a real share of the uncut coverage, so a renderer that ignored the
+    # planes would fail the agreement above
+    assert f.mask.sum() < 0.85 * whole.mask.sum()
+    assert coverage_agreement(whole, pf)["agree"] < 0.99
+    both = f.mask & pf.coverage
+    # clipped pieces keep their parent's id
+    assert np.mean(f.triangle_id[both] == pf.triangle_id[both]) >= 0.999
+    if (cull, k) == ("back", 1):
+        # negative control: the planes' other side (a flipped sign convention) disagrees
+        flipped = peer.render(vp, cull=cull, repeat=1, clip_planes=-np.asarray(planes))
+        assert coverage_agreement(f, flipped)["agree"] < 0.95
+        # no planes and an empty (0, 4) list both draw the whole mesh
+        assert np.array_equal(peer.render(vp, cull=cull, repeat=1).coverage, whole.mask)
+        empty = peer.render(vp, cull=cull, repeat=1, clip_planes=np.zeros((0, 4)))
+        assert np.array_equal(empty.coverage, whole.mask)
+
+
+@needs_gl
+def test_scene_instances_cut_by_a_clip_plane_agree_with_clraster(peer):
+    scene = _instances_scene()
+    lo, hi = scene.bounds()
+    cam = Camera.framing(lo, hi, direction=(0.3, 0.5, 1.0), aspect=W / H)
+    # an oblique plane through the mirrored spot and the quad: keeps the left side
+    planes = [_plane((-1.0, -0.4, 0.1), (-0.1, 0.1, -1.2))]
+    whole = _clraster(scene, cam, W, H)
+    f = _clraster(scene, cam, W, H, clip_planes=planes)
+    peer.upload(scene)
+    pf = peer.render(cam.view_projection(W, H), repeat=1, ids=True, clip_planes=planes)
+    r = coverage_agreement(f, pf)
+    assert r["agree"] >= 0.999 and r["both"] >= 1000, r
+    assert r["depth_diff_median"] < 2e-6, r
+    assert f.mask.sum() < 0.85 * whole.mask.sum()
+    both = f.mask & pf.coverage
+    assert np.mean(f.triangle_id[both] == pf.triangle_id[both]) >= 0.999
+    # the quad and the mirrored spot are cut, not dropped: each keeps part of its pixels
+    inst_whole = np.bincount(scene.split_ids(whole.triangle_id[whole.mask])[0], minlength=4)
+    inst_cut = np.bincount(scene.split_ids(f.triangle_id[f.mask])[0], minlength=4)
+    for i in (1, 3):
+        assert 0.1 * inst_whole[i] < inst_cut[i] < 0.9 * inst_whole[i], (inst_whole, inst_cut)
+
+
 @needs_gl
 def test_render_checks_and_release():
     p = LlvmpipePeer(16, 16)
@@ -293,6 +378,13 @@ def test_render_checks_and_release():
         p.render(np.eye(3))
     with pytest.raises(TypeError, match="Mesh or Scene"):
         p.upload("dragon.ply")
+    with pytest.raises(ValueError):
+        p.render(np.eye(4), clip_planes=np.zeros((9, 4)) + [1, 0, 0, 0])   # at most 8
+    with pytest.raises(ValueError):
+        p.render(np.eye(4), clip_planes=[[0, 0, 0, 1]])   # no normal
     assert p.render(np.eye(4), cull="none", repeat=1).coverage.any()
+    # CCW lies at x < 0: kept by x <= 0, gone with x >= 0.5 (and the clip program is freed)
+    assert p.render(np.eye(4), repeat=1, clip_planes=[[-1, 0, 0, 0]]).coverage.any()
+    assert not p.render(np.eye(4), repeat=1, clip_planes=[[1, 0, 0, -0.5]]).coverage.any()
     p.release()
     p.release()   # idempotent

@@ -24,6 +24,14 @@ mesh, and one instanced draw per distinct mesh with a per-instance ``mat4`` attr
 scene of thousands of instances (the procedural plant: 5,408 instances) is a few dozen draw
 calls (43).
 
+User clip planes (``render(..., clip_planes=...)``): up to 8 world-space planes (a, b, c, d)
+keeping a·x + b·y + c·z + d >= 0, through ``gl_ClipDistance[i]`` with GL_CLIP_DISTANCE0 + i
+enabled for the planes given. Each plane is taken to object space per instance on the host
+(``plane @ model`` in float64, rounded to float32 once, like the matrices) and passed as a
+per-instance attribute, so the distance is the plane's value at the object-space vertex and
+GL's clipper interpolates it linearly in clip space, the semantics clraster follows. Frames
+without planes use the plain shader (no clip distances written), unchanged.
+
 Install: ``pip install 'clraster[peers]'`` (moderngl, glcontext) and, on Debian/Ubuntu,
 ``apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri libgl1`` (GLVND's libEGL, Mesa's EGL
 vendor, the gallium drivers with llvmpipe, and libGL, which glcontext's EGL backend loads).
@@ -71,6 +79,34 @@ void main() {
 }
 """
 
+# The same shader, plus 8 user clip distances. The object-space planes of an instance are
+# two mat4 attributes, one plane per column (a mat4 attribute takes 4 locations: 1 + 4 + 1 +
+# 8 = 14 of the 16 GL 3.3 guarantees). All 8 distances are written; those of planes not
+# given are zero and their GL_CLIP_DISTANCEi is disabled, so they are ignored.
+_CLIP_VERTEX_SHADER = """
+#version 330
+in vec3 in_pos;
+in mat4 in_mvp;        // per instance: view_proj @ model, float32
+in int in_base;        // per instance: face_base of the instance
+in mat4 in_planes_a;   // per instance: object-space planes 0..3, one per column
+in mat4 in_planes_b;   // per instance: object-space planes 4..7
+flat out int v_base;
+out float gl_ClipDistance[8];
+void main() {
+    vec4 p = vec4(in_pos, 1.0);
+    gl_Position = in_mvp * p;
+    v_base = in_base;
+    gl_ClipDistance[0] = dot(in_planes_a[0], p);
+    gl_ClipDistance[1] = dot(in_planes_a[1], p);
+    gl_ClipDistance[2] = dot(in_planes_a[2], p);
+    gl_ClipDistance[3] = dot(in_planes_a[3], p);
+    gl_ClipDistance[4] = dot(in_planes_b[0], p);
+    gl_ClipDistance[5] = dot(in_planes_b[1], p);
+    gl_ClipDistance[6] = dot(in_planes_b[2], p);
+    gl_ClipDistance[7] = dot(in_planes_b[3], p);
+}
+"""
+
 _FRAGMENT_SHADER = """
 #version 330
 flat in int v_base;
@@ -86,6 +122,11 @@ _GL_DEPTH_COMPONENT = 0x1902
 _GL_DEPTH_COMPONENT32F = 0x8CAC
 _GL_FLOAT = 0x1406
 _GL_TEXTURE_INTERNAL_FORMAT = 0x1003
+# GL_CLIP_DISTANCE0 + i enables user clip distance i (moderngl has no flag for it:
+# Context.enable_direct / disable_direct take the raw enum)
+_GL_CLIP_DISTANCE0 = 0x3000
+#: gl_ClipDistance slots the clip shader writes (GL_MAX_CLIP_DISTANCES is at least 8)
+_CLIP_PLANES_MAX = 8
 
 
 def _lp_threads() -> int | None:
@@ -248,7 +289,8 @@ class _Group:
     """The GL objects of one distinct mesh and the scene instances that draw it, all
     mirroring (negative determinant: drawn with glFrontFace(GL_CW)) or none."""
 
-    __slots__ = ("instances", "vbo", "ibo", "mvp", "base", "vao", "n_faces", "mirrored")
+    __slots__ = ("instances", "vbo", "ibo", "mvp", "base", "vao", "n_faces", "mirrored",
+                 "planes", "clip_vao")
 
     def __init__(self, mirrored: bool = False) -> None:
         self.instances: list[int] = []
@@ -259,10 +301,14 @@ class _Group:
         self.mvp: Any = None
         self.base: Any = None
         self.vao: Any = None
+        # made by the first render with clip planes: per-instance object-space planes
+        # (8 × vec4 float32) and the vertex array of the clip program
+        self.planes: Any = None
+        self.clip_vao: Any = None
         self.n_faces = 0
 
     def release(self) -> None:
-        for name in ("vao", "vbo", "ibo", "mvp", "base"):
+        for name in ("vao", "clip_vao", "vbo", "ibo", "mvp", "base", "planes"):
             obj = getattr(self, name)
             if obj is not None:
                 obj.release()
@@ -290,6 +336,7 @@ class LlvmpipePeer:
         self.renderer = str(ctx.info["GL_RENDERER"])
         self._groups: list[_Group] = []
         self._transforms: np.ndarray | None = None
+        self._clip_prog: Any = None   # the clip-distance program, made on first use
         self.n_faces = 0
         with ctx:
             self._depth = ctx.depth_texture((w, h))
@@ -364,7 +411,7 @@ class LlvmpipePeer:
 
     # -- frames -----------------------------------------------------------------------------
     def render(self, view_proj, *, cull: str = "back", repeat: int = 5, warmup: int = 1,
-               ids: bool = False) -> PeerFrame:
+               ids: bool = False, clip_planes=None) -> PeerFrame:
         """Draw what was uploaded, ``warmup`` untimed frames then ``repeat`` timed ones.
 
         Args:
@@ -374,9 +421,13 @@ class LlvmpipePeer:
             repeat: timed frames (>= 1); each is clear + all draws + glFinish.
             warmup: untimed frames first (the first frame includes llvmpipe's shader JIT).
             ids: also read back the triangle ids (untimed).
+            clip_planes: None, or (K, 4) world-space planes (a, b, c, d), 0 <= K <= 8,
+                keeping the points with a·x + b·y + c·z + d >= 0 (gl_ClipDistance; checked
+                by `clraster.inputs.check_clip_planes`, as clraster's render does).
 
-        The per-instance matrices (``view_proj @ model`` in float64, rounded to float32) are
-        written once per call, before the frames, outside the timing.
+        The per-instance matrices (``view_proj @ model`` in float64, rounded to float32) and
+        object-space planes (``plane @ model``, likewise) are written once per call, before
+        the frames, outside the timing.
         """
         if self._transforms is None:
             raise RuntimeError("upload() a mesh or scene first")
@@ -390,12 +441,18 @@ class LlvmpipePeer:
         vp = np.asarray(view_proj, np.float64)
         if vp.shape != (4, 4):
             raise ValueError(f"view_proj must be (4, 4), got {vp.shape}")
+        planes = None
+        if clip_planes is not None:
+            from clraster.inputs import check_clip_planes
+            planes = check_clip_planes(clip_planes)
         ctx, fbo = self.ctx, self.fbo
         with ctx:
             for g in self._groups:
                 mvp = np.matmul(vp, self._transforms[g.instances]).astype(np.float32)
                 # column-major for GL: the transpose of each row-major matrix, flattened
                 g.mvp.write(np.ascontiguousarray(mvp.transpose(0, 2, 1)))
+            if planes is not None:
+                self._write_planes(planes)
             fbo.use()
             ctx.depth_func = "<"
             ctx.enable(moderngl.DEPTH_TEST)
@@ -405,8 +462,17 @@ class LlvmpipePeer:
             else:
                 ctx.enable(moderngl.CULL_FACE)
                 ctx.cull_face = cull
-            draws = [(g.vao, len(g.instances), "cw" if g.mirrored else "ccw")
-                     for g in self._groups]
+            if planes is None:
+                draws = [(g.vao, len(g.instances), "cw" if g.mirrored else "ccw")
+                         for g in self._groups]
+            else:
+                draws = [(g.clip_vao, len(g.instances), "cw" if g.mirrored else "ccw")
+                         for g in self._groups]
+                for i in range(_CLIP_PLANES_MAX):
+                    if i < planes.shape[0]:
+                        ctx.enable_direct(_GL_CLIP_DISTANCE0 + i)
+                    else:
+                        ctx.disable_direct(_GL_CLIP_DISTANCE0 + i)
 
             def frame() -> None:
                 fbo.clear(depth=1.0)
@@ -432,12 +498,44 @@ class LlvmpipePeer:
                 raw = fbo.read(components=1, attachment=0, dtype="i4")
                 tri = np.frombuffer(raw, np.int32).reshape(self.height, self.width)[::-1]
                 tri = np.where(depth < 1.0, tri, -1).astype(np.int32)
+            if planes is not None:
+                # leave them off: the plain program writes no clip distances
+                for i in range(_CLIP_PLANES_MAX):
+                    ctx.disable_direct(_GL_CLIP_DISTANCE0 + i)
             err = ctx.error
         if err != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL error after rendering: {err}")
         return PeerFrame(depth=depth, times_ms=times, readback_ms=statistics.median(reads),
                          renderer=self.renderer, threads=_lp_threads(),
                          depth_format=self.depth_format, triangle_id=tri)
+
+    def _write_planes(self, planes: np.ndarray) -> None:
+        """Write each group's per-instance object-space planes (``plane @ model`` in float64,
+        rounded to float32; zero rows for the unused slots) for (K, 4) float64 world
+        ``planes``, making the clip program and vertex arrays on first use. The context
+        must be current."""
+        ctx = self.ctx
+        if self._clip_prog is None:
+            self._clip_prog = ctx.program(vertex_shader=_CLIP_VERTEX_SHADER,
+                                          fragment_shader=_FRAGMENT_SHADER)
+        assert self._transforms is not None
+        k = planes.shape[0]
+        for g in self._groups:
+            n = len(g.instances)
+            obj = np.zeros((n, _CLIP_PLANES_MAX, 4), np.float64)
+            # a world point x is kept iff plane · (model @ x_obj) >= 0, i.e. (plane @ model)
+            # · x_obj >= 0: the object-space plane is the row vector plane @ model
+            obj[:, :k] = np.matmul(planes[None], self._transforms[g.instances])
+            if g.clip_vao is None:
+                g.planes = ctx.buffer(reserve=4 * _CLIP_PLANES_MAX * 4 * n, dynamic=True)
+                g.clip_vao = ctx.vertex_array(
+                    self._clip_prog,
+                    [(g.vbo, "3f", "in_pos"), (g.mvp, "16f/i", "in_mvp"),
+                     (g.base, "i/i", "in_base"),
+                     (g.planes, "16f 16f/i", "in_planes_a", "in_planes_b")],
+                    index_buffer=g.ibo, index_element_size=4)
+            # a mat4 attribute's column i is the i-th vec4 in memory: plane i per column
+            g.planes.write(np.ascontiguousarray(obj.astype(np.float32)))
 
     def _read_depth(self) -> np.ndarray:
         raw = self.fbo.read(components=1, attachment=-1, dtype="f4")
@@ -457,8 +555,10 @@ class LlvmpipePeer:
             return
         with ctx:
             self._free_geometry()
-            for obj in (self.fbo, self._ids, self._depth, self.prog):
-                obj.release()
+            for obj in (self.fbo, self._ids, self._depth, self.prog, self._clip_prog):
+                if obj is not None:
+                    obj.release()
+            self._clip_prog = None
         ctx.release()
         self.ctx = None
 

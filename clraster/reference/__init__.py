@@ -16,13 +16,14 @@ twophase...), never the OpenCL side.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
 from ..config import RasterConfig
 from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
-from ..inputs import CameraLike, Target, check_cull, check_flag, check_size
+from ..inputs import CameraLike, Target, check_clip_planes, check_cull, check_flag, check_size
 from ..params import FrameParams, FrameTotals, finish_depth
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
@@ -60,16 +61,17 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               reversed_z: bool = False) -> Frame:
+               reversed_z: bool = False, clip_planes: Any = None) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
         check_flag(occlusion, "occlusion")
         check_flag(reversed_z, "reversed_z")
+        planes = check_clip_planes(clip_planes)
         w, h, config = self.width, self.height, self.config
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans)
+                          cache=self._plans, clip_planes=planes)
         t_cull = (time.perf_counter() - t0) * 1e3
         pool, fd = plan.pool, plan.frame
         counts = dict(plan.draw_list.counts)
@@ -94,7 +96,7 @@ class Renderer:
 def render(target: Target, camera: CameraLike, width: int, height: int, *,
            cull: str = "back", frustum: bool = True, cones: bool = True,
            occlusion: bool = False, config: RasterConfig | None = None,
-           reversed_z: bool = False) -> Frame:
+           reversed_z: bool = False, clip_planes: Any = None) -> Frame:
     """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene) with the NumPy
     twin; same arguments and outputs as `Renderer.render` (the same culling code decides
     what is drawn).
@@ -107,7 +109,7 @@ def render(target: Target, camera: CameraLike, width: int, height: int, *,
     """
     return Renderer(width, height, config=config).render(
         target, camera, cull=cull, frustum=frustum, cones=cones, occlusion=occlusion,
-        reversed_z=reversed_z)
+        reversed_z=reversed_z, clip_planes=clip_planes)
 
 
 def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
@@ -143,7 +145,8 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     tri_verts, ids = setup_.draw_triangles(pool, fd)
     st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky,
                       setup_.object_clip(pool, fd, params.reversed_z),
-                      setup_.draw_mirrored(pool, fd), params.reversed_z)
+                      setup_.draw_mirrored(pool, fd), params.reversed_z,
+                      setup_.user_distances(pool, fd))
     t2 = time.perf_counter()
     if max_entries is not None and st.clip_pieces.size > max_entries:
         raise BinBudgetExceeded(st.clip_pieces.size, max_entries)

@@ -24,7 +24,7 @@ from ..config import (
     OC_Z_POS,
     SUBPIXEL_BITS,
 )
-from ..inputs import check_size
+from ..inputs import check_clip_planes, check_size
 from ..layout import LINE_DTYPE, ZMIN_CLEAR
 from ..lines import (
     LS_ACCEPTED,
@@ -39,6 +39,8 @@ from ..lines import (
     check_depth,
     check_segments,
     check_view_proj,
+    clip_to_planes,
+    merge_plane_status,
     stats_from_status,
 )
 from .vertex import viewport
@@ -249,7 +251,8 @@ def raster(rec: np.ndarray, width: int, height: int, depth: np.ndarray | None,
 
 
 def render_lines(segments: npt.ArrayLike, view_proj: Any, width: int, height: int, *,
-                 depth: np.ndarray | None = None, depth_bias: float = 0.0) -> LineFrame:
+                 depth: np.ndarray | None = None, depth_bias: float = 0.0,
+                 clip_planes: Any = None) -> LineFrame:
     """NumPy twin of `clraster.lines.render_lines`: same arguments (no context), identical
     line_id, depth and stats."""
     width, height = check_size(width, height)
@@ -257,8 +260,16 @@ def render_lines(segments: npt.ArrayLike, view_proj: Any, width: int, height: in
     m = check_view_proj(view_proj, width, height)
     dbuf = check_depth(depth, width, height)
     bias = check_bias(depth_bias)
+    planes = check_clip_planes(clip_planes)
     if seg.shape[0] == 0:
         return LineFrame.empty(width, height)
-    rec = setup(seg, m, width, height)
+    drawn, keep, pre = clip_to_planes(seg, planes)   # shared with the OpenCL path
+    if drawn.shape[0] == 0:
+        return LineFrame.empty(width, height, stats_from_status(pre, 0, 0))
+    rec = setup(drawn, m, width, height)
     line_id, zbuf, frags, passed = raster(rec, width, height, dbuf, bias)
-    return LineFrame(line_id, zbuf, stats_from_status(rec["status"], frags, passed))
+    status = rec["status"]
+    if planes is not None:
+        line_id = np.where(line_id >= 0, keep[np.maximum(line_id, 0)], -1).astype(np.int32)
+        status = merge_plane_status(pre, keep, status)
+    return LineFrame(line_id, zbuf, stats_from_status(status, frags, passed))

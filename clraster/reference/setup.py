@@ -7,6 +7,7 @@ looping only over the 6 planes and the ≤ 16 polygon vertex positions, exactly 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -185,7 +186,8 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     return status, pc, swapped
 
 
-def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
+def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32,
+                  ud: np.ndarray | None = None, umask: np.ndarray | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sutherland–Hodgman in clip space, vectorized over triangles.
 
@@ -195,6 +197,10 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
         c: float64 (K, 3, 5) clip-space triangles and their depth numerators
             (`object_clip`: recomputed in double from object space; with 4 columns the
             numerator is z). planes: (K,) OC_* bits to clip against.
+        ud: float64 (K, 3, U) the triangles' vertex distances to the U user clip planes
+            (`user_distances`), umask: (K,) bit k = clip against user plane k (after the
+            frustum planes, as clip_and_emit; distances at polygon vertices from their parent
+            barycentrics: user_plane_dist).
 
     Returns:
         poly float64 (K, POLY_MAX, 7) — x, y, z, w and the parent barycentrics —, the
@@ -214,10 +220,23 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
     n = np.full(k, 3, np.int64)
     rows = np.arange(k)
     with np.errstate(all="ignore"):
-        for p, bit in enumerate(PLANE_BITS):
-            act = ((planes & bit) != 0) & (n >= 3)
+        n_user = 0 if ud is None else ud.shape[2]
+        for p in range(len(PLANE_BITS) + n_user):
+            user = p >= len(PLANE_BITS)
+            if user:
+                k_u = p - len(PLANE_BITS)
+                act = ((np.asarray(umask) & (1 << k_u)) != 0) & (n >= 3)
+            else:
+                act = ((planes & PLANE_BITS[p]) != 0) & (n >= 3)
             if not act.any():
                 continue
+
+            def dist(v: np.ndarray, p: int = p, user: bool = user) -> np.ndarray:
+                if not user:
+                    return plane_dist(p, v, kx, ky)
+                u = cast(np.ndarray, ud)[:, :, p - len(PLANE_BITS)]
+                return (v[:, 4] * u[:, 0] + v[:, 5] * u[:, 1]) + v[:, 6] * u[:, 2]
+
             tmp = poly.copy()
             m = np.zeros(k, np.int64)
             for i in range(POLY_MAX):
@@ -227,7 +246,7 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
                 j = np.where(i + 1 == n, 0, i + 1)
                 a = tmp[:, i]
                 b = tmp[rows, np.minimum(j, POLY_MAX - 1)]
-                da, db = plane_dist(p, a, kx, ky), plane_dist(p, b, kx, ky)
+                da, db = dist(a), dist(b)
                 ain, bin_ = da >= 0, db >= 0
                 e1 = cont & ain
                 poly[rows[e1], m[e1]] = a[e1]
@@ -240,7 +259,8 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
                     do = np.where(ain, db, da)[e2]
                     t = (di / (di - do))[:, None]
                     r = vi + t * (vo - vi)
-                    r[:, :4] = onto_plane(p, r[:, :4], kx, ky)
+                    if not user:
+                        r[:, :4] = onto_plane(p, r[:, :4], kx, ky)
                     r[:, 7] = -1
                     poly[rows[e2], m[e2]] = r
                     m += e2
@@ -281,6 +301,22 @@ def object_clip(pool, fd, reversed_z: bool = False) -> np.ndarray:
     return out
 
 
+def user_distances(pool, fd) -> np.ndarray | None:
+    """Float64 (N, U) distances of the frame's vertex stream to its U user clip planes
+    (`FrameDraws.uplanes`, object space per instance), as user_dist in common.h: the vertex
+    stage's ucode bits are ``< 0``, setup's clipper starts from these. None without planes."""
+    if fd.n_user == 0:
+        return None
+    from .vertex import draw_vertices
+
+    pv, inst, _ = draw_vertices(pool, fd)
+    p = pool.positions[pv].astype(np.float64)
+    q = fd.uplanes[inst]                                         # (N, U, 4)
+    with np.errstate(all="ignore"):
+        return ((q[:, :, 0] * p[:, 0:1] + q[:, :, 1] * p[:, 1:2]) + q[:, :, 2] * p[:, 2:3]
+                ) + q[:, :, 3]
+
+
 def draw_mirrored(pool, fd) -> np.ndarray:
     """bool (M,): per slot of the frame's triangle stream, whether its draw has the
     DRAW_MIRRORED flag (mirrors triangle_of's flags in setup.cl)."""
@@ -306,14 +342,16 @@ def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
 def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.ndarray,
           ids: np.ndarray, width: int, height: int, cull: str, kx: F32, ky: F32,
           clip64: np.ndarray | None = None, mirrored: np.ndarray | None = None,
-          reversed_z: bool = False) -> SetupResult:
+          reversed_z: bool = False, udist: np.ndarray | None = None) -> SetupResult:
     """Triangle setup over the vertex stage's outputs (clip float32 (N, 4), outcode uint16
     (N,), win WINVERT_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
     int (M,). clip64: float64 (N, 5) the clipper's and value planes' inputs
     (`object_clip`; None: ``clip`` itself, depth numerator z). mirrored: bool (M,)
     triangles of mirroring draws (`draw_mirrored`; None: none). reversed_z: the depth
     convention (`clraster.params.FrameParams.reversed_z`; clip64 must then hold the
-    reversed numerators)."""
+    reversed numerators). udist: float64 (N, U) each vertex's distances to the U user clip
+    planes (`user_distances`; None: none): a triangle with all three vertices outside one
+    is rejected (ST_TRIVIAL_REJECT), one with any outside is clipped."""
     zs, zo = (-0.5, 0.0) if reversed_z else (0.5, 0.5)   # DEPTH_MODE in setup.cl
     cull_i = CULL_MODES[cull]
     faces = tri_verts
@@ -323,14 +361,22 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     o_and = oc[:, 0] & oc[:, 1] & oc[:, 2]
     status = np.full(m, ST_RASTER, np.uint8)
     invalid = (o_or & OC_INVALID) != 0
-    reject = ~invalid & ((o_and & OC_FRUSTUM) != 0)
+    u_or = np.zeros(m, np.int64)
+    u_and = np.zeros(m, np.int64)
+    if udist is not None and udist.shape[1]:
+        with np.errstate(invalid="ignore"):
+            ucode = ((udist < 0.0) * (1 << np.arange(udist.shape[1]))).sum(axis=1)  # (N,)
+        uc = ucode[faces]
+        u_or = uc[:, 0] | uc[:, 1] | uc[:, 2]
+        u_and = uc[:, 0] & uc[:, 1] & uc[:, 2]
+    reject = ~invalid & (((o_and & OC_FRUSTUM) != 0) | (u_and != 0))
     status[invalid] = ST_INVALID
     status[reject] = ST_TRIVIAL_REJECT
     rest = np.nonzero(~invalid & ~reject)[0]
     status[rest] = facing(clip[faces[rest]], cull_i,
                           None if mirrored is None else mirrored[rest])
     live = status == ST_RASTER
-    needs = live & ((o_or & OC_NEEDS_CLIP) != 0)
+    needs = live & (((o_or & OC_NEEDS_CLIP) != 0) | (u_or != 0))
     wzero = live & ~needs & ((o_or & OC_W_NONPOS) != 0)
     plain = live & ~needs & ~wzero
     status[needs] = ST_CLIPPED
@@ -351,7 +397,9 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
 
     cidx = np.nonzero(needs)[0]
     clip_count = np.zeros(m, np.int32)
-    poly, n, orig, rnum = clip_polygons(c64[faces[cidx]], o_or[cidx] & OC_NEEDS_CLIP, kx, ky)
+    poly, n, orig, rnum = clip_polygons(
+        c64[faces[cidx]], o_or[cidx] & OC_NEEDS_CLIP, kx, ky,
+        None if udist is None or not udist.shape[1] else udist[faces[cidx]], u_or[cidx])
     # fan (0, k, k+1) for k = 1..n-2, ordered by triangle then k
     nfan = np.maximum(n - 2, 0)
     owner = np.repeat(np.arange(cidx.size), nfan)

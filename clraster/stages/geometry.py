@@ -17,7 +17,8 @@ class GeometryBuffers:
 
     positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
     draws: DRAW_DTYPE (D,), mvps: float32 (I, 16), mvps64: float64 (I, 16) and zrows:
-    float64 (I, 4) (drawlist.FrameDraws), uploaded for every pass.
+    float64 (I, 4), uplanes: float64 (I, K, 4) (drawlist.FrameDraws), uploaded for every
+    pass. n_user: K, the user clip planes of the draws uploaded last.
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
     uploaded last (drawlist.FrameDraws).
     """
@@ -31,14 +32,16 @@ class GeometryBuffers:
     mvps: GrowBuffer
     mvps64: GrowBuffer
     zrows: GrowBuffer
+    uplanes: GrowBuffer
     n_draws: int = 0
+    n_user: int = 0
     n_verts: int = 0
     n_tris: int = 0
 
 
 class GeometryStage:
     def __init__(self, ctx: cl.Context) -> None:
-        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(9)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(10)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self._pool: GeometryPool | None = None
 
     def upload_pool(self, queue: cl.CommandQueue, pool: GeometryPool) -> None:
@@ -59,9 +62,10 @@ class GeometryStage:
         returns the buffers, the vertex and setup stages' input."""
         b = self.buffers
         for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps), (b.mvps64, fd.mvps64),
-                        (b.zrows, fd.zrows)):
+                        (b.zrows, fd.zrows), (b.uplanes, fd.uplanes)):
             buf = gb.ensure(arr.nbytes)
             if arr.nbytes:
                 cl.enqueue_copy(queue, buf, arr, is_blocking=True)
         b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
+        b.n_user = fd.n_user
         return b

@@ -75,7 +75,7 @@ class SetupStage:
         # object-space positions (kernels/setup.cl object_clip)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
                      geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, geo.mvps64.buf,
-                     geo.zrows.buf)
+                     geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)

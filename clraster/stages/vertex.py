@@ -22,19 +22,22 @@ class ClipBuffers:
     clip: float32 (N, 4) clip-space positions. outcode: uint16 (N,) outcode bits
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
     win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
+    ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
     n_verts: N of the last run.
     """
 
     clip: GrowBuffer
     outcode: GrowBuffer
     win: GrowBuffer
+    ucode: GrowBuffer
     n_verts: int = 0
 
 
 class VertexStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         self.kernel = cl.Kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
-        self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx))
+        self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx),
+                                   GrowBuffer(ctx))
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
             ) -> tuple[ClipBuffers, list[cl.Event]]:
@@ -48,6 +51,7 @@ class VertexStage:
                          np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
-                         b.win.ensure(16 * n_verts))
+                         b.win.ensure(16 * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
+                         b.ucode.ensure(n_verts))
         b.n_verts = n_verts
         return b, [ev]
