@@ -76,6 +76,26 @@ inline float4 clip_transform(__global const float *m, float px, float py, float 
     return c;
 }
 
+/* Clip position of an object-space vertex in double from the instance's float64 matrix m
+ * (FrameDraws.mvps64: VP · model before it is rounded to float32 for coverage, so the value
+ * planes do not inherit that rounding, ~1e-7 relative, which put barycentrics of 1-px
+ * triangles off by up to 2.6e-5), and into *r its depth numerator (setup.cl ClipIn): z, or
+ * with `reversed` the depth row q (FrameDraws.zrows, w row − z row formed in float64) times
+ * the position. The twin (reference/setup.py object_clip) sums in the same order; products
+ * of doubles are rounded, so it matters that nothing is fused (FP_CONTRACT is off). */
+inline double4 vertex_clip64(__global const double *m, __global const double *q, int reversed,
+                             float fx, float fy, float fz, double *r)
+{
+    double px = (double)fx, py = (double)fy, pz = (double)fz;
+    double4 c;
+    c.x = ((m[0] * px + m[1] * py) + m[2] * pz) + m[3];
+    c.y = ((m[4] * px + m[5] * py) + m[6] * pz) + m[7];
+    c.z = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
+    c.w = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
+    *r = reversed ? ((q[0] * px + q[1] * py) + q[2] * pz) + q[3] : c.z;
+    return c;
+}
+
 /* Signed distance of an object-space vertex to a user clip plane q (a, b, c, d, already in
  * the instance's object space: world plane · model, float64 on the host), >= 0 kept. The
  * vertex stage (ucode bits) and setup's clipper (vertex distances) evaluate exactly this,

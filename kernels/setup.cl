@@ -68,34 +68,12 @@ inline double4 onto_plane(int p, double4 v, double kx, double ky)
     return v;
 }
 
-/* Clip position (and depth numerator, see ClipIn) of vertex-stream vertex i of draw dr, in
- * double, from its object-space position and the draw's float64 matrix (FrameDraws.mvps64:
- * VP · model before it is rounded to float32 for the vertex stage, so the values do not
- * inherit that rounding, ~1e-7 relative, which put barycentrics of 1-px triangles off by
- * up to 2.6e-5) and depth row (zrows + 4·instance, used when `reversed`). The twin sums
- * in the same order; products of doubles are rounded here, so it matters that nothing is
- * fused: common.h turns FP_CONTRACT off and NumPy never fuses. */
-inline ClipIn object_clip(__global const float *pos, __global const int *vert_ids,
-                          __global const int4 *clusters, __global const double *mvps,
-                          __global const double *zrows, int reversed, Draw dr, int i)
-{
-    int vi = vert_ids[clusters[dr.cluster].z + (i - dr.vert_base)];
-    __global const double *m = mvps + 16 * dr.instance;
-    double px = (double)pos[3 * vi], py = (double)pos[3 * vi + 1], pz = (double)pos[3 * vi + 2];
-    ClipIn o;
-    double4 c;
-    c.x = (((double)m[0] * px + (double)m[1] * py) + (double)m[2] * pz) + (double)m[3];
-    c.y = (((double)m[4] * px + (double)m[5] * py) + (double)m[6] * pz) + (double)m[7];
-    c.z = (((double)m[8] * px + (double)m[9] * py) + (double)m[10] * pz) + (double)m[11];
-    c.w = (((double)m[12] * px + (double)m[13] * py) + (double)m[14] * pz) + (double)m[15];
-    o.p = c;
-    o.r = c.z;
-    if (reversed) {
-        __global const double *q = zrows + 4 * dr.instance;
-        o.r = ((q[0] * px + q[1] * py) + q[2] * pz) + q[3];
-    }
-    return o;
-}
+/* The vertex stage's double clip position and depth numerator of vertex-stream vertex i
+ * (vertex.cl, common.h vertex_clip64): computed once per vertex there rather than once per
+ * triangle corner here, which cost ~17 ms of setup on the dragon at 1080p. A macro, not a
+ * function returning the struct: inlining that (an sret pointer, noalias) emitted an
+ * intrinsic Oclgrind cannot run. */
+#define clip_in(clip64, rnum, i) ((ClipIn){(clip64)[i], (rnum)[i]})
 
 /* The clip position with z replaced by the depth numerator: what value_planes reads. */
 inline double4 value_vertex(double4 p, double r)
@@ -355,8 +333,8 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const Draw *restrict draws, const uint n_draws,                               \
     __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
     __global const int *restrict face_ids, __global const float *restrict pos,             \
-    __global const int *restrict vert_ids, __global const double *restrict mvps,           \
-    __global const double *restrict zrows, __global const double *restrict uplanes,       \
+    __global const int *restrict vert_ids, __global const double4 *restrict clip64,        \
+    __global const double *restrict rnum, __global const double *restrict uplanes,        \
     const int n_user, __global const uchar *restrict ucode
 
 /* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
@@ -412,16 +390,10 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         st = facing(c0, c1, c2, draw_cull(cull, dflags));
         if (st != ST_RASTER) {
         } else if ((o_or & OC_NEEDS_CLIP) || u_or) {
+            /* its pieces are counted by setup_count_clipped: the clipper's polygon arrays
+             * (2 × POLY_MAX vertices of 72+ bytes) inlined here made every work-item of
+             * this kernel pay for them (dragon 1080p setup 1.4x with POLY_MAX 16 → 24) */
             st = ST_CLIPPED;
-            Draw dr = draws[get_group_id(0)];
-            double ud[3 * USER_PLANES_MAX];
-            user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
-            nclip = clip_and_emit(c0, c1, c2,
-                                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i0),
-                                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i1),
-                                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i2),
-                                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
-                                  id, 0, pieces, 0, 0);
         } else if (o_or & OC_W_NONPOS) {
             st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
         } else {
@@ -431,9 +403,9 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
              * rounded by ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the
              * barycentrics of 1-pixel triangles off by 3e-5 */
             Draw dr = draws[get_group_id(0)];
-            ClipIn a = object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i0);
-            ClipIn b = object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i1);
-            ClipIn c = object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i2);
+            ClipIn a = clip_in(clip64, rnum, i0);
+            ClipIn b = clip_in(clip64, rnum, i1);
+            ClipIn c = clip_in(clip64, rnum, i2);
             st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
                             value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height,
                             zs, zo, &pc, &sw);
@@ -446,6 +418,33 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     }
     status[t] = (uchar)st;
     clip_count[t] = nclip;
+}
+
+/* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into
+ * clip_count; other triangles keep setup_triangles' 0. */
+__kernel void setup_count_clipped(__global const float4 *restrict clip,
+                                  __global const ushort *restrict outcode, DRAW_ARGS,
+                                  const int width, const int height, const float kx,
+                                  const float ky, const int reversed,
+                                  __global const uchar *restrict status,
+                                  __global int *restrict clip_count)
+{
+    DEPTH_MODE(reversed);
+    int t, i0, i1, i2, id, dflags;
+    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
+                     &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED)
+        return;
+    uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
+    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) : 0u;
+    Draw dr = draws[get_group_id(0)];
+    double ud[3 * USER_PLANES_MAX];
+    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
+    clip_count[t] = clip_and_emit(clip[i0], clip[i1], clip[i2],
+                  clip_in(clip64, rnum, i0),
+                  clip_in(clip64, rnum, i1),
+                  clip_in(clip64, rnum, i2),
+                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
+                  id, 0, 0, 0, 0);
 }
 
 __kernel void setup_clipped(__global const float4 *restrict clip,
@@ -467,9 +466,9 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
     double ud[3 * USER_PLANES_MAX];
     user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
     clip_and_emit(clip[i0], clip[i1], clip[i2],
-                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i0),
-                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i1),
-                  object_clip(pos, vert_ids, clusters, mvps, zrows, reversed, dr, i2),
+                  clip_in(clip64, rnum, i0),
+                  clip_in(clip64, rnum, i1),
+                  clip_in(clip64, rnum, i2),
                   o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
                   id, 1, clip_pieces, clip_bary, clip_offset[t]);
 }

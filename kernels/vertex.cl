@@ -22,7 +22,11 @@ __kernel void vertex_transform(__global const float *restrict pos,
                                __global ushort *restrict outcode,
                                __global WinVert *restrict win,
                                __global const double *restrict uplanes, const int n_user,
-                               __global uchar *restrict ucode)
+                               __global uchar *restrict ucode,
+                               __global const double *restrict mvps64,
+                               __global const double *restrict zrows, const int reversed,
+                               __global double4 *restrict clip64,
+                               __global double *restrict rnum)
 {
     /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
      * per draw (record, cluster, matrix) is uniform over the group and PoCL hoists it */
@@ -60,6 +64,11 @@ __kernel void vertex_transform(__global const float *restrict pos,
             uc |= user_dist(q + 4 * k, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]) < 0.0
                   ? 1u << k : 0u;
     }
+    /* the double position setup's value planes and clipper use (common.h vertex_clip64) */
+    double r;
+    clip64[i] = vertex_clip64(mvps64 + 16 * dr.instance, zrows + 4 * dr.instance, reversed,
+                              pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2], &r);
+    rnum[i] = r;
     clip[i] = c;
     outcode[i] = (ushort)oc;
     win[i] = v;

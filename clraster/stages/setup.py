@@ -53,6 +53,7 @@ class SetupStage:
         prg = program(ctx, "setup", config.build_options())
         self.k_setup = cl.Kernel(prg, "setup_triangles")
         self.k_clipped = cl.Kernel(prg, "setup_clipped")
+        self.k_count = cl.Kernel(prg, "setup_count_clipped")
         self.k_partials = cl.Kernel(prg, "scan_partials")
         self.k_offsets = cl.Kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
@@ -74,8 +75,8 @@ class SetupStage:
         # the pool and matrices too: the clipper recomputes its inputs in double from the
         # object-space positions (kernels/setup.cl object_clip)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
-                     geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, geo.mvps64.buf,
-                     geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), verts.ucode.buf)
+                     geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, verts.clip64.buf,
+                     verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
@@ -83,6 +84,9 @@ class SetupStage:
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
                            b.status.ensure(m), b.clip_count.ensure(4 * m))]
+        ev.append(self.k_count(queue, gsize, lsize, clip, outcode, *draw_args, *size,
+                               np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
+                               b.status.buf, b.clip_count.buf))
         total = np.zeros(1, np.int32)
         if m:
             chunks = np.uint32(min(SCAN_CHUNKS, m))

@@ -23,6 +23,8 @@ class ClipBuffers:
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
     win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
     ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
+    clip64: float64 (N, 4) clip positions from the float64 matrices and rnum: float64 (N,)
+    depth numerators (kernels/common.h vertex_clip64): setup's value planes and clipper.
     n_verts: N of the last run.
     """
 
@@ -30,14 +32,15 @@ class ClipBuffers:
     outcode: GrowBuffer
     win: GrowBuffer
     ucode: GrowBuffer
+    clip64: GrowBuffer
+    rnum: GrowBuffer
     n_verts: int = 0
 
 
 class VertexStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         self.kernel = cl.Kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
-        self.buffers = ClipBuffers(GrowBuffer(ctx), GrowBuffer(ctx), GrowBuffer(ctx),
-                                   GrowBuffer(ctx))
+        self.buffers = ClipBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
             ) -> tuple[ClipBuffers, list[cl.Event]]:
@@ -52,6 +55,8 @@ class VertexStage:
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
                          b.win.ensure(16 * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
-                         b.ucode.ensure(n_verts))
+                         b.ucode.ensure(n_verts), geo.mvps64.buf, geo.zrows.buf,
+                         np.int32(params.reversed_z), b.clip64.ensure(32 * n_verts),
+                         b.rnum.ensure(8 * n_verts))
         b.n_verts = n_verts
         return b, [ev]
