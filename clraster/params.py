@@ -29,7 +29,8 @@ class FrameParams:
     convention (`Renderer.render`): the kernels' z-buffer holds a key where less is nearer,
     window depth (z/w + 1)/2 by default, or minus the reversed-Z depth (1 − z/w)/2, whose
     float32 values keep their relative precision far away; `finish_depth` turns the key
-    buffer into the depth the frame returns.
+    buffer into the depth the frame returns. window: uint8 (H, W) C-contiguous mask of
+    the pixels a polygon window lets through (`clraster.window.window_mask`), or None.
     """
 
     width: int
@@ -40,13 +41,16 @@ class FrameParams:
     tiles_x: int
     tiles_y: int
     reversed_z: bool = False
+    window: np.ndarray | None = None
 
     @classmethod
     def make(cls, width: int, height: int, config: RasterConfig, cull: str = "back",
-             reversed_z: bool = False) -> FrameParams:
+             reversed_z: bool = False, window: np.ndarray | None = None) -> FrameParams:
         kx, ky = guard_band_factors(width, height)
         tiles_x, tiles_y = config.tiles(width, height)
-        return cls(int(width), int(height), cull, kx, ky, tiles_x, tiles_y, bool(reversed_z))
+        mask = None if window is None else np.ascontiguousarray(window, np.uint8)
+        return cls(int(width), int(height), cull, kx, ky, tiles_x, tiles_y, bool(reversed_z),
+                   mask)
 
     @property
     def zoff(self) -> float:

@@ -24,6 +24,7 @@ from .stages.pyramid import PyramidStage
 from .stages.raster import RasterOutput
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
+from .window import window_mask
 
 
 class Renderer:
@@ -83,7 +84,7 @@ class Renderer:
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
                overdraw: bool = False, fates: bool = False, reversed_z: bool = False,
-               clip_planes: Any = None) -> Frame:
+               clip_planes: Any = None, window: Any = None) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
         or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
         by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
@@ -120,6 +121,14 @@ class Renderer:
                 keep the parent's id and barycentrics), and clusters wholly outside one
                 plane are culled before anything is drawn (counted as frustum-culled).
                 None or [] for none.
+            window: a polygon in window pixels (x right, y down; an (N, 2) ring, concave
+                allowed, or (exterior, holes); `clraster.clip2d.as_polygon`): only the pixel
+                centres inside it are drawn (`clraster.window.window_mask`: vertices snap to
+                1/256 px, centres on its boundary follow the top-left rule, so windows that
+                tile the screen draw every pixel once). The image is the unwindowed image
+                restricted to those pixels; tiles the window does not reach are not
+                rasterized, and fragments at shut pixels of the others are tested but never
+                pass (counted in fragments_tested).
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -129,6 +138,7 @@ class Renderer:
         """
         check_cull(cull)
         planes = check_clip_planes(clip_planes)
+        mask = None if window is None else window_mask(window, self.width, self.height)
         for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
                             ("overdraw", overdraw), ("fates", fates),
                             ("reversed_z", reversed_z)):
@@ -136,7 +146,7 @@ class Renderer:
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates, reversed_z, planes)
+                                fates, reversed_z, planes, mask)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -162,7 +172,8 @@ class Renderer:
 
     def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
                 cones: bool, occlusion: bool, overdraw: bool, fates: bool,
-                reversed_z: bool = False, clip_planes: np.ndarray | None = None) -> Frame:
+                reversed_z: bool = False, clip_planes: np.ndarray | None = None,
+                window: np.ndarray | None = None) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -178,7 +189,7 @@ class Renderer:
             if fates:
                 fr.fates = ClusterFates.from_plan(plan)
             return fr
-        params = FrameParams.make(w, h, self.config, cull, reversed_z)
+        params = FrameParams.make(w, h, self.config, cull, reversed_z, window)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
         occluded = None
         config = self.config

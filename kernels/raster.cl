@@ -35,7 +35,8 @@ __kernel void raster_tiles(__global const float *clip_bary,
                            __global float *depth_out, __global int *id_out,
                            __global float *bary_out, __global long *tile_stats,
                            const int load, const int want_overdraw,
-                           __global int *overdraw)
+                           __global int *overdraw, __global const uchar *wmask,
+                           const int use_window)
 {
     int tile = get_global_id(0);
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
@@ -44,6 +45,13 @@ __kernel void raster_tiles(__global const float *clip_bary,
     int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
 
     int e0 = tile_start[tile], e1 = tile_start[tile + 1];
+    /* a polygon window (clraster.window): a tile it lets no pixel of is drawn as empty */
+    if (use_window && e0 != e1) {
+        int open = 0;
+        for (int y = ty0; y <= ty1; ++y)
+            for (int x = tx0; x <= tx1; ++x) open |= wmask[(size_t)y * width + x];
+        if (!open) e1 = e0;
+    }
     if (e0 == e1 && load) {
         /* a later pass with nothing here: the earlier pass's pixels stay as they are */
         tile_stats[2 * tile] = 0;
@@ -83,6 +91,13 @@ __kernel void raster_tiles(__global const float *clip_bary,
                 wid[i] = id0 < 0 ? INT_MAX : id0;
                 if (want_overdraw) odc[i] = overdraw[o];
             }
+    }
+    if (use_window) {
+        /* pixels the window shuts: no fragment passes a -inf depth (and none ties) */
+        for (int y = ty0; y <= ty1; ++y)
+            for (int x = tx0; x <= tx1; ++x)
+                if (!wmask[(size_t)y * width + x])
+                    zbuf[((y - ty0) << TILE_LOG2) + (x - tx0)] = -INFINITY;
     }
     long tested = 0, passed = 0;
 
@@ -166,7 +181,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
             if (want_overdraw) overdraw[o] = odc[i];
             int e = win[i];
             if (e < 0 && load) continue;   /* the earlier pass's winner stays */
-            depth_out[o] = zbuf[i];
+            depth_out[o] = e < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
             float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
             int id = -1;
             if (e >= 0) {

@@ -27,6 +27,7 @@ from ..inputs import CameraLike, Target, check_clip_planes, check_cull, check_fl
 from ..params import FrameParams, FrameTotals, finish_depth
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
+from ..window import window_mask
 from . import bin as bin_
 from . import pyramid as pyramid_
 from . import raster as raster_
@@ -61,13 +62,14 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               reversed_z: bool = False, clip_planes: Any = None) -> Frame:
+               reversed_z: bool = False, clip_planes: Any = None, window: Any = None) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
         check_flag(occlusion, "occlusion")
         check_flag(reversed_z, "reversed_z")
         planes = check_clip_planes(clip_planes)
+        mask = None if window is None else window_mask(window, self.width, self.height)
         w, h, config = self.width, self.height, self.config
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -78,7 +80,7 @@ class Renderer:
         if fd.n_tris == 0:
             return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
                                reversed_z)
-        params = FrameParams.make(w, h, config, cull, reversed_z)
+        params = FrameParams.make(w, h, config, cull, reversed_z, mask)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
 
         def draw(draws: FrameDraws, into: Images | None) -> Images:
@@ -96,7 +98,7 @@ class Renderer:
 def render(target: Target, camera: CameraLike, width: int, height: int, *,
            cull: str = "back", frustum: bool = True, cones: bool = True,
            occlusion: bool = False, config: RasterConfig | None = None,
-           reversed_z: bool = False, clip_planes: Any = None) -> Frame:
+           reversed_z: bool = False, clip_planes: Any = None, window: Any = None) -> Frame:
     """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene) with the NumPy
     twin; same arguments and outputs as `Renderer.render` (the same culling code decides
     what is drawn).
@@ -109,7 +111,7 @@ def render(target: Target, camera: CameraLike, width: int, height: int, *,
     """
     return Renderer(width, height, config=config).render(
         target, camera, cull=cull, frustum=frustum, cones=cones, occlusion=occlusion,
-        reversed_z=reversed_z, clip_planes=clip_planes)
+        reversed_z=reversed_z, clip_planes=clip_planes, window=window)
 
 
 def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
@@ -155,7 +157,8 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     tile_start, entries = bin_.bin_pieces(allp, order, w, h, config, max_entries)
     t3 = time.perf_counter()
     depth, ids_img, bary, tested, passed = raster_.raster(st.clip_bary, tile_start, entries,
-                                                          w, h, config, into=into)
+                                                          w, h, config, into=into,
+                                                          window=params.window)
     t4 = time.perf_counter()
     totals.add_status(st.status)
     totals.clip_pieces += int(st.clip_pieces.size)

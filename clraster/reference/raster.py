@@ -110,7 +110,8 @@ def covered_fragments(tile_start: np.ndarray, entries: np.ndarray, width: int, h
 
 def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, width: int,
            height: int, config: RasterConfig,
-           into: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None):
+           into: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+           window: np.ndarray | None = None):
     """Rasterize binned pieces.
 
     Args:
@@ -120,6 +121,10 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
             as raster_tiles with ``load``: their depth and ids take part in the depth test
             as if drawn in this pass, and pixels nobody beats keep their values (two-phase
             occlusion culling). Not modified. None: start from the clear values.
+        window: uint8/bool (H, W) polygon window mask (`clraster.window`) or None: as
+            raster_tiles with use_window, tiles the window lets no pixel of are not
+            rasterized at all, and in the others fragments at shut pixels are tested
+            (counted) but never pass.
 
     Returns:
         depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3),
@@ -134,9 +139,24 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         zbuf = np.array(into[0], F32).reshape(npx)
         wid = into[1].reshape(npx).astype(np.int64)
     tested = passed = 0
+    open_px = shut = None
+    if window is not None:
+        shut = ~np.asarray(window, bool).reshape(npx)
+        t = config.tile_size
+        ty, tx = -(-height // t), -(-width // t)
+        pad = np.zeros((ty * t, tx * t), bool)
+        pad[:height, :width] = ~shut.reshape(height, width)
+        tile_open = pad.reshape(ty, t, tx, t).any(axis=(1, 3))
+        open_px = np.repeat(np.repeat(tile_open, t, 0), t, 1)[:height, :width].reshape(npx)
 
     for owner, pix, z, pc in covered_fragments(tile_start, entries, width, height, config):
+        if open_px is not None:
+            keep = open_px[pix]             # tiles the window shuts are not rasterized
+            owner, pix, z, pc = owner[keep], pix[keep], z[keep], pc[keep]
         tested += z.size
+        if shut is not None:                # tested, but never passing (-inf depth)
+            keep = ~shut[pix]
+            owner, pix, z, pc = owner[keep], pix[keep], z[keep], pc[keep]
         # sequential LESS in list order == segmented running min over (pixel, entry index)
         srt = np.lexsort((owner, pix))
         pix, z, owner = pix[srt], z[srt], owner[srt]

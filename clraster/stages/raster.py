@@ -31,18 +31,33 @@ class FrameBuffers:
     The image outputs are the caller's fresh NumPy arrays, wrapped per frame as
     CL_MEM_USE_HOST_PTR buffers: on a CPU device the kernel writes straight into them, which
     saves copying ~20 bytes per pixel back (a third of the frame time of a small scene at
-    1080p). tile_stats: int64 (T, 2) fragments tested / passed per tile.
+    1080p). tile_stats: int64 (T, 2) fragments tested / passed per tile. window: uint8
+    (H, W) the polygon window's mask of this frame (`clraster.window`), when it has one.
     """
 
     tile_stats: GrowBuffer
+    window: GrowBuffer
 
 
 class RasterStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         self.kernel = cl.Kernel(program(ctx, "raster", config.build_options()), "raster_tiles")
         self.config = config
-        self.buffers = FrameBuffers(GrowBuffer(ctx))
+        self.buffers = FrameBuffers(GrowBuffer(ctx), GrowBuffer(ctx))
+        self._window_src: np.ndarray | None = None
         self.ctx = ctx
+
+    def _window(self, queue: cl.CommandQueue, params: FrameParams) -> tuple[cl.Buffer, np.int32]:
+        """The window mask buffer (uint8 (H, W), `FrameParams.window`) and the kernel's
+        use_window flag; uploaded once per frame (the passes of a frame share it)."""
+        w = params.window
+        if w is None:
+            return self.buffers.window.ensure(1), np.int32(0)
+        if self._window_src is not w:
+            buf = self.buffers.window.ensure(w.nbytes)
+            cl.enqueue_copy(queue, buf, w, is_blocking=True)
+            self._window_src = w
+        return cast(cl.Buffer, self.buffers.window.buf), np.int32(1)
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
             params: FrameParams, *, into: RasterOutput | None = None,
@@ -72,7 +87,8 @@ class RasterStage:
                          bins.entries.buf,
                          np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
                          self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
-                         np.int32(want), into.bufs[3] if want else into.bufs[1])
+                         np.int32(want), into.bufs[3] if want else into.bufs[1],
+                         *self._window(queue, params))
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
