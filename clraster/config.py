@@ -109,9 +109,9 @@ class RasterConfig:
             pieces count against it too). A batch whose count step finds more is split and
             drawn again in smaller batches (never truncated, never refused); a single draw
             larger than this still goes through alone, and the buffers it grew are released
-            after the frame. Memory: 64 bytes per entry (the entries are copies of the
-            64-byte setup records, which the raster reads sequentially) plus 100 per
-            clipped piece. Default ``1 << 21`` (128 MiB of entries): ordinary scenes bin
+            after the frame. Memory: 96 bytes per entry (the entries are copies of the
+            96-byte setup records, which the raster reads sequentially) plus 132 per
+            clipped piece. Default ``1 << 21`` (192 MiB of entries): ordinary scenes bin
             ~0.5 entries per triangle (dragon 0.46, 5M plant 0.56 at 1080p), so a full
             triangle batch needs ~2**19 and this never binds there (2**20..2**22 measured
             alike); it splits only frames of huge overlapping triangles, whose passes are

@@ -145,7 +145,6 @@ class _SceneCull:
         self.minv = np.linalg.inv(t) if n else np.zeros((0, 4, 4))
         self.abs_m = np.abs(t)
         lin = t[:, :3, :3]
-        self.det_neg = np.linalg.det(lin) < 0.0 if n else np.zeros(0, bool)
         sv = np.linalg.svd(lin, compute_uv=False) if n else np.zeros((0, 3))
         self.cond = sv[:, 0] / sv[:, -1] if n else np.zeros(0)
         n_clusters = np.array([mc.cm.n_clusters for mc in meshes], np.int64)
@@ -301,7 +300,9 @@ class _ConeView:
     #: float64 (I, 3): the eye in each instance's object space, a point (perspective: M is
     #: affine, so w stays 1) or a unit direction (orthographic).
     eye_obj: np.ndarray
-    #: float64 (I,): +1 to cull back faces, −1 front faces (mirroring transforms swap them).
+    #: float64 (I,): +1 to cull back faces, −1 front faces. The same for every instance: a
+    #: mirroring transform keeps its faces' outward side (the Scene rule, as glTF; setup
+    #: swaps its cull sense, DRAW_MIRRORED), so the object-space cone test is unchanged.
     side: np.ndarray
     #: float64 (I,): sine of the object-space angle margin, <= 1 (1: never culled).
     sin_m: np.ndarray
@@ -323,12 +324,13 @@ def _cone_view(prep: _SceneCull, vp: np.ndarray, cones: bool, cull: str,
     if flips:
         return None
     # Object-space eye (I, 3): a point (perspective: M is affine, so w stays 1) or a unit
-    # direction (orthographic). Side: mirroring transforms swap front and back.
+    # direction (orthographic). Side: the object-space normals are the outward ones for
+    # every instance, mirrored or not (setup culls mirrored draws by their outward side).
     ortho = bool(eye[3] == 0.0)
     eye_obj = (prep.minv @ eye)[:, :3]
     if ortho:
         eye_obj /= np.linalg.norm(eye_obj, axis=1)[:, None]
-    side = np.where(prep.det_neg ^ (cull == "front"), -1.0, 1.0)
+    side = np.full(prep.n, -1.0 if cull == "front" else 1.0)
     # An angle margin m in world space needs sin(m)·cond(M) in object space: for unit
     # n, u, sin of the world angle = dot(n, u) / (|M^-T n|·|M u|) >= sin_obj / cond.
     sin_m = np.minimum(1.0, math.sin(cone_margin) * prep.cond)
@@ -558,7 +560,8 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             their culled side, at least `cone_margin` radians from edge-on (measured in
             world space: the object-space margin is widened by the condition number of
             the instance's transform). Instances with a mirroring transform (negative
-            determinant) are tested for the opposite side, as their winding flips.
+            determinant) keep their faces' outward side (the Scene rule, as glTF): they are
+            tested for the same side as the others.
         cull: the renderer's face culling mode: "back", "front" or "none".
         max_triangles, max_vertices: cluster limits (see `clusterize`).
         inside_margin, outside_margin: relative frustum margins (the module docstring of

@@ -16,6 +16,7 @@ import numpy as np
 from .clusters import clusters_of
 from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
 from .inputs import as_target, view_projection
+from .layout import DRAW_MIRRORED
 from .precision import check_depth_range
 
 if TYPE_CHECKING:
@@ -28,7 +29,13 @@ if TYPE_CHECKING:
 class GeometryPool:
     """All unique meshes of a scene, clustered, concatenated.
 
-    positions: float32 (V, 3) vertices of every unique mesh, mesh after mesh.
+    positions: float32 (V, 3) vertices of every unique mesh, mesh after mesh, each relative
+        to its mesh's origin (`mesh_origin`).
+    mesh_origin: float64 (number of unique meshes, 3): subtracted from the mesh's vertices
+        (exactly: float32 values, see `_mesh_origin`) and folded back into each instance's
+        matrix by `frame_draws`, so that a mesh baked far from the origin (georeferenced,
+        ~1e6) is stored as small float32 coordinates and its 1e6 offset cancels against the
+        camera's in float64 (camera-relative rendering). Zero for meshes near the origin.
     vert_ids: int32 (sum of cluster vertex counts,) pool vertex index of each cluster-local
         vertex. local_tris: uint8 (T, 4) local vertex indices of each clustered triangle
         (4th byte padding). face_ids: int32 (T,) the triangle's face index in its mesh.
@@ -53,6 +60,7 @@ class GeometryPool:
     aabb_max: np.ndarray
     bounded: np.ndarray
     instance_key_base: np.ndarray
+    mesh_origin: np.ndarray
 
     @classmethod
     def build(cls, scene) -> GeometryPool:
@@ -65,10 +73,15 @@ class GeometryPool:
                 meshes.append(inst.mesh)
             inst_mesh.append(k)
         pos, vids, ltris, fids, cl, cbase, lo, hi, bnd = [], [], [], [], [], [], [], [], []
+        origins = []
         v0 = t0 = vv0 = c0 = 0
         for mesh in meshes:
             cm = clusters_of(mesh)
-            pos.append(np.asarray(mesh.vertices, np.float32))
+            origin = _mesh_origin(mesh)
+            origins.append(origin)
+            # float32 minus a float32 value near it: exact (Sterbenz), so the stored
+            # positions plus the origin are the mesh's own vertices
+            pos.append((np.asarray(mesh.vertices, np.float64) - origin).astype(np.float32))
             vids.append(cm.vert_ids.astype(np.int64) + v0)
             lt = np.zeros((cm.local_tris.shape[0], 4), np.uint8)
             lt[:, :3] = cm.local_tris
@@ -107,7 +120,38 @@ class GeometryPool:
                    cat(ltris, np.uint8, (0, 4)), cat(fids, np.int32, (0,)),
                    cat(cl, np.int32, (0, 4)), np.asarray(cbase, np.int64), inst_mesh_a,
                    cat(lo, np.float64, (0, 3)), cat(hi, np.float64, (0, 3)),
-                   cat(bnd, bool, (0,)), key_base)
+                   cat(bnd, bool, (0,)), key_base,
+                   np.asarray(origins, np.float64).reshape(-1, 3))
+
+
+#: A mesh whose bounds centre lies more than this many times its size from the origin is
+#: stored relative to that centre (`_mesh_origin`).
+ORIGIN_FAR = 16.0
+
+
+def _mesh_origin(mesh) -> np.ndarray:
+    """float64 (3,): the origin `GeometryPool` stores ``mesh`` relative to. Per axis, the
+    centre of its finite bounds, rounded to float32, where that centre lies more than
+    ORIGIN_FAR times the mesh's size from the origin (only there does float32 lose much
+    precision to the offset); else zero, so meshes around the origin keep their exact
+    float32 positions and images (and so do the sub-meshes of `distributed.partition`, a
+    part of a mesh around the origin being far less than 16 of its own sizes away from
+    it)."""
+    v = np.asarray(mesh.vertices, np.float64)
+    fin = v[np.all(np.isfinite(v), axis=1)]
+    if fin.shape[0] == 0:
+        return np.zeros(3)
+    lo, hi = fin.min(0), fin.max(0)
+    centre = (lo + hi) / 2
+    far = np.abs(centre) > ORIGIN_FAR * float((hi - lo).max())
+    if not far.any():
+        return np.zeros(3)
+    origin = np.where(far, centre, 0.0).astype(np.float32).astype(np.float64)
+    # subtraction must stay exact: each |v - origin| <= |v| keeps the float32 spacing of v
+    # (Sterbenz: v/2 <= origin <= 2v per coordinate), else no origin for that axis
+    ok = np.all((fin == 0) | ((fin / np.where(origin == 0, 1, origin) >= 0.5)
+                              & (fin / np.where(origin == 0, 1, origin) <= 2.0)), axis=0)
+    return np.where(ok & (origin != 0), origin, 0.0)
 
 
 @dataclass(frozen=True)
@@ -124,8 +168,12 @@ class FrameDraws:
 def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> FrameDraws:
     """Lay out ``draw_list`` (instance, cluster, inside) as `Draw` records.
 
-    view_proj: float64 (4, 4). Each instance's matrix is formed in float64 and rounded to
-    float32 once, for both the device and the twin.
+    view_proj: float64 (4, 4). Each instance's matrix (view-projection · model · the
+    translation by its mesh's pool origin) is formed in float64 and rounded to float32 once,
+    for both the device and the twin: a camera and an instance both ~1e6 from the world
+    origin cancel there, in float64, before anything becomes float32 (camera-relative
+    rendering). Draws of instances whose transform has a negative determinant get
+    DRAW_MIRRORED: their faces keep their outward side (the Scene rule, as glTF).
     """
     inst = np.asarray(draw_list.instance, np.int64)
     gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(draw_list.cluster,
@@ -138,12 +186,18 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray) -> 
     d["vert_base"] = np.cumsum(nv) - nv
     d["tri_base"] = np.cumsum(nt) - nt
     d["face_base"] = np.asarray(scene.face_base, np.int64)[inst] if inst.size else 0
-    d["flags"] = np.where(np.asarray(draw_list.inside, bool), DRAW_INSIDE, 0)
+    mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
+    mirrored = np.linalg.det(mats[:, :3, :3]) < 0.0 if len(mats) else np.zeros(0, bool)
+    d["flags"] = (np.where(np.asarray(draw_list.inside, bool), DRAW_INSIDE, 0)
+                  | np.where(mirrored[inst], DRAW_MIRRORED, 0))
     n_verts, n_tris = int(nv.sum()), int(nt.sum())
     if n_verts >= 2**31 or n_tris >= 2**31:
         raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
-    mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
-    mvps = np.matmul(np.asarray(view_proj, np.float64), mats).astype(np.float32)
+    origin = np.zeros((len(mats), 4, 4))
+    origin[:] = np.eye(4)
+    origin[:, :3, 3] = pool.mesh_origin[pool.instance_mesh] if len(mats) else 0.0
+    mvps = np.matmul(np.asarray(view_proj, np.float64),
+                     np.matmul(mats, origin)).astype(np.float32)
     if not np.all(np.isfinite(mvps)):
         raise ValueError("an instance's view-projection · model matrix is not finite in "
                          "float32")

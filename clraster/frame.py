@@ -153,7 +153,10 @@ class Frame:
         triangle_id: (H, W) int32 face index of the visible triangle, −1 for background.
         barycentrics: (H, W, 3) float32 perspective-correct barycentrics of the pixel centre
             relative to the visible face's three vertices (in the face's own vertex order,
-            also for clipped triangles); zeros for background.
+            also for clipped triangles); zeros for background. Depth and barycentrics are
+            interpolated from the unsnapped vertex positions (coverage uses the 1/256-px
+            snapped ones), so at a covered pixel centre just outside the unsnapped triangle
+            (at most sqrt(2)/512 px) a weight can be slightly negative.
         stats: counts per stage (`FrameStats`).
         overdraw: (H, W) int32 fragments tested per pixel (depth complexity), when asked for
             (``render(..., overdraw=True)``); else None.

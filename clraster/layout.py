@@ -79,6 +79,10 @@ CULL_MODES = {"none": CULL_NONE, "back": CULL_BACK, "front": CULL_FRONT}
 CLUSTER_LOG2 = 7
 CLUSTER_MAX = 1 << CLUSTER_LOG2
 DRAW_INSIDE = 1  #: draw flag: cluster inside the frustum by a margin, no clip tests needed
+#: Draw flag: the instance's transform mirrors (negative determinant). Its faces keep their
+#: outward side (glTF 2.0, trimesh's apply_transform): setup swaps the cull sense (and the
+#: meaning of "front") for such draws, since their screen winding is reversed.
+DRAW_MIRRORED = 2
 
 # ---- Depth pyramid and occlusion ---------------------------------------------------------
 
@@ -119,25 +123,33 @@ IDMIN_CLEAR = np.uint32(0xFFFFFFFF)
 
 #: One drawn (instance, cluster) pair (C ``Draw``). cluster: global cluster index in the
 #: geometry pool; vert_base / tri_base: first vertex / triangle slot of the draw in this
-#: frame's streams; face_base: triangle id of the instance's face 0; flags: DRAW_INSIDE.
+#: frame's streams; face_base: triangle id of the instance's face 0; flags: DRAW_INSIDE,
+#: DRAW_MIRRORED.
 DRAW_DTYPE = np.dtype([("cluster", np.int32), ("instance", np.int32), ("vert_base", np.int32),
                        ("tri_base", np.int32), ("face_base", np.int32), ("flags", np.int32),
                        ("pad", np.int32, 2)])
 assert DRAW_DTYPE.itemsize == 32
 
-#: One triangle setup record, 64 bytes (one cache line) (C ``Piece``).
+#: One triangle setup record, 96 bytes (C ``Piece``).
 #: x, y: 24.8 fixed-point window coordinates (y down, row 0 at top), oriented so that the
-#: window-space doubled area is > 0. bb_min/bb_max: inclusive pixel range of the pixel centres
-#: in the bounding box, clamped to the viewport, packed as x | y << 16. Depth at a pixel is
-#: z0 + l1*dz10 + l2*dz20 with l_i = E_i * inv_area. r1 = w0/w1, r2 = w0/w2 give the
-#: perspective correction of the piece's screen-space weights.
+#: window-space doubled area is > 0: coverage (edge functions, top-left rule) uses only these.
+#: bb_min/bb_max: inclusive pixel range of the pixel centres in the bounding box, clamped to
+#: the viewport, packed as x | y << 16. The values come from value planes set up in double
+#: from the UNSNAPPED window positions (setup.cl `value_planes`), evaluated at pixel centres
+#: relative to the reference pixel (px0, py0) = bb_min as fx = x − px0, fy = y − py0 (small
+#: exact integers in float): window depth = (z0 + dzdy·fy) + dzdx·fx; screen-space weights
+#: l_i = (l_i + l_ix·fx) + l_iy·fy for vertices 1, 2 (l_0 = 1 − l_1 − l_2). r1 = w0/w1,
+#: r2 = w0/w2 give their perspective correction. pad: keeps the record 16-byte aligned.
 PIECE_DTYPE = np.dtype([
     ("x", np.int32, 3), ("y", np.int32, 3),
     ("bb_min", np.int32), ("bb_max", np.int32),
-    ("z0", np.float32), ("dz10", np.float32), ("dz20", np.float32), ("inv_area", np.float32),
-    ("id", np.int32), ("flags", np.int32), ("r1", np.float32), ("r2", np.float32),
+    ("id", np.int32), ("flags", np.int32),
+    ("z0", np.float32), ("dzdx", np.float32), ("dzdy", np.float32),
+    ("l1", np.float32), ("l1x", np.float32), ("l1y", np.float32),
+    ("l2", np.float32), ("l2x", np.float32), ("l2y", np.float32),
+    ("r1", np.float32), ("r2", np.float32), ("pad", np.int32, 3),
 ])
-assert PIECE_DTYPE.itemsize == 64
+assert PIECE_DTYPE.itemsize == 96
 
 #: A vertex after the viewport transform (C ``WinVert``): 24.8 fixed-point window x, y
 #: (y down), window depth z = (z/w + 1)/2 and iw = 1/w.
@@ -174,7 +186,7 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Clipping: vertices of a clipped triangle (3 + 6 planes) and of the clipper's polygon",
      ("MAX_CLIP_VERTICES", "POLY_MAX")),
     ("Clusters (meshlets): at most CLUSTER_MAX triangles and vertices; draw flags",
-     ("CLUSTER_LOG2", "CLUSTER_MAX", "DRAW_INSIDE")),
+     ("CLUSTER_LOG2", "CLUSTER_MAX", "DRAW_INSIDE", "DRAW_MIRRORED")),
     ("Depth pyramid: levels per launch; Hi-Z test results and error model (pyramid.cl)",
      ("PYR_LOG2", "OCC_VISIBLE", "OCC_OCCLUDED", "OCC_VIEW_CULLED", "HIZ_EPS",
       "HIZ_DEPTH_SLACK", "HIZ_PIXEL_SLACK")),

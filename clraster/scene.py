@@ -141,6 +141,12 @@ class Scene:
     Attributes that change with :meth:`add` are recomputed on access; `version` increases
     by one on every change, so a renderer can cache uploads per (scene, version).
     See the module docstring for the triangle-id convention.
+
+    Winding rule (glTF 2.0): faces keep their outward side under any instance transform.
+    An instance whose transform has a negative determinant (a mirror) reverses its faces'
+    screen winding, and the renderers swap back and front for it, so it renders exactly
+    as the same geometry baked with trimesh's ``apply_transform`` (which reverses each
+    face's vertex order) — culling, normal cones and shading normals alike.
     """
 
     def __init__(self, instances: Iterable[Instance | tuple[Mesh, npt.ArrayLike]] = ()) -> None:

@@ -13,12 +13,11 @@ Normals. A face's normal is ``normalize((b − a) × (c − a))`` in its mesh's 
 ``M⁻ᵀ n``, and *no* sign change for a mirroring transform (negative determinant). That is
 glTF's rule: a mirroring node flips the winding, so the normal that pointed out of the
 object still points out of its mirror image (the world-space winding normal
-``(Mb − Ma) × (Mc − Ma) = det(M)·M⁻ᵀ n`` would point in). Note that clraster's culling
-decides facing from the *world-space* winding (setup's clip-space determinant, and
-`clraster.cull`'s normal cones tested for the opposite side of mirroring instances), so
-with ``cull="back"`` a closed mirrored mesh shows its far, inner side; render such scenes
-with ``cull="none"`` (or with unmirrored geometry) to see their outside. Lighting is
-two-sided by default (``|n · l|``), which looks right in both cases.
+``(Mb − Ma) × (Mc − Ma) = det(M)·M⁻ᵀ n`` would point in). clraster's culling follows the
+same rule (the `Scene` docstring): setup swaps back and front for mirroring instances
+(DRAW_MIRRORED) and the normal cones test them for the same side as the others, so with
+``cull="back"`` a closed mirrored mesh shows its outside. Lighting is two-sided by default
+(``|n · l|``).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@
  *                reads tile_start[tiles] (total entries) and sizes the entry buffer to fit.
  *   bin_scatter: each chunk walks its pieces again and copies each setup record to
  *                entries[tile_start[tile] + counts[chunk][tile]++].
- * Copying whole 64-byte records (not indices) makes the raster read its tile's list
+ * Copying whole 96-byte records (not indices) makes the raster read its tile's list
  * sequentially: with indices it chased one random cache line per entry, and on the dragon at
  * 1080p that pointer chase was most of the raster time.
  * A piece goes to the tiles of its pixel box that its edges can reach (rect_outside):

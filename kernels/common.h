@@ -30,11 +30,13 @@
 
 /* Records (typedefs generated from the clraster.layout dtypes named in brackets):
  *
- * Piece [PIECE_DTYPE]: one triangle setup record, 64 bytes. Window coordinates are 24.8
+ * Piece [PIECE_DTYPE]: one triangle setup record, 96 bytes. Window coordinates are 24.8
  * fixed point with y down (row 0 at the top) and the vertex order makes the doubled area
- * positive. bb_min/bb_max are the inclusive pixel ranges of pixel centres inside the bounding
- * box, clamped to the viewport, packed x | y << 16. r1, r2 = w0/w1, w0/w2: perspective
- * correction of screen-space weights.
+ * positive; they decide coverage only. bb_min/bb_max are the inclusive pixel ranges of pixel
+ * centres inside the bounding box, clamped to the viewport, packed x | y << 16. Depth and
+ * screen-space weights are planes set up from the unsnapped vertices, relative to pixel
+ * bb_min (setup.cl value_planes); r1, r2 = w0/w1, w0/w2: perspective correction of the
+ * weights.
  *
  * Draw [DRAW_DTYPE]: one drawn cluster of one instance. vert_base / tri_base: where its
  * vertices / triangles start in this frame's vertex and triangle streams; face_base: triangle

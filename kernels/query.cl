@@ -86,17 +86,18 @@ __kernel void query_tiles(__global const int *tile_start, __global const Piece *
         long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
         long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
         long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
-        float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
+        float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy;
+        /* depth plane relative to the piece's reference pixel, as raster_tiles */
+        int qx0 = bb_x(pc->bb_min) - tx0, qy0 = bb_y(pc->bb_min);
         for (int ly = ly0; ly <= ly1; ++ly) {
             int row = ly << TILE_LOG2;
+            float zrow = z0 + dzdy * (float)(ty0 + ly - qy0);
             for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN)
             for (int j = 0; j < SPAN; ++j) {
                 int lx = cx + j;
                 long w0 = r0 + lx * sx0, w1 = r1 + lx * sx1, w2 = r2 + lx * sx2;
                 bool in = lx >= lx0 && lx <= lx1 && w0 >= b0 && w1 >= b1 && w2 >= b2;
-                float l1 = (float)w1 * inv_area;
-                float l2 = (float)w2 * inv_area;
-                float z = (z0 + l1 * dz10) + l2 * dz20;
+                float z = zrow + dzdx * (float)(lx - qx0);
                 int i = row + lx;
                 hit[i] |= (uchar)(in && z < zt[i]);   /* LESS: equal depth does not pass */
             }

@@ -2,7 +2,7 @@
  *
  * Per entry: intersect the piece's pixel box with the tile, step three exact 64-bit edge
  * functions across it (top-left rule via edge_bias), interpolate window depth linearly in
- * screen space and depth-test LESS against the tile's private z-buffer (equal depth: the
+ * screen space from the piece's depth plane (set up from the unsnapped vertices) and depth-test LESS against the tile's private z-buffer (equal depth: the
  * lower triangle id wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id and perspective-correct
  * barycentrics (relative to the parent triangle's vertices) are resolved once at the end.
  *
@@ -108,13 +108,17 @@ __kernel void raster_tiles(__global const float *clip_bary,
         long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
         long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
         long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
-        float z0 = pc->z0, dz10 = pc->dz10, dz20 = pc->dz20, inv_area = pc->inv_area;
+        /* depth plane from the unsnapped vertices (setup.cl value_planes), relative to the
+         * piece's reference pixel (its box's first column and row) */
+        float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy;
+        int rx0 = bb_x(pc->bb_min) - tx0, ry0 = bb_y(pc->bb_min);
         int id = pc->id;
         int lx0 = x0 - tx0, lx1 = x1 - tx0;
         bool wide = x1 - x0 >= SPAN;
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
             int t_row = 0, p_row = 0;
+            float zrow = z0 + dzdy * (float)(y - ry0);
             /* A piece wider than one span first finds the exact run of columns of this
              * row inside all three edges (a triangle meets a row in one run) and walks
              * only the spans over it; a narrow one tests its span or two directly, which
@@ -130,9 +134,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
                 int lx = cx + j;
                 long e0 = r0 + lx * sx0, e1 = r1 + lx * sx1, e2 = r2 + lx * sx2;
                 bool in = lx >= c0 && lx <= c1 && e0 >= b0 && e1 >= b1 && e2 >= b2;
-                float l1 = (float)e1 * inv_area;
-                float l2 = (float)e2 * inv_area;
-                float z = (z0 + l1 * dz10) + l2 * dz20;
+                float z = zrow + dzdx * (float)(lx - rx0);
                 int i = row + lx;
                 float zb = zbuf[i];
                 int wd = wid[i];
@@ -167,10 +169,11 @@ __kernel void raster_tiles(__global const float *clip_bary,
             int id = -1;
             if (e >= 0) {
                 __global const Piece *pc = &entries[e];
-                int px = (x << SUBPIXEL_BITS) + SUB_HALF, py = (y << SUBPIXEL_BITS) + SUB_HALF;
-                float l0 = (float)edge_fn(pc->x[1], pc->y[1], pc->x[2], pc->y[2], px, py) * pc->inv_area;
-                float l1 = (float)edge_fn(pc->x[2], pc->y[2], pc->x[0], pc->y[0], px, py) * pc->inv_area;
-                float l2 = (float)edge_fn(pc->x[0], pc->y[0], pc->x[1], pc->y[1], px, py) * pc->inv_area;
+                /* screen-space weights from the unsnapped value planes (setup.cl) */
+                float fx = (float)(x - bb_x(pc->bb_min)), fy = (float)(y - bb_y(pc->bb_min));
+                float l1 = (pc->l1 + pc->l1x * fx) + pc->l1y * fy;
+                float l2 = (pc->l2 + pc->l2x * fx) + pc->l2y * fy;
+                float l0 = (1.0f - l1) - l2;
                 float q1 = l1 * pc->r1, q2 = l2 * pc->r2;
                 float s = (l0 + q1) + q2;
                 float c0 = l0 / s, c1 = q1 / s, c2 = q2 / s;

@@ -20,9 +20,14 @@
 
 /* The clipper works in double: interpolating float32 positions between far-apart vertices
  * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
- * cancels away more than the plane's own scale, and whole triangles vanished. Inputs are
- * the float32 clip positions; each new vertex is rounded to float once, at the end. */
-typedef struct { double4 p; double b0, b1, b2; } ClipVert;
+ * cancels away more than the plane's own scale, and whole triangles vanished. Its inputs
+ * are clip positions recomputed in double from the object-space vertices and the float32
+ * matrix (object_clip): the vertex stage's float32 clip positions are rounded by ~4e-3 at
+ * |w| ~ 1e5, more than a near distance of 1e-3, and the near-plane crossing landed at
+ * w <= 0. A polygon vertex that is one of the triangle's own (orig >= 0) is emitted as the
+ * vertex stage's float32 position, so an edge shared with an unclipped neighbour stays
+ * bit-identical; each new vertex is rounded to float once, at the end. */
+typedef struct { double4 p; double b0, b1, b2; int orig; } ClipVert;
 
 __constant uint PLANE_BIT[6] = {OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG,
                                 OC_GB_Y_POS};
@@ -40,13 +45,57 @@ inline double plane_dist(int p, double4 v, double kx, double ky)
     }
 }
 
+/* Put a vertex cut by plane p exactly on it: the interpolated coordinate along the plane's
+ * normal carries the cancellation error of |vi - vo| (~1e14 for vertices at ±1e30), while
+ * the plane's own expression in w is exact to rounding. */
+inline double4 onto_plane(int p, double4 v, double kx, double ky)
+{
+    switch (p) {
+    case 0: v.z = -v.w; break;
+    case 1: v.z = v.w; break;
+    case 2: v.x = -kx * v.w; break;
+    case 3: v.x = kx * v.w; break;
+    case 4: v.y = -ky * v.w; break;
+    default: v.y = ky * v.w; break;
+    }
+    return v;
+}
+
+/* Clip position of vertex-stream vertex i of draw dr, in double, from its object-space
+ * position and the draw's float32 matrix (the products of two floats are exact in double,
+ * so FMA contraction cannot change it; the twin sums in the same order). */
+inline double4 object_clip(__global const float *pos, __global const int *vert_ids,
+                           __global const int4 *clusters, __global const float *mvps,
+                           Draw dr, int i)
+{
+    int vi = vert_ids[clusters[dr.cluster].z + (i - dr.vert_base)];
+    __global const float *m = mvps + 16 * dr.instance;
+    double px = (double)pos[3 * vi], py = (double)pos[3 * vi + 1], pz = (double)pos[3 * vi + 2];
+    double4 c;
+    c.x = (((double)m[0] * px + (double)m[1] * py) + (double)m[2] * pz) + (double)m[3];
+    c.y = (((double)m[4] * px + (double)m[5] * py) + (double)m[6] * pz) + (double)m[7];
+    c.z = (((double)m[8] * px + (double)m[9] * py) + (double)m[10] * pz) + (double)m[11];
+    c.w = (((double)m[12] * px + (double)m[13] * py) + (double)m[14] * pz) + (double)m[15];
+    return c;
+}
+
+/* The cull mode for one draw: a mirroring instance (DRAW_MIRRORED) keeps its faces' outward
+ * side (glTF 2.0; trimesh's apply_transform), so its screen winding is reversed and back
+ * and front swap. */
+inline int draw_cull(int cull, int flags)
+{
+    if (!(flags & DRAW_MIRRORED)) return cull;
+    return cull == CULL_BACK ? CULL_FRONT : (cull == CULL_FRONT ? CULL_BACK : cull);
+}
+
 /* Facing from the homogeneous determinant det[x y w] of the clip-space vertices: > 0 is
  * counter-clockwise in NDC (front by default), < 0 clockwise. It is the sign of the NDC
  * area for w > 0 and stays meaningful for triangles that cross w = 0, so back-face culling
  * happens before clipping (Olano & Greer 1997). Deciding facing on the unsnapped positions
  * (not on the 1/256-snapped area, which can flip for sub-pixel triangles) is what lets the
  * cluster normal-cone test be conservative: it culls only clusters whose every triangle
- * faces away by a margin far above float32 rounding. Returns ST_RASTER (keep),
+ * faces away by a margin far above float32 rounding. `cull` is the draw's (draw_cull).
+ * Returns ST_RASTER (keep),
  * ST_BACKFACE or ST_DEGENERATE (det exactly 0: edge-on).
  *
  * det is computed in double from the float32 clip positions: a product of two floats is
@@ -68,11 +117,61 @@ inline int facing(float4 a, float4 b, float4 c, int cull)
     return ST_RASTER;
 }
 
-/* Set up one triangle from its three window-space vertices. Returns ST_RASTER when it
+/* Value planes of a piece (depth, screen-space weights, perspective ratios) from its
+ * UNSNAPPED vertices a, b, c (clip space, double, in the piece's vertex order), while
+ * coverage keeps the snapped 24.8 vertices X, Y. Interpolating values from the snapped
+ * positions moved them by up to 1/512 px: window-depth errors of 1.7e-6..7.3e-6 on real
+ * meshes (7e-5 with the near plane cutting them) against a float64 ray caster, where Mesa
+ * llvmpipe is at ~2e-7. Everything here is double, each stored value is rounded to float
+ * once, and every plane is written relative to the reference pixel centre (px0 + 0.5,
+ * py0 + 0.5), so the raster evaluates it at small exact integer offsets and its float
+ * error stays ~1 ulp of the value (not of the window coordinate). The unsnapped doubled area
+ * is used only while it stays within a factor 2 of the snapped one (as = area2 / 256^2,
+ * exact): a sub-pixel sliver whose snap changed its shape that much (or flipped it) falls
+ * back to the snapped positions, so weights at its covered pixel centres stay bounded.
+ * clraster/reference/setup.py `value_planes` does the same double operations in order. */
+inline void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1, int Y1,
+                         int X2, int Y2, long area2, double hw, double hh, int px0, int py0,
+                         Piece *pc)
+{
+    double iw0 = 1.0 / a.w, iw1 = 1.0 / b.w, iw2 = 1.0 / c.w;
+    double x0 = (a.x * iw0 + 1.0) * hw, y0 = (1.0 - a.y * iw0) * hh;
+    double x1 = (b.x * iw1 + 1.0) * hw, y1 = (1.0 - b.y * iw1) * hh;
+    double x2 = (c.x * iw2 + 1.0) * hw, y2 = (1.0 - c.y * iw2) * hh;
+    double z0 = (a.z * iw0) * 0.5 + 0.5, z1 = (b.z * iw1) * 0.5 + 0.5;
+    double z2 = (c.z * iw2) * 0.5 + 0.5;
+    double as = (double)area2 * (1.0 / 65536.0);
+    double ar = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0);
+    if (!(ar >= 0.5 * as && ar <= 2.0 * as)) {
+        x0 = (double)X0 * (1.0 / 256.0); y0 = (double)Y0 * (1.0 / 256.0);
+        x1 = (double)X1 * (1.0 / 256.0); y1 = (double)Y1 * (1.0 / 256.0);
+        x2 = (double)X2 * (1.0 / 256.0); y2 = (double)Y2 * (1.0 / 256.0);
+        ar = as;
+    }
+    double inv = 1.0 / ar;
+    double rx = (double)px0 + 0.5, ry = (double)py0 + 0.5;
+    /* l1 = E(v2 -> v0) / area, l2 = E(v0 -> v1) / area (edge_fn's orientation) */
+    double l1 = ((x0 - x2) * (ry - y2) - (y0 - y2) * (rx - x2)) * inv;
+    double l1x = -(y0 - y2) * inv, l1y = (x0 - x2) * inv;
+    double l2 = ((x1 - x0) * (ry - y0) - (y1 - y0) * (rx - x0)) * inv;
+    double l2x = -(y1 - y0) * inv, l2y = (x1 - x0) * inv;
+    double dz10 = z1 - z0, dz20 = z2 - z0;
+    pc->z0 = (float)((z0 + l1 * dz10) + l2 * dz20);
+    pc->dzdx = (float)(l1x * dz10 + l2x * dz20);
+    pc->dzdy = (float)(l1y * dz10 + l2y * dz20);
+    pc->l1 = (float)l1; pc->l1x = (float)l1x; pc->l1y = (float)l1y;
+    pc->l2 = (float)l2; pc->l2x = (float)l2x; pc->l2y = (float)l2y;
+    pc->r1 = (float)(a.w / b.w);
+    pc->r2 = (float)(a.w / c.w);
+    pc->pad[0] = 0; pc->pad[1] = 0; pc->pad[2] = 0;
+}
+
+/* Set up one triangle from its three window-space vertices (coverage) and the same three
+ * vertices in clip space, double (values: value_planes). Returns ST_RASTER when it
  * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
  * exchanged to make the doubled area positive. */
-inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height,
-                      Piece *pc, int *swapped)
+inline int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1, double4 c2,
+                      int width, int height, Piece *pc, int *swapped)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
@@ -81,6 +180,7 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height,
     *swapped = area2 < 0;
     if (area2 < 0) {
         WinVert t = v1; v1 = v2; v2 = t;
+        double4 tc = c1; c1 = c2; c2 = tc;
         area2 = -area2;
     }
     int xmin = min(min(v0.x, v1.x), v2.x), xmax = max(max(v0.x, v1.x), v2.x);
@@ -95,27 +195,25 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, int width, int height,
     pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
     pc->bb_min = px0 | (py0 << 16);
     pc->bb_max = px1 | (py1 << 16);
-    pc->z0 = v0.z;
-    pc->dz10 = v1.z - v0.z;
-    pc->dz20 = v2.z - v0.z;
-    pc->inv_area = 1.0f / (float)area2;
-    pc->r1 = v1.iw / v0.iw;
-    pc->r2 = v2.iw / v0.iw;
+    value_planes(c0, c1, c2, v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, area2,
+                 0.5 * (double)width, 0.5 * (double)height, px0, py0, pc);
     return ST_RASTER;
 }
 
 /* Clip triangle (c0, c1, c2) against the planes in `planes`, fan the polygon and snap each
  * piece. Returns the number of surviving pieces; with write != 0 also stores them (and their
  * parent barycentrics, 9 floats per piece) at index base, base+1, ... */
-inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx, float ky,
+inline int clip_and_emit(float4 c0, float4 c1, float4 c2, double4 d0, double4 d1, double4 d2,
+                         uint planes, float kx, float ky,
                          int width, int height, int id, int write,
                          __global Piece *out, __global float *out_bary, int base)
 {
     ClipVert poly[POLY_MAX], tmp[POLY_MAX];
     double kxd = (double)kx, kyd = (double)ky;
-    poly[0].p = convert_double4(c0); poly[0].b0 = 1.0; poly[0].b1 = 0.0; poly[0].b2 = 0.0;
-    poly[1].p = convert_double4(c1); poly[1].b0 = 0.0; poly[1].b1 = 1.0; poly[1].b2 = 0.0;
-    poly[2].p = convert_double4(c2); poly[2].b0 = 0.0; poly[2].b1 = 0.0; poly[2].b2 = 1.0;
+    float4 corig[3] = {c0, c1, c2};   /* the vertex stage's positions (see ClipVert) */
+    poly[0].p = d0; poly[0].b0 = 1.0; poly[0].b1 = 0.0; poly[0].b2 = 0.0; poly[0].orig = 0;
+    poly[1].p = d1; poly[1].b0 = 0.0; poly[1].b1 = 1.0; poly[1].b2 = 0.0; poly[1].orig = 1;
+    poly[2].p = d2; poly[2].b0 = 0.0; poly[2].b1 = 0.0; poly[2].b2 = 1.0; poly[2].orig = 2;
     int n = 3;
     for (int p = 0; p < 6 && n >= 3; ++p) {
         if (!(planes & PLANE_BIT[p])) continue;
@@ -131,10 +229,11 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
                 double di = ain ? da : db, dout = ain ? db : da;
                 double t = di / (di - dout);
                 ClipVert r;
-                r.p = vi.p + t * (vo.p - vi.p);
+                r.p = onto_plane(p, vi.p + t * (vo.p - vi.p), kxd, kyd);
                 r.b0 = vi.b0 + t * (vo.b0 - vi.b0);
                 r.b1 = vi.b1 + t * (vo.b1 - vi.b1);
                 r.b2 = vi.b2 + t * (vo.b2 - vi.b2);
+                r.orig = -1;
                 poly[m++] = r;
             }
         }
@@ -145,14 +244,17 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
     for (int k = 1; k + 1 < n; ++k) {
         Piece pc;
         int sw = 0;
-        float4 f0 = convert_float4(poly[0].p), f1 = convert_float4(poly[k].p);
-        float4 f2 = convert_float4(poly[k + 1].p);
+        ClipVert q0 = poly[0], q1 = poly[k], q2 = poly[k + 1];
+        float4 f0 = q0.orig >= 0 ? corig[q0.orig] : convert_float4(q0.p);
+        float4 f1 = q1.orig >= 0 ? corig[q1.orig] : convert_float4(q1.p);
+        float4 f2 = q2.orig >= 0 ? corig[q2.orig] : convert_float4(q2.p);
         /* a piece with a vertex at w <= 0 can only come from a projection matrix that
          * does not put w > 0 on the near plane; it has no window position: dropped */
         if (!(f0.w > 0.0f && f1.w > 0.0f && f2.w > 0.0f))
             continue;
         if (make_piece(viewport_vertex(f0, hw, hh), viewport_vertex(f1, hw, hh),
-                       viewport_vertex(f2, hw, hh), width, height, &pc, &sw)
+                       viewport_vertex(f2, hw, hh), poly[0].p, poly[k].p, poly[k + 1].p,
+                       width, height, &pc, &sw)
             != ST_RASTER)
             continue;
         if (write) {
@@ -173,12 +275,12 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, uint planes, float kx,
 
 /* Which triangle this work-item sets up: local triangle get_local_id of draw get_group_id
  * (work-groups of CLUSTER_MAX; the draw is uniform over the group). Gives its slot in the
- * frame's triangle stream, its three vertices in the frame's vertex stream, and its id.
- * Returns 0 for idle work-items. */
+ * frame's triangle stream, its three vertices in the frame's vertex stream, its id and its
+ * draw's flags. Returns 0 for idle work-items. */
 inline int triangle_of(uint n_draws, __global const Draw *draws,
                        __global const int4 *clusters, __global const uchar4 *local_tris,
                        __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
-                       int *id)
+                       int *id, int *flags)
 {
     uint d = get_group_id(0), lt = get_local_id(0);
     if (d >= n_draws) return 0;
@@ -191,13 +293,15 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     *i1 = dr.vert_base + tv.y;
     *i2 = dr.vert_base + tv.z;
     *id = dr.face_base + face_ids[ci.x + lt];
+    *flags = dr.flags;
     return 1;
 }
 
 #define DRAW_ARGS                                                                          \
     __global const Draw *restrict draws, const uint n_draws,                               \
     __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
-    __global const int *restrict face_ids
+    __global const int *restrict face_ids, __global const float *restrict pos,             \
+    __global const int *restrict vert_ids, __global const float *restrict mvps
 
 __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global const ushort *restrict outcode,
@@ -206,9 +310,9 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global Piece *restrict pieces, __global uchar *restrict status,
                               __global int *restrict clip_count)
 {
-    int t, i0, i1, i2, id;
+    int t, i0, i1, i2, id, dflags;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id))
+                     &i0, &i1, &i2, &id, &dflags))
         return;
     uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
     uint o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
@@ -219,18 +323,31 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         st = ST_TRIVIAL_REJECT;
     } else {
         float4 c0 = clip[i0], c1 = clip[i1], c2 = clip[i2];
-        st = facing(c0, c1, c2, cull);
+        st = facing(c0, c1, c2, draw_cull(cull, dflags));
         if (st != ST_RASTER) {
         } else if (o_or & OC_NEEDS_CLIP) {
             st = ST_CLIPPED;
-            nclip = clip_and_emit(c0, c1, c2, o_or & OC_NEEDS_CLIP, kx, ky, width, height, id,
+            Draw dr = draws[get_group_id(0)];
+            nclip = clip_and_emit(c0, c1, c2,
+                                  object_clip(pos, vert_ids, clusters, mvps, dr, i0),
+                                  object_clip(pos, vert_ids, clusters, mvps, dr, i1),
+                                  object_clip(pos, vert_ids, clusters, mvps, dr, i2),
+                                  o_or & OC_NEEDS_CLIP, kx, ky, width, height, id,
                                   0, pieces, 0, 0);
         } else if (o_or & OC_W_NONPOS) {
             st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
         } else {
             Piece pc;
             int sw = 0;
-            st = make_piece(win[i0], win[i1], win[i2], width, height, &pc, &sw);
+            /* values from the double clip positions (object_clip): the float32 ones are
+             * rounded by ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the
+             * barycentrics of 1-pixel triangles off by 3e-5 */
+            Draw dr = draws[get_group_id(0)];
+            st = make_piece(win[i0], win[i1], win[i2],
+                            object_clip(pos, vert_ids, clusters, mvps, dr, i0),
+                            object_clip(pos, vert_ids, clusters, mvps, dr, i1),
+                            object_clip(pos, vert_ids, clusters, mvps, dr, i2), width, height,
+                            &pc, &sw);
             if (st == ST_RASTER) {
                 pc.id = id;
                 pc.flags = sw ? PF_SWAPPED : 0;
@@ -250,12 +367,17 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
                             __global Piece *restrict clip_pieces,
                             __global float *restrict clip_bary)
 {
-    int t, i0, i1, i2, id;
+    int t, i0, i1, i2, id, dflags;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id) || clip_count[t] == 0)
+                     &i0, &i1, &i2, &id, &dflags) || clip_count[t] == 0)
         return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
-    clip_and_emit(clip[i0], clip[i1], clip[i2], o_or & OC_NEEDS_CLIP, kx, ky, width, height,
+    Draw dr = draws[get_group_id(0)];
+    clip_and_emit(clip[i0], clip[i1], clip[i2],
+                  object_clip(pos, vert_ids, clusters, mvps, dr, i0),
+                  object_clip(pos, vert_ids, clusters, mvps, dr, i1),
+                  object_clip(pos, vert_ids, clusters, mvps, dr, i2),
+                  o_or & OC_NEEDS_CLIP, kx, ky, width, height,
                   id, 1, clip_pieces, clip_bary, clip_offset[t]);
 }
 

@@ -28,8 +28,8 @@ from clraster import Mesh
 #: Angular margin around triangle edges, in pixels at the image centre.
 EDGE_MARGIN_PX = 0.02
 #: Relative margin around the near and far planes (float32 clipping of triangles whose
-#: vertices are far from the plane leaves relative errors of this order; see the xfail
-#: cases below for where it stops being small).
+#: vertices are far from the plane leaves relative errors of this order; the huge ground
+#: plane cases below once went past where it stops being small).
 DEPTH_MARGIN = 1e-3
 #: Margin in window depth: near the far plane of a deep frustum float32 depth cannot tell
 #: the far plane from a point a little in front of it, and a fragment at depth ≥ 1.0 fails
@@ -162,13 +162,12 @@ GROUND_CASES = [
     pytest.param(0.1, 1e3, 1e4, id="near0.1-half1e4"),
     pytest.param(0.1, 1e3, 1e6, id="near0.1-half1e6"),
     pytest.param(1e-3, 1e3, 1e4, id="near1e-3-half1e4"),
-    pytest.param(1e-3, 1e3, 1e5, id="near1e-3-half1e5", marks=pytest.mark.xfail(
-        strict=True, reason="LIMITATION: the clipper runs in double, but its inputs are the "
-        "vertex stage's float32 clip positions; at |w| ≈ 1e5 their rounding (≈ 4e-3) exceeds "
-        "the near distance 1e-3, so the near-plane crossing lands at w ≤ 0 and the pieces "
-        "are dropped. Needs clip positions recomputed in double for clipped triangles")),
-    pytest.param(0.1, 1e3, 1e7, id="near0.1-half1e7", marks=pytest.mark.xfail(
-        strict=True, reason="LIMITATION: same float32 input rounding (see above)")),
+    # Failed while the clipper's inputs were the vertex stage's float32 clip positions: at
+    # |w| ≈ 1e5 their rounding (≈ 4e-3) exceeds the near distance 1e-3, so the near-plane
+    # crossing landed at w ≤ 0 and the pieces were dropped. The clipper now recomputes them
+    # in double from the object-space vertices (setup.cl object_clip).
+    pytest.param(1e-3, 1e3, 1e5, id="near1e-3-half1e5"),
+    pytest.param(0.1, 1e3, 1e7, id="near0.1-half1e7"),
 ]
 
 
@@ -192,9 +191,11 @@ def test_huge_ground_plane_through_near_plane(near, far, half):
 @pytest.mark.parametrize("scale", [
     1e5, 1e10, 1e12,
     1e15,  # failed while the clipper interpolated in float32 (cancellation ≈ 7e7)
-    pytest.param(1e30, marks=pytest.mark.xfail(
-        strict=True, reason="LIMITATION: at ±1e30 even double interpolation errs by ~1e14, "
-        "far beyond the guard band (±2**19 px): the clipped polygon misses the window")),
+    # Failed while a clipped vertex kept its interpolated coordinate across the plane: at
+    # ±1e30 double interpolation errs by ~1e14, far beyond the guard band (±2**19 px), and
+    # the clipped polygon missed the window. It is now put exactly on the plane
+    # (setup.cl onto_plane).
+    1e30,
 ])
 def test_huge_finite_triangle_covers_window(scale):
     """A finite triangle around the whole window (identity clip matrix, w = 1): every pixel

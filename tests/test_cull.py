@@ -434,8 +434,10 @@ def test_cone_culling_of_quads_and_mirrored_instances():
     scene.add(down, translation(2, 0, 0))  # faces away: cone-culled
     scene.add(side, translation(4, 0, 0))  # edge-on: kept (margin)
     mirror = np.diag([1.0, -1.0, 1.0, 1.0]) @ translation(0, -1, 0)
-    scene.add(up, translation(6, 0, 0) @ mirror)  # mirrored: world normal +y again: drawn
-    scene.add(down, translation(8, 0, 0) @ mirror)  # mirrored: faces away: culled
+    # Mirrored instances keep their faces' outward side (glTF): the "up" quad's outward
+    # normal becomes −y (faces away: culled), the "down" quad's +y (drawn).
+    scene.add(up, translation(6, 0, 0) @ mirror)
+    scene.add(down, translation(8, 0, 0) @ mirror)
     for kind in ("ortho", "perspective"):
         if kind == "ortho":
             view = Camera.look_at((4, 10, 0), (4, 0, 0), up=(0, 0, -1)).view
@@ -445,11 +447,11 @@ def test_cone_culling_of_quads_and_mirrored_instances():
                                 far=60).view_projection(400, 200)
         dl = build_draw_list(scene, vp)
         check_counts(dl, scene)
-        assert dl.instance.tolist() == [0, 2, 3], kind
+        assert dl.instance.tolist() == [0, 2, 4], kind
         assert dl.counts["clusters_cone_culled"] == 2 and dl.counts["triangles_cone_culled"] == 4
         # Front culling keeps the opposite ones (and the edge-on quad).
         dl = build_draw_list(scene, vp, cull="front")
-        assert dl.instance.tolist() == [1, 2, 4], kind
+        assert dl.instance.tolist() == [1, 2, 3], kind
         # No face culling, or cones off: no cone culling.
         assert len(build_draw_list(scene, vp, cull="none")) == 5
         assert len(build_draw_list(scene, vp, cones=False)) == 5
@@ -585,7 +587,9 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
     area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
     front_w = (clip[faces][..., 3] > 0).all(axis=1)
     pw = mesh.vertices[faces].astype(np.float64) @ t[:3, :3].T + t[:3, 3]  # world, (M, 3, 3)
-    nw = np.cross(pw[:, 1] - pw[:, 0], pw[:, 2] - pw[:, 0])  # world winding normal
+    # world outward normal: the winding normal, reversed for a mirroring instance (its
+    # faces keep their outward side, the Scene rule)
+    nw = np.cross(pw[:, 1] - pw[:, 0], pw[:, 2] - pw[:, 0]) * np.sign(np.linalg.det(t[:3, :3]))
     po = mesh.vertices[faces].astype(np.float64)
     e1, e2 = po[:, 1] - po[:, 0], po[:, 2] - po[:, 0]
     usable = np.linalg.norm(np.cross(e1, e2), axis=1) > 1e-8 * np.linalg.norm(
@@ -598,6 +602,8 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
     # > 0: the culled side; >= sin(1e-3): seen at least the default cone margin (in world
     # space) away from edge-on, although the instance's scale is not uniform.
     facing = sign * np.einsum("tk,tjk->tj", unit_nw, ray)
+    # the screen area's sign, reversed for a mirroring instance (setup swaps its cull sense)
+    area = area * np.sign(np.linalg.det(t[:3, :3]))
     culled_side = (area < 0) if cull == "back" else (area > 0)
     n_cone = 0
     for k in np.flatnonzero(~drawn):

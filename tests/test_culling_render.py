@@ -652,10 +652,11 @@ def test_instances_behind_the_camera_are_culled():
 def _back_facing(mesh: Mesh, transform: np.ndarray, eye: np.ndarray) -> np.ndarray:
     """bool (F,): the face, placed in world space, is seen from behind from `eye`:
     dot(n, p − eye) > 0 at its centroid p (the same sign everywhere on its plane), with n
-    from the world-space vertex order (counter-clockwise = front, as the renderer sees it;
-    a mirroring transform turns an outward-wound mesh inward)."""
+    the outward normal: from the world-space vertex order, reversed for a mirroring
+    transform (faces keep their outward side, the Scene rule as glTF's; it used to be the
+    world-space order alone, which turned an outward-wound mirrored mesh inward)."""
     v = mesh.vertices[mesh.faces] @ transform[:3, :3].T + transform[:3, 3]
-    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) * np.sign(np.linalg.det(transform[:3, :3]))
     return np.einsum("ij,ij->i", n, v.mean(axis=1) - eye) > 0
 
 

@@ -133,7 +133,10 @@ def test_tilted_plane_depth_and_perspective_barycentrics(normal, size):
     # barycentrics: perspective-correct, relative to the visible face's own vertices
     b = fr.barycentrics[m].astype(np.float64)
     np.testing.assert_allclose(b.sum(axis=1), 1.0, atol=1e-5)
-    assert b.min() > -1e-5
+    # values come from the unsnapped triangle, coverage from the snapped one: a covered pixel
+    # centre can lie up to sqrt(2)/512 px outside the unsnapped triangle, where a weight is
+    # that distance over the triangle's altitude (>= ~15 px here) below 0
+    assert b.min() > -2e-4
     verts = mesh.vertices.astype(np.float64)[mesh.faces[fr.triangle_id[m]]]  # (K, 3, 3)
     pt = np.einsum("ki,kij->kj", b, verts)  # reconstructed eye-space point
     # it lies on the pixel's ray: compare its projection with the pixel centre, in pixels

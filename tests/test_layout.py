@@ -97,10 +97,12 @@ def test_probe_detects_a_disagreement():
     assert bad_src.count("OC_INVALID 1025") == 1 and "long id;" in bad_src
     prg = cl.Program(ctx, bad_src).build(options=list(probe_options(cfg, entries)))
     bad = {m.split(":")[0] for m in mismatches(entries, run_probe(prg, ctx, len(entries)))}
-    # long id (still at 48, already 8-aligned) moves the fields after it by 4 and rounds
-    # Piece up to 72 bytes
-    assert bad == {"OC_INVALID", "sizeof(Piece)", "sizeof(Piece.id)", "offsetof(Piece, flags)",
-                   "offsetof(Piece, r1)", "offsetof(Piece, r2)"}
+    # long id (still at 32, already 8-aligned) moves the fields after it by 4 and rounds
+    # Piece up to 104 bytes
+    after = ("flags", "z0", "dzdx", "dzdy", "l1", "l1x", "l1y", "l2", "l2x", "l2y", "r1", "r2",
+             "pad")
+    assert bad == {"OC_INVALID", "sizeof(Piece)", "sizeof(Piece.id)",
+                   *(f"offsetof(Piece, {f})" for f in after)}
 
 
 def test_kernels_keep_no_hand_copies():

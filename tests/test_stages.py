@@ -112,7 +112,8 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
 
     # -- setup → bin ------------------------------------------------------------------------
     tri_verts, ids = ref_setup.draw_triangles(pool, fd)
-    st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, cull, params.kx, params.ky)
+    st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, cull, params.kx, params.ky,
+                         ref_setup.object_clip(pool, fd), ref_setup.draw_mirrored(pool, fd))
     _assert_records("setup", "status", _read(queue, setup.status, np.uint8, m), st.status)
     _assert_records("setup", "clip_count", _read(queue, setup.clip_count, np.int32, m),
                     st.clip_count)

@@ -23,7 +23,7 @@ from conftest import NDC_CAMERA, assert_frames_equal, load_shared_mesh
 
 import clraster
 from clraster import Camera, Mesh, RasterConfig, Renderer, reference
-from clraster.config import DRAW_DTYPE
+from clraster.config import DRAW_DTYPE, PIECE_DTYPE
 from clraster.drawlist import FrameDraws
 from clraster.scenes import plant, plant_inside_camera, random_scene
 from clraster.streaming import BinBudgetExceeded, draw_range, stream_draws
@@ -164,7 +164,7 @@ def test_full_screen_quads_small_entry_budget():
     assert np.all(fr.triangle_id // 2 == near)
     assert np.abs(fr.depth - (z[near] + 1) / 2).max() < 1e-6
     _assert_bounded(r)
-    assert r.chain.binning.buffers.entries.capacity <= 64 * 200_000
+    assert r.chain.binning.buffers.entries.capacity <= PIECE_DTYPE.itemsize * 200_000
 
 
 def test_buffers_shrink_after_outsized_draw():

@@ -135,7 +135,8 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     clip, oc, win = vertex_.transform_draws(pool, fd, params.kx, params.ky, w, h)
     t1 = time.perf_counter()
     tri_verts, ids = setup_.draw_triangles(pool, fd)
-    st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky)
+    st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky,
+                      setup_.object_clip(pool, fd), setup_.draw_mirrored(pool, fd))
     t2 = time.perf_counter()
     if max_entries is not None and st.clip_pieces.size > max_entries:
         raise BinBudgetExceeded(st.clip_pieces.size, max_entries)

@@ -81,7 +81,8 @@ def samples_passed(depth: np.ndarray, mins: np.ndarray, maxs: np.ndarray,
     kx, ky = guard_band_factors(width, height)
     clip, oc, win = vertex_.transform_draws(pool, fd, kx, ky, width, height)
     tri_verts, ids = setup_.draw_triangles(pool, fd)
-    st = setup_.setup(clip, oc, win, tri_verts, ids, width, height, "none", kx, ky)
+    st = setup_.setup(clip, oc, win, tri_verts, ids, width, height, "none", kx, ky,
+                      setup_.object_clip(pool, fd))
     order = bin_.unified_order(st.status, st.clip_count, st.clip_offset)
     allp = np.concatenate([st.pieces, st.clip_pieces])
     tile_start, entries = bin_.bin_pieces(allp, order, width, height, config)

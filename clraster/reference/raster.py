@@ -98,9 +98,10 @@ def covered_fragments(tile_start: np.ndarray, entries: np.ndarray, width: int, h
                & (e2 >= _bias(X[:, 0], Y[:, 0], X[:, 1], Y[:, 1])))
         owner, pc = owner[cov], pc[cov]
         pix = py_i[cov].astype(np.int64) * width + px_i[cov]
-        l1 = e1[cov].astype(F32) * pc["inv_area"]
-        l2 = e2[cov].astype(F32) * pc["inv_area"]
-        z = (pc["z0"] + l1 * pc["dz10"]) + l2 * pc["dz20"]
+        # depth plane relative to the piece's reference pixel (setup.cl value_planes)
+        fx = (px_i[cov] - (pc["bb_min"] & 0xFFFF)).astype(F32)
+        fy = (py_i[cov] - (pc["bb_min"] >> 16)).astype(F32)
+        z = (pc["z0"] + pc["dzdy"] * fy) + pc["dzdx"] * fx
         yield owner, pix, z, pc
         start = stop
 
@@ -170,11 +171,12 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
     hit = np.nonzero(win >= 0)[0]
     if hit.size:
         pc = entries[win[hit]]
-        fx = ((hit % width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        fy = ((hit // width) << SUBPIXEL_BITS) + SUBPIXEL_ONE // 2
-        e0, e1, e2 = edges_at(pc, fx, fy)
-        inv = pc["inv_area"]
-        l0, l1, l2 = e0.astype(F32) * inv, e1.astype(F32) * inv, e2.astype(F32) * inv
+        # screen-space weights from the unsnapped value planes (setup.cl value_planes)
+        fx = ((hit % width) - (pc["bb_min"] & 0xFFFF)).astype(F32)
+        fy = ((hit // width) - (pc["bb_min"] >> 16)).astype(F32)
+        l1 = (pc["l1"] + pc["l1x"] * fx) + pc["l1y"] * fy
+        l2 = (pc["l2"] + pc["l2x"] * fx) + pc["l2y"] * fy
+        l0 = (F32(1) - l1) - l2
         q1, q2 = l1 * pc["r1"], l2 * pc["r2"]
         ssum = (l0 + q1) + q2
         c = np.stack([l0 / ssum, q1 / ssum, q2 / ssum], axis=1)

@@ -37,7 +37,10 @@ from ..config import (
     SUBPIXEL_ONE,
     WINVERT_DTYPE,
 )
-from ..layout import POLY_MAX  # vertex slots of the clipper's polygon (kernels/setup.cl)
+from ..layout import (
+    DRAW_MIRRORED,
+    POLY_MAX,  # vertex slots of the clipper's polygon (kernels/setup.cl)
+)
 from .vertex import viewport
 
 PLANE_BITS = (OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG, OC_GB_Y_POS)
@@ -67,17 +70,20 @@ def plane_dist(p: int, v: np.ndarray, kx: F32, ky: F32) -> np.ndarray:
     return (z + w, w - z, x + kx * w, kx * w - x, y + ky * w, ky * w - y)[p]
 
 
-def facing(c: np.ndarray, cull: int) -> np.ndarray:
+def facing(c: np.ndarray, cull: int, mirrored: np.ndarray | None = None) -> np.ndarray:
     """Facing of clip-space triangles c float32 (K, 3, 4) from det[x y w], as facing() in
     setup.cl: ST_RASTER (keep), ST_BACKFACE or ST_DEGENERATE (det == 0) per triangle. The
     determinant is taken in float64 (as the kernel does in double): exact products, no
-    under- or overflow at any scene scale."""
+    under- or overflow at any scene scale. ``mirrored`` bool (K,): triangles of mirroring
+    instances (DRAW_MIRRORED), whose back and front swap (draw_cull in setup.cl)."""
     c = c.astype(np.float64)
     a, b, d = c[:, 0], c[:, 1], c[:, 2]
     with np.errstate(all="ignore"):
         det = ((a[:, 0] * (b[:, 1] * d[:, 3] - b[:, 3] * d[:, 1])
                 - a[:, 1] * (b[:, 0] * d[:, 3] - b[:, 3] * d[:, 0]))
                + a[:, 3] * (b[:, 0] * d[:, 1] - b[:, 1] * d[:, 0]))
+    if mirrored is not None:
+        det = np.where(mirrored, -det, det)
     st = np.full(c.shape[0], ST_RASTER, np.uint8)
     if cull == CULL_MODES["back"]:
         st[det < 0] = ST_BACKFACE
@@ -87,12 +93,55 @@ def facing(c: np.ndarray, cull: int) -> np.ndarray:
     return st
 
 
-def make_pieces(wv: np.ndarray, width: int, height: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Set up triangles from window-space vertices, as make_piece in setup.cl.
+def value_planes(c: np.ndarray, X: np.ndarray, Y: np.ndarray, area2: np.ndarray,
+                 width: int, height: int, px0: np.ndarray, py0: np.ndarray,
+                 pc: np.ndarray) -> None:
+    """Fill the value planes of pieces pc PIECE_DTYPE (K,) in place, as value_planes in
+    setup.cl (see there why): the same float64 operations in the same order, each stored
+    value rounded to float32 once.
 
     Args:
-        wv: WINVERT_DTYPE (K, 3).
+        c: float64 (K, 3, 4) unsnapped clip-space vertices in the pieces' (swapped) order.
+        X, Y: int64 (K, 3) their snapped 24.8 window positions. area2: int64 (K,) > 0.
+        px0, py0: int64 (K,) reference pixel (the box's first column and row).
+    """
+    hw, hh = 0.5 * np.float64(width), 0.5 * np.float64(height)
+    with np.errstate(all="ignore"):
+        iw = 1.0 / c[..., 3]
+        x = (c[..., 0] * iw + 1.0) * hw
+        y = (1.0 - c[..., 1] * iw) * hh
+        z = (c[..., 2] * iw) * 0.5 + 0.5
+        a_s = area2.astype(np.float64) * (1.0 / 65536.0)
+        ar = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (y[:, 1] - y[:, 0]) * (x[:, 2] - x[:, 0])
+        snap = ~((ar >= 0.5 * a_s) & (ar <= 2.0 * a_s))
+        x = np.where(snap[:, None], X.astype(np.float64) * (1.0 / 256.0), x)
+        y = np.where(snap[:, None], Y.astype(np.float64) * (1.0 / 256.0), y)
+        ar = np.where(snap, a_s, ar)
+        inv = 1.0 / ar
+        rx, ry = px0.astype(np.float64) + 0.5, py0.astype(np.float64) + 0.5
+        x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
+        y0, y1, y2 = y[:, 0], y[:, 1], y[:, 2]
+        l1 = ((x0 - x2) * (ry - y2) - (y0 - y2) * (rx - x2)) * inv
+        l1x, l1y = -(y0 - y2) * inv, (x0 - x2) * inv
+        l2 = ((x1 - x0) * (ry - y0) - (y1 - y0) * (rx - x0)) * inv
+        l2x, l2y = -(y1 - y0) * inv, (x1 - x0) * inv
+        dz10, dz20 = z[:, 1] - z[:, 0], z[:, 2] - z[:, 0]
+        pc["z0"] = (z[:, 0] + l1 * dz10) + l2 * dz20
+        pc["dzdx"] = l1x * dz10 + l2x * dz20
+        pc["dzdy"] = l1y * dz10 + l2y * dz20
+        pc["l1"], pc["l1x"], pc["l1y"] = l1, l1x, l1y
+        pc["l2"], pc["l2x"], pc["l2y"] = l2, l2x, l2y
+        pc["r1"] = c[:, 0, 3] / c[:, 1, 3]
+        pc["r2"] = c[:, 0, 3] / c[:, 2, 3]
+
+
+def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Set up triangles from window-space vertices (coverage) and the same vertices in clip
+    space (values), as make_piece in setup.cl.
+
+    Args:
+        wv: WINVERT_DTYPE (K, 3). c: float64 (K, 3, 4) unsnapped clip positions.
 
     Returns (status uint8 (K,), pieces PIECE_DTYPE (K,) valid where status == ST_RASTER,
     swapped bool (K,)).
@@ -107,7 +156,8 @@ def make_pieces(wv: np.ndarray, width: int, height: int
     swapped = area2 < 0
     perm = np.where(swapped[:, None], [0, 2, 1], [0, 1, 2])
     wv = wv[np.arange(k)[:, None], perm]
-    X, Y, Z, iw = wv["x"].astype(np.int64), wv["y"].astype(np.int64), wv["z"], wv["iw"]
+    c = np.asarray(c, np.float64)[np.arange(k)[:, None], perm]
+    X, Y = wv["x"].astype(np.int64), wv["y"].astype(np.int64)
     area2 = np.abs(area2)
     half, one = SUBPIXEL_ONE // 2, SUBPIXEL_ONE
     px0 = np.maximum((X.min(1) - half + one - 1) >> SUBPIXEL_BITS, 0)
@@ -122,35 +172,35 @@ def make_pieces(wv: np.ndarray, width: int, height: int
     pc["y"][ok] = Y[ok]
     pc["bb_min"][ok] = (px0 | (py0 << 16))[ok]
     pc["bb_max"][ok] = (px1 | (py1 << 16))[ok]
-    with np.errstate(all="ignore"):
-        pc["z0"][ok] = Z[ok, 0]
-        pc["dz10"][ok] = (Z[:, 1] - Z[:, 0])[ok]
-        pc["dz20"][ok] = (Z[:, 2] - Z[:, 0])[ok]
-        pc["inv_area"][ok] = F32(1) / area2[ok].astype(F32)
-        pc["r1"][ok] = (iw[:, 1] / iw[:, 0])[ok]
-        pc["r2"][ok] = (iw[:, 2] / iw[:, 0])[ok]
+    vals = pc[ok]
+    value_planes(c[ok], X[ok], Y[ok], area2[ok], width, height, px0[ok], py0[ok], vals)
+    pc[ok] = vals
     pc["flags"] = np.where(swapped, PF_SWAPPED, 0)
     return status, pc, swapped
 
 
 def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sutherland–Hodgman in clip space, vectorized over triangles.
 
     In float64, as the kernel (see the comment on ClipVert in setup.cl).
 
     Args:
-        c: float32 (K, 3, 4) clip-space triangles. planes: (K,) OC_* bits to clip against.
+        c: float64 (K, 3, 4) clip-space triangles (`object_clip`: recomputed in double from
+            object space). planes: (K,) OC_* bits to clip against.
 
     Returns:
-        poly float64 (K, POLY_MAX, 7) — x, y, z, w and the parent barycentrics — and the
-        vertex counts n int (K,).
+        poly float64 (K, POLY_MAX, 7) — x, y, z, w and the parent barycentrics —, the
+        vertex counts n int (K,) and orig int (K, POLY_MAX): which of the triangle's own
+        vertices each polygon vertex is, −1 for one made by the clipper.
     """
     k = c.shape[0]
     kx, ky = np.float64(kx), np.float64(ky)
-    poly = np.zeros((k, POLY_MAX, 7), np.float64)
+    # column 7: the original vertex (as ClipVert.orig), carried along with the rest
+    poly = np.zeros((k, POLY_MAX, 8), np.float64)
     poly[:, :3, :4] = c
-    poly[:, :3, 4:] = np.eye(3)
+    poly[:, :3, 4:7] = np.eye(3)
+    poly[:, :3, 7] = [0, 1, 2]
     n = np.full(k, 3, np.int64)
     rows = np.arange(k)
     with np.errstate(all="ignore"):
@@ -179,10 +229,46 @@ def clip_polygons(c: np.ndarray, planes: np.ndarray, kx: F32, ky: F32
                     di = np.where(ain, da, db)[e2]
                     do = np.where(ain, db, da)[e2]
                     t = (di / (di - do))[:, None]
-                    poly[rows[e2], m[e2]] = vi + t * (vo - vi)
+                    r = vi + t * (vo - vi)
+                    r[:, :4] = onto_plane(p, r[:, :4], kx, ky)
+                    r[:, 7] = -1
+                    poly[rows[e2], m[e2]] = r
                     m += e2
             n = np.where(act, m, n)
-    return poly, n
+    return poly[..., :7], n, poly[..., 7].astype(np.int64)
+
+
+def onto_plane(p: int, v: np.ndarray, kx: np.float64, ky: np.float64) -> np.ndarray:
+    """Float64 clip positions v (K, 4) cut by plane p, put exactly on it (onto_plane in
+    setup.cl)."""
+    v = v.copy()
+    x, y, z, w = 0, 1, 2, 3
+    axis, value = ((z, -v[:, w]), (z, v[:, w]), (x, -kx * v[:, w]), (x, kx * v[:, w]),
+                   (y, -ky * v[:, w]), (y, ky * v[:, w]))[p]
+    v[:, axis] = value
+    return v
+
+
+def object_clip(pool, fd) -> np.ndarray:
+    """Float64 (N, 4) clip positions of the frame's vertex stream recomputed from the pool's
+    object-space positions and the float32 matrices, summed in the kernel's order
+    (object_clip in setup.cl): the clipper's inputs."""
+    from .vertex import draw_vertices
+
+    pv, inst, _ = draw_vertices(pool, fd)
+    p = pool.positions[pv].astype(np.float64)
+    m = fd.mvps[inst].astype(np.float64).reshape(-1, 4, 4)
+    with np.errstate(all="ignore"):   # NaN/Inf vertices: OC_INVALID, never clipped
+        return (((m[:, :, 0] * p[:, 0:1] + m[:, :, 1] * p[:, 1:2]) + m[:, :, 2] * p[:, 2:3])
+                + m[:, :, 3])
+
+
+def draw_mirrored(pool, fd) -> np.ndarray:
+    """bool (M,): per slot of the frame's triangle stream, whether its draw has the
+    DRAW_MIRRORED flag (mirrors triangle_of's flags in setup.cl)."""
+    d = fd.draws
+    nt = pool.clusters[d["cluster"]][:, 1].astype(np.int64)
+    return np.repeat((d["flags"] & DRAW_MIRRORED) != 0, nt)
 
 
 def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
@@ -200,11 +286,14 @@ def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
 
 
 def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.ndarray,
-          ids: np.ndarray, width: int, height: int, cull: str, kx: F32, ky: F32
+          ids: np.ndarray, width: int, height: int, cull: str, kx: F32, ky: F32,
+          clip64: np.ndarray | None = None, mirrored: np.ndarray | None = None
           ) -> SetupResult:
     """Triangle setup over the vertex stage's outputs (clip float32 (N, 4), outcode uint16
     (N,), win WINVERT_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
-    int (M,)."""
+    int (M,). clip64: float64 (N, 4) the clipper's inputs (`object_clip`; None: ``clip``
+    itself). mirrored: bool (M,) triangles of mirroring draws (`draw_mirrored`; None:
+    none)."""
     cull_i = CULL_MODES[cull]
     faces = tri_verts
     m = faces.shape[0]
@@ -217,7 +306,8 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     status[invalid] = ST_INVALID
     status[reject] = ST_TRIVIAL_REJECT
     rest = np.nonzero(~invalid & ~reject)[0]
-    status[rest] = facing(clip[faces[rest]], cull_i)
+    status[rest] = facing(clip[faces[rest]], cull_i,
+                          None if mirrored is None else mirrored[rest])
     live = status == ST_RASTER
     needs = live & ((o_or & OC_NEEDS_CLIP) != 0)
     wzero = live & ~needs & ((o_or & OC_W_NONPOS) != 0)
@@ -226,7 +316,9 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     status[wzero] = ST_DEGENERATE
     pieces = np.zeros(m, PIECE_DTYPE)
     idx = np.nonzero(plain)[0]
-    st, pc, _ = make_pieces(win[faces[idx]], width, height)
+    # values from the float64 clip positions (object_clip), as the kernel
+    cval = clip if clip64 is None else clip64
+    st, pc, _ = make_pieces(win[faces[idx]], cval[faces[idx]], width, height)
     status[idx] = st
     pc["id"] = ids[idx]
     ok = st == ST_RASTER
@@ -234,17 +326,25 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
 
     cidx = np.nonzero(needs)[0]
     clip_count = np.zeros(m, np.int32)
-    poly, n = clip_polygons(clip[faces[cidx]], o_or[cidx] & OC_NEEDS_CLIP, kx, ky)
+    c64 = clip.astype(np.float64) if clip64 is None else clip64
+    poly, n, orig = clip_polygons(c64[faces[cidx]], o_or[cidx] & OC_NEEDS_CLIP, kx, ky)
     # fan (0, k, k+1) for k = 1..n-2, ordered by triangle then k
     nfan = np.maximum(n - 2, 0)
     owner = np.repeat(np.arange(cidx.size), nfan)
     kk = np.arange(owner.size) - np.repeat(np.cumsum(nfan) - nfan, nfan) + 1
     v0, v1, v2 = poly[owner, 0], poly[owner, kk], poly[owner, kk + 1]
     c3 = np.stack([v0[:, :4], v1[:, :4], v2[:, :4]], axis=1).astype(F32)
+    # the triangle's own vertices are emitted as the vertex stage's float32 positions
+    for j, kj in enumerate((np.zeros_like(kk), kk, kk + 1)):
+        o = orig[owner, kj]
+        own = o >= 0
+        c3[own, j] = clip[faces[cidx[owner[own]], o[own]]]
     wpos = np.all(c3[:, :, 3] > 0, axis=1)  # pieces with a vertex at w <= 0 are dropped
     wv = np.zeros(c3.shape[:2], WINVERT_DTYPE)
     wv[wpos] = viewport(c3[wpos], width, height)
-    st, pc, sw = make_pieces(wv, width, height)
+    # values from the clipper's float64 vertices (as the kernel passes poly[].p)
+    cpc = np.stack([v0[:, :4], v1[:, :4], v2[:, :4]], axis=1)
+    st, pc, sw = make_pieces(wv, cpc, width, height)
     ok = (st == ST_RASTER) & wpos
     clip_count[cidx] = np.bincount(owner[ok], minlength=cidx.size)
     clip_pieces = pc[ok]

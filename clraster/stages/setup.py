@@ -71,8 +71,10 @@ class SetupStage:
         n_draws, m = geo.n_draws, geo.n_tris
         clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
         kx, ky = params.kx, params.ky
+        # the pool and matrices too: the clipper recomputes its inputs in double from the
+        # object-space positions (kernels/setup.cl object_clip)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
-                     geo.face_ids.buf)
+                     geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, geo.mvps.buf)
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
