@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -16,7 +16,14 @@ from .device import check_process, default_context, event_ms
 from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .inputs import CameraLike, Target, check_cull, check_flag, check_size
+from .inputs import (
+    CameraLike,
+    Target,
+    check_cull,
+    check_flag,
+    check_render_outputs,
+    check_size,
+)
 from .params import FrameParams, FrameTotals
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
@@ -80,7 +87,8 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               overdraw: bool = False, fates: bool = False) -> Frame:
+               overdraw: bool = False, fates: bool = False,
+               outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
         or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
         by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
@@ -102,6 +110,11 @@ class Renderer:
             fates: also return ``frame.fates``, a `clraster.fates.ClusterFates`: the fate
                 of every cluster of every instance (drawn, frustum-, cone- or
                 occlusion-culled); its counts equal the stats' culling funnel.
+            outputs: which of "depth", "ids", "bary" to make. Without "bary" the
+                barycentrics are neither computed nor stored (``frame.barycentrics`` is
+                None): 8 bytes per pixel instead of 20, for depth, visibility and
+                occlusion users. Depth and ids are always made (the depth test needs
+                both), and they are the same with or without "bary".
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -113,10 +126,11 @@ class Renderer:
         for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
                             ("overdraw", overdraw), ("fates", fates)):
             check_flag(value, name)
+        bary = check_render_outputs(outputs)
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates)
+                                fates, bary)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -127,7 +141,7 @@ class Renderer:
                 entry dicts, or objects with ``view_projection(width, height)``; or the path
                 of a camera list file (JSON; format and checks in `clraster.views`).
             render_kwargs: `render`'s keywords (cull, frustum, cones, occlusion, overdraw,
-                fates), the same for every view; unknown ones raise TypeError at once.
+                fates, outputs), the same for every view; unknown ones raise TypeError at once.
 
         Each frame is exactly what ``render(target, camera, **render_kwargs)`` returns in a
         loop on this renderer (with occlusion=True, each view's history is the view before
@@ -141,7 +155,8 @@ class Renderer:
         return render_many(self, target, cameras, **render_kwargs)
 
     def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
-                cones: bool, occlusion: bool, overdraw: bool, fates: bool) -> Frame:
+                cones: bool, occlusion: bool, overdraw: bool, fates: bool,
+                bary: bool = True) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
@@ -150,7 +165,8 @@ class Renderer:
         counts = dict(plan.draw_list.counts)
         fd = plan.frame
         if fd.n_tris == 0:
-            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
+            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                             bary=bary)
             if overdraw:
                 fr.overdraw = np.zeros((h, w), np.int32)
             if fates:
@@ -164,7 +180,7 @@ class Renderer:
         def one_pass(batch, max_entries: int | None, into: RasterOutput | None
                      ) -> RasterOutput:
             return self.chain.draw(self.queue, plan.pool, batch, params, totals, into=into,
-                                   overdraw=overdraw, max_entries=max_entries)
+                                   overdraw=overdraw, max_entries=max_entries, bary=bary)
 
         def draw(draws, into: RasterOutput | None) -> RasterOutput:
             # a frame (or an occlusion phase) as a stream of bounded passes

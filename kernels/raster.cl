@@ -1,4 +1,5 @@
-/* Tile raster: one work-item per screen tile walks its bin list in submission order.
+/* Tile raster: one work-item per row of screen tiles; each tile walks its bin list in
+ * submission order.
  *
  * Per entry: intersect the piece's pixel box with the tile, step three exact 64-bit edge
  * functions across it (top-left rule via edge_bias), interpolate window depth linearly in
@@ -29,41 +30,16 @@ inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
         *hi = (int)floor_div(r - bias, -s);
 }
 
-__kernel void raster_tiles(__global const float *clip_bary,
-                           __global const int *tile_start, __global const Piece *entries,
-                           const int width, const int height, const int tiles_x,
-                           __global float *depth_out, __global int *id_out,
-                           __global float *bary_out, __global long *tile_stats,
-                           const int load, const int want_overdraw,
-                           __global int *overdraw)
+/* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
+inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
+                        __global const float *clip_bary, __global const Piece *entries,
+                        const int width, const int height,
+                        __global float *depth_out, __global int *id_out,
+                        __global float *bary_out, __global long *tile_stats,
+                        const int load, const int want_overdraw, __global int *overdraw,
+                        const int want_bary)
 {
-    int tile = get_global_id(0);
-    int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
-    if (tile >= tiles_x * tiles_y) return;
-    int tx0 = (tile % tiles_x) << TILE_LOG2, ty0 = (tile / tiles_x) << TILE_LOG2;
     int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
-
-    int e0 = tile_start[tile], e1 = tile_start[tile + 1];
-    if (e0 == e1 && load) {
-        /* a later pass with nothing here: the earlier pass's pixels stay as they are */
-        tile_stats[2 * tile] = 0;
-        tile_stats[2 * tile + 1] = 0;
-        return;
-    }
-    if (e0 == e1) {
-        /* empty tile (most of a typical frame): clear values, in plain loops that vectorize */
-        for (int y = ty0; y <= ty1; ++y) {
-            size_t o = (size_t)y * width;
-            for (int x = tx0; x <= tx1; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
-            for (int x = 3 * tx0; x < 3 * (tx1 + 1); ++x) bary_out[3 * o + x] = 0.0f;
-            if (want_overdraw)
-                for (int x = tx0; x <= tx1; ++x) overdraw[o + x] = 0;
-        }
-        tile_stats[2 * tile] = 0;
-        tile_stats[2 * tile + 1] = 0;
-        return;
-    }
-
     float zbuf[TILE_PIXELS];
     int win[TILE_PIXELS];   /* winning entry index, -1 = background */
     int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
@@ -166,7 +142,9 @@ __kernel void raster_tiles(__global const float *clip_bary,
             if (e < 0 && load) continue;   /* the earlier pass's winner stays */
             depth_out[o] = zbuf[i];
             float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
-            int id = -1;
+            int id = e >= 0 ? entries[e].id : -1;
+            id_out[o] = id;
+            if (!want_bary) continue;
             if (e >= 0) {
                 __global const Piece *pc = &entries[e];
                 /* screen-space weights from the unsnapped value planes (setup.cl) */
@@ -187,9 +165,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
                 } else {
                     B0 = c0; B1 = c1; B2 = c2;
                 }
-                id = pc->id;
             }
-            id_out[o] = id;
             bary_out[3 * o] = B0;
             bary_out[3 * o + 1] = B1;
             bary_out[3 * o + 2] = B2;
@@ -197,4 +173,59 @@ __kernel void raster_tiles(__global const float *clip_bary,
     }
     tile_stats[2 * tile] = tested;
     tile_stats[2 * tile + 1] = passed;
+}
+
+/* One work-item per row of tiles, walking its tiles left to right. A run of empty tiles
+ * (most of a typical frame) is cleared as one span per pixel row: clearing tile by tile, in
+ * 16-pixel pieces of 48 rows of three arrays, cost ~4x the time of the same bytes written
+ * in long runs (spot at 1080p: the clears were ~2/3 of the raster time). A later pass
+ * (load) leaves the earlier pass's pixels of its empty tiles as they are. want_bary = 0:
+ * barycentrics are neither computed nor written (bary_out is not touched); 1: written at
+ * every pixel; 2: bary_out starts as zeros (fresh pages from the OS, which cost nothing
+ * until touched), so empty tiles leave it alone: 12 of the 20 bytes a background pixel
+ * cost are never written. */
+__kernel void raster_tiles(__global const float *clip_bary,
+                           __global const int *tile_start, __global const Piece *entries,
+                           const int width, const int height, const int tiles_x,
+                           __global float *depth_out, __global int *id_out,
+                           __global float *bary_out, __global long *tile_stats,
+                           const int load, const int want_overdraw,
+                           __global int *overdraw, const int want_bary)
+{
+    int ty = get_global_id(0);
+    int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
+    if (ty >= tiles_y) return;
+    int y0 = ty << TILE_LOG2, y1 = min(y0 + TILE_SIZE, height) - 1;
+    int run = -1;   /* first tile column of the current run of empty tiles, -1: none */
+    for (int tx = 0; tx <= tiles_x; ++tx) {
+        int tile = ty * tiles_x + tx;
+        int e0 = 0, e1 = 0;
+        if (tx < tiles_x) {
+            e0 = tile_start[tile];
+            e1 = tile_start[tile + 1];
+            if (e0 == e1) {
+                tile_stats[2 * tile] = 0;
+                tile_stats[2 * tile + 1] = 0;
+                if (run < 0) run = tx;
+                continue;
+            }
+        }
+        if (run >= 0 && !load) {
+            /* clear values, in plain loops that vectorize */
+            int xa = run << TILE_LOG2, xb = min(tx << TILE_LOG2, width);
+            for (int y = y0; y <= y1; ++y) {
+                size_t o = (size_t)y * width;
+                for (int x = xa; x < xb; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
+                if (want_bary == 1)
+                    for (int x = 3 * xa; x < 3 * xb; ++x) bary_out[3 * o + x] = 0.0f;
+                if (want_overdraw)
+                    for (int x = xa; x < xb; ++x) overdraw[o + x] = 0;
+            }
+        }
+        run = -1;
+        if (tx < tiles_x)
+            raster_tile(tile, tx << TILE_LOG2, y0, e0, e1, clip_bary, entries, width, height,
+                        depth_out, id_out, bary_out, tile_stats, load, want_overdraw,
+                        overdraw, want_bary);
+    }
 }

@@ -16,13 +16,21 @@ twophase...), never the OpenCL side.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 
 from ..config import RasterConfig
 from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
-from ..inputs import CameraLike, Target, check_cull, check_flag, check_size
+from ..inputs import (
+    CameraLike,
+    Target,
+    check_cull,
+    check_flag,
+    check_render_outputs,
+    check_size,
+)
 from ..params import FrameParams, FrameTotals
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
@@ -59,10 +67,12 @@ class Renderer:
         self.history = OcclusionHistory()
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
-               frustum: bool = True, cones: bool = True, occlusion: bool = False) -> Frame:
+               frustum: bool = True, cones: bool = True, occlusion: bool = False,
+               outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
+        want_bary = check_render_outputs(outputs)
         check_flag(occlusion, "occlusion")
         w, h, config = self.width, self.height, self.config
         t0 = time.perf_counter()
@@ -72,7 +82,8 @@ class Renderer:
         pool, fd = plan.pool, plan.frame
         counts = dict(plan.draw_list.counts)
         if fd.n_tris == 0:
-            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)))
+            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                               bary=want_bary)
         params = FrameParams.make(w, h, config, cull)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
 
@@ -84,7 +95,7 @@ class Renderer:
         else:
             res = two_phase(plan, self.history, draw, _hiz(w, h), totals, counts)
             depth, ids, bary = res.out
-        return Frame(depth, ids, bary, totals.stats(counts))
+        return Frame(depth, ids, bary if want_bary else None, totals.stats(counts))
 
 
 def render(target: Target, camera: CameraLike, width: int, height: int, *,

@@ -1,7 +1,8 @@
-"""Tile raster host side (kernels/raster.cl): one work-item per tile."""
+"""Tile raster host side (kernels/raster.cl): one work-item per row of tiles."""
 
 from __future__ import annotations
 
+import mmap
 from dataclasses import dataclass
 from typing import cast
 
@@ -14,6 +15,16 @@ from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .bin import BinBuffers
 from .setup import SetupBuffers
+
+
+def zeroed_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """A zero-filled array in fresh anonymous memory (page aligned): the OS maps its pages
+    as zeros on first touch, so the parts never written cost nothing. ``np.zeros`` gives no
+    such promise: after a large block is freed, glibc serves the next one from its heap and
+    clears it with memset (4 ms for a 1080p barycentric array here)."""
+    n = int(np.prod(shape))
+    mm = mmap.mmap(-1, max(n * np.dtype(dtype).itemsize, 1))
+    return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
 def host_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
@@ -46,7 +57,8 @@ class RasterStage:
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
             params: FrameParams, *, into: RasterOutput | None = None,
-            overdraw: bool = False) -> tuple[RasterOutput, np.ndarray, cl.Event]:
+            overdraw: bool = False, bary: bool = True
+            ) -> tuple[RasterOutput, np.ndarray, cl.Event]:
         """Rasterize the binned pieces (bins; the parent barycentrics of clipped pieces come
         from setup.clip_bary).
 
@@ -55,6 +67,8 @@ class RasterStage:
                 depth and ids take part in the depth test; pixels nobody beats keep their
                 values) — used by two-phase occlusion culling. None: start from clear.
             overdraw: also count fragments tested per pixel (depth complexity).
+            bary: also compute and write barycentrics (new outputs only; ``into`` has
+                them or not as it was allocated).
 
         Returns:
             the outputs (complete and readable on return), tile stats (T, 2) int64
@@ -64,15 +78,20 @@ class RasterStage:
         tiles_x, n_tiles = params.tiles_x, params.n_tiles
         load = into is not None
         if into is None:
-            into = RasterOutput.allocate(self.ctx, width, height, overdraw)
+            into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary)
         elif overdraw and into.overdraw is None:
             raise ValueError("overdraw was not counted in the earlier pass")
         want = into.overdraw is not None
-        ev = self.kernel(queue, (n_tiles,), (1,), setup.clip_bary.buf, bins.tile_start.buf,
-                         bins.entries.buf,
-                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
+        want_bary = into.bary is not None
+        # an output not wanted gets another buffer as its (untouched) argument; overdraw,
+        # when present, is the last buffer
+        ev = self.kernel(queue, (params.tiles_y,), (1,), setup.clip_bary.buf,
+                         bins.tile_start.buf, bins.entries.buf,
+                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:2],
+                         into.bufs[2] if want_bary else into.bufs[1],
                          self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
-                         np.int32(want), into.bufs[3] if want else into.bufs[1])
+                         np.int32(want), into.bufs[-1] if want else into.bufs[1],
+                         np.int32(want_bary))
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
@@ -85,41 +104,48 @@ class RasterStage:
 @dataclass
 class RasterOutput:
     """The image outputs as the caller's NumPy arrays and the CL_MEM_USE_HOST_PTR buffers
-    over them. depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3), overdraw
-    int32 (H, W) or None."""
+    over them. depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3) or None (not
+    asked for), overdraw int32 (H, W) or None. bufs: one buffer per array present, in
+    that order (depth, ids, then bary and overdraw when present)."""
 
     depth: np.ndarray
     ids: np.ndarray
-    bary: np.ndarray
+    bary: np.ndarray | None
     overdraw: np.ndarray | None
     bufs: list[cl.Buffer]
 
     @classmethod
-    def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool
-                 ) -> RasterOutput:
-        arrs = [host_array((height, width), np.float32), host_array((height, width), np.int32),
-                host_array((height, width, 3), np.float32)]
+    def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool,
+                 bary: bool = True) -> RasterOutput:
+        arrs = [host_array((height, width), np.float32), host_array((height, width), np.int32)]
+        if bary:
+            arrs.append(host_array((height, width, 3), np.float32))
         if overdraw:
             arrs.append(host_array((height, width), np.int32))
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
         bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in arrs]
-        return cls(arrs[0], arrs[1], arrs[2], arrs[3] if overdraw else None, bufs)
+        return cls(arrs[0], arrs[1], arrs[2] if bary else None,
+                   arrs[-1] if overdraw else None, bufs)
+
+    def arrays(self) -> list[np.ndarray]:
+        """The arrays present, in the order of ``bufs``."""
+        return [a for a in (self.depth, self.ids, self.bary, self.overdraw) if a is not None]
 
     def clear(self) -> None:
-        """Set the arrays to the cleared frame (depth 1.0, id −1, barycentrics and overdraw
-        0) on the host, for a pass that draws nothing (the buffers wrap these arrays)."""
+        """Set freshly allocated arrays to the cleared frame (depth 1.0, id −1,
+        barycentrics and overdraw 0) on the host, for a pass that draws nothing (the
+        buffers wrap these arrays)."""
         self.depth.fill(1.0)
         self.ids.fill(-1)
-        self.bary.fill(0.0)
+        if self.bary is not None:
+            self.bary.fill(0.0)
         if self.overdraw is not None:
             self.overdraw.fill(0)
 
     def sync(self, queue: cl.CommandQueue) -> None:
         """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for
         USE_HOST_PTR buffers; on a CPU device the mapping is the array itself (no copy)."""
-        arrs = [self.depth, self.ids, self.bary] + ([self.overdraw] if self.overdraw is not None
-                                                    else [])
-        for a, b in zip(arrs, self.bufs, strict=True):
+        for a, b in zip(self.arrays(), self.bufs, strict=True):
             mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype,
                                               is_blocking=True)
             mapped.base.release(queue)
