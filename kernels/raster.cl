@@ -180,10 +180,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
  * 16-pixel pieces of 48 rows of three arrays, cost ~4x the time of the same bytes written
  * in long runs (spot at 1080p: the clears were ~2/3 of the raster time). A later pass
  * (load) leaves the earlier pass's pixels of its empty tiles as they are. want_bary = 0:
- * barycentrics are neither computed nor written (bary_out is not touched); 1: written at
- * every pixel; 2: bary_out starts as zeros (fresh pages from the OS, which cost nothing
- * until touched), so empty tiles leave it alone: 12 of the 20 bytes a background pixel
- * cost are never written. */
+ * barycentrics are neither computed nor written (bary_out is not touched). */
 __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
@@ -216,7 +213,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
             for (int y = y0; y <= y1; ++y) {
                 size_t o = (size_t)y * width;
                 for (int x = xa; x < xb; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
-                if (want_bary == 1)
+                if (want_bary)
                     for (int x = 3 * xa; x < 3 * xb; ++x) bary_out[3 * o + x] = 0.0f;
                 if (want_overdraw)
                     for (int x = xa; x < xb; ++x) overdraw[o + x] = 0;

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import mmap
 from dataclasses import dataclass
 from typing import cast
 
@@ -15,16 +14,6 @@ from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .bin import BinBuffers
 from .setup import SetupBuffers
-
-
-def zeroed_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
-    """A zero-filled array in fresh anonymous memory (page aligned): the OS maps its pages
-    as zeros on first touch, so the parts never written cost nothing. ``np.zeros`` gives no
-    such promise: after a large block is freed, glibc serves the next one from its heap and
-    clears it with memset (4 ms for a 1080p barycentric array here)."""
-    n = int(np.prod(shape))
-    mm = mmap.mmap(-1, max(n * np.dtype(dtype).itemsize, 1))
-    return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
 def host_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
