@@ -90,6 +90,30 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         int rx0 = bb_x(pc->bb_min) - tx0, ry0 = bb_y(pc->bb_min);
         int id = pc->id;
         int lx0 = x0 - tx0, lx1 = x1 - tx0;
+        if (x1 - x0 <= 1 && y1 - y0 <= 1) {
+            /* a piece that meets at most 2x2 pixels of the tile (most pieces of a dense
+             * mesh): test them one by one, cheaper than a masked span per row */
+            for (int y = y0; y <= y1; ++y) {
+                long dy = y - y0;
+                float zrow = z0 + dzdy * (float)(y - ry0);
+                for (int lx = lx0; lx <= lx1; ++lx) {
+                    long e0 = r0 + lx * sx0 + dy * sy0, e1 = r1 + lx * sx1 + dy * sy1;
+                    long e2 = r2 + lx * sx2 + dy * sy2;
+                    if (!(e0 >= b0 && e1 >= b1 && e2 >= b2)) continue;
+                    float z = zrow + dzdx * (float)(lx - rx0);
+                    int i = ((y - ty0) << TILE_LOG2) + lx;
+                    float zb = zbuf[i];
+                    int wd = wid[i];
+                    ++tested;
+                    ++odc[i];
+                    if (z < zb || (z == zb && id < wd && wd != INT_MAX)) {
+                        zbuf[i] = z; wid[i] = id; win[i] = k;
+                        ++passed;
+                    }
+                }
+            }
+            continue;
+        }
         bool wide = x1 - x0 >= SPAN;
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
