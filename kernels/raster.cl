@@ -35,7 +35,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
                         const int width, const int height,
                         __global float *depth_out, __global int *id_out,
-                        __global float *bary_out, __global long *tile_stats,
+                        __global float *bary_out, long *tile_tested, long *tile_passed,
                         const int load, const int want_overdraw, __global int *overdraw,
                         const int want_bary)
 {
@@ -195,11 +195,12 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             bary_out[3 * o + 2] = B2;
         }
     }
-    tile_stats[2 * tile] = tested;
-    tile_stats[2 * tile + 1] = passed;
+    *tile_tested += tested;
+    *tile_passed += passed;
 }
 
-/* One work-item per row of tiles, walking its tiles left to right. A run of empty tiles
+/* One work-item per row of tiles, walking its tiles left to right; row_stats[2·ty] and
+ * [2·ty + 1]: fragments tested and passed in the row. A run of empty tiles
  * (most of a typical frame) is cleared as one span per pixel row: clearing tile by tile, in
  * 16-pixel pieces of 48 rows of three arrays, cost ~4x the time of the same bytes written
  * in long runs (spot at 1080p: the clears were ~2/3 of the raster time). A later pass
@@ -209,7 +210,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
                            __global float *depth_out, __global int *id_out,
-                           __global float *bary_out, __global long *tile_stats,
+                           __global float *bary_out, __global long *row_stats,
                            const int load, const int want_overdraw,
                            __global int *overdraw, const int want_bary)
 {
@@ -218,6 +219,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
     if (ty >= tiles_y) return;
     int y0 = ty << TILE_LOG2, y1 = min(y0 + TILE_SIZE, height) - 1;
     int run = -1;   /* first tile column of the current run of empty tiles, -1: none */
+    long tested = 0, passed = 0;   /* fragments of this row of tiles */
     for (int tx = 0; tx <= tiles_x; ++tx) {
         int tile = ty * tiles_x + tx;
         int e0 = 0, e1 = 0;
@@ -225,8 +227,6 @@ __kernel void raster_tiles(__global const float *clip_bary,
             e0 = tile_start[tile];
             e1 = tile_start[tile + 1];
             if (e0 == e1) {
-                tile_stats[2 * tile] = 0;
-                tile_stats[2 * tile + 1] = 0;
                 if (run < 0) run = tx;
                 continue;
             }
@@ -246,7 +246,9 @@ __kernel void raster_tiles(__global const float *clip_bary,
         run = -1;
         if (tx < tiles_x)
             raster_tile(tile, tx << TILE_LOG2, y0, e0, e1, clip_bary, entries, width, height,
-                        depth_out, id_out, bary_out, tile_stats, load, want_overdraw,
-                        overdraw, want_bary);
+                        depth_out, id_out, bary_out, &tested, &passed, load,
+                        want_overdraw, overdraw, want_bary);
     }
+    row_stats[2 * ty] = tested;
+    row_stats[2 * ty + 1] = passed;
 }

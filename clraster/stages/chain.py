@@ -145,13 +145,13 @@ class StageChain:
         bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
         setup = self.setup.buffers
         raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
-        out, tstats, ev_r = raster.run(queue, setup, bins, params, into=into,
+        out, rstats, ev_r = raster.run(queue, setup, bins, params, into=into,
                                        overdraw=overdraw, bary=bary)
         status = np.empty(setup.n_tris, np.uint8)
         cl.enqueue_copy(queue, status, cast(cl.Buffer, setup.status.buf), is_blocking=True)
         totals.add_status(status)
-        totals.fragments_tested += int(tstats[:, 0].sum())
-        totals.fragments_passed += int(tstats[:, 1].sum())
+        totals.fragments_tested += int(rstats[:, 0].sum())
+        totals.fragments_passed += int(rstats[:, 1].sum())
         totals.add_events("raster", [ev_r])
         totals.settle()   # the raster waited for the queue: every event is complete
         return out

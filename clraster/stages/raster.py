@@ -31,10 +31,10 @@ class FrameBuffers:
     The image outputs are the caller's fresh NumPy arrays, wrapped per frame as
     CL_MEM_USE_HOST_PTR buffers: on a CPU device the kernel writes straight into them, which
     saves copying ~20 bytes per pixel back (a third of the frame time of a small scene at
-    1080p). tile_stats: int64 (T, 2) fragments tested / passed per tile.
+    1080p). row_stats: int64 (tiles_y, 2) fragments tested / passed per row of tiles.
     """
 
-    tile_stats: GrowBuffer
+    row_stats: GrowBuffer
 
 
 class RasterStage:
@@ -60,11 +60,11 @@ class RasterStage:
                 them or not as it was allocated).
 
         Returns:
-            the outputs (complete and readable on return), tile stats (T, 2) int64
-            (fragments tested / passed per tile) and the profiling event.
+            the outputs (complete and readable on return), row stats (tiles_y, 2) int64
+            (fragments tested / passed per row of tiles) and the profiling event.
         """
         width, height = params.width, params.height
-        tiles_x, n_tiles = params.tiles_x, params.n_tiles
+        tiles_x = params.tiles_x
         load = into is not None
         if into is None:
             into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary)
@@ -78,16 +78,17 @@ class RasterStage:
                          bins.tile_start.buf, bins.entries.buf,
                          np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:2],
                          into.bufs[2] if want_bary else into.bufs[1],
-                         self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
+                         self.buffers.row_stats.ensure(16 * params.tiles_y), np.int32(load),
                          np.int32(want), into.bufs[-1] if want else into.bufs[1],
                          np.int32(want_bary))
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
-        tstats = np.empty((n_tiles, 2), np.int64)
-        cl.enqueue_copy(queue, tstats, cast(cl.Buffer, self.buffers.tile_stats.buf))
-        into.sync(queue)
-        return into, tstats, ev
+        rstats = np.empty((params.tiles_y, 2), np.int64)
+        cl.enqueue_copy(queue, rstats, cast(cl.Buffer, self.buffers.row_stats.buf),
+                        is_blocking=False)
+        into.sync(queue)   # waits for the copy too
+        return into, rstats, ev
 
 
 @dataclass
@@ -134,8 +135,9 @@ class RasterOutput:
     def sync(self, queue: cl.CommandQueue) -> None:
         """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for
         USE_HOST_PTR buffers; on a CPU device the mapping is the array itself (no copy)."""
+        # enqueued without blocking, then one finish: each blocking map was a round trip
         for a, b in zip(self.arrays(), self.bufs, strict=True):
             mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype,
-                                              is_blocking=True)
+                                              is_blocking=False)
             mapped.base.release(queue)
         queue.finish()
