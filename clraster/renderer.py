@@ -6,7 +6,7 @@ import os
 import threading
 import time
 from collections.abc import Iterable, Iterator, Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pyopencl as cl
@@ -27,7 +27,7 @@ from .inputs import (
 from .params import FrameParams, FrameTotals
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
-from .stages.raster import RasterOutput
+from .stages.raster import RasterOutput, RasterStage
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
 
@@ -51,6 +51,10 @@ class Renderer:
 
         frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
                        NumPy arrays, used in place by a CPU device)
+      + recycled       ≤ 48·W·H bytes of host memory of frames the caller has dropped,
+                       kept to make the next frames' arrays without page faults
+                       (`clraster.arraypool`: a frame's arrays are its own as long as
+                       anything refers to them)
       + per pass       ≤ 207·M + 164·E bytes (535 MiB at the defaults; draws, vertex stream,
                        setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
@@ -81,6 +85,10 @@ class Renderer:
         self.queue = cl.CommandQueue(
             self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.chain = StageChain(self.context, self.config)
+        # the frames' arrays: the raster stage's pool (clraster.arraypool), its bound set
+        # for this image size
+        self._arrays = cast(RasterStage, self.chain.raster).pool
+        self._arrays.max_bytes = 2 * 24 * self.width * self.height
         self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
         self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
@@ -166,7 +174,7 @@ class Renderer:
         fd = plan.frame
         if fd.n_tris == 0:
             fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                             bary=bary)
+                             bary=bary, alloc=self._arrays.empty)
             if overdraw:
                 fr.overdraw = np.zeros((h, w), np.int32)
             if fates:

@@ -83,3 +83,43 @@ def test_frames_do_not_share_arrays(scene):
     r.render(scene, Camera.framing(*scene.bounds(), aspect=w / h))
     assert np.array_equal(a.triangle_id, keep[0]) and np.array_equal(a.depth, keep[1])
     assert np.array_equal(a.barycentrics, keep[2])
+
+
+def test_pool_recycles_only_dropped_arrays():
+    """A block comes back to the pool only when the last view of its array is gone, and a
+    new array never shares memory with one still referenced."""
+    from clraster.arraypool import ArrayPool
+
+    pool = ArrayPool(1 << 20)
+    a = pool.empty((64, 32), np.float32)
+    a.fill(7.0)
+    view = a[3:5, ::2].T       # a view outlives its array
+    addr = a.ctypes.data
+    assert a.ctypes.data % 4096 == 0 and a.flags.writeable and a.flags.c_contiguous
+    del a
+    b = pool.empty((64, 32), np.float32)
+    assert b.ctypes.data != addr and (view == 7.0).all()
+    del view
+    c = pool.empty((32, 64), np.int32)   # same size: the freed block
+    assert c.ctypes.data == addr and pool.free_bytes == 0
+    del b, c
+    assert pool.free_bytes == 2 * 64 * 32 * 4
+    small = ArrayPool(100)   # over its bound, a block goes back to the allocator
+    d = small.empty((64,), np.float64)
+    del d
+    assert small.free_bytes == 0
+
+
+def test_renderer_frames_survive_recycling(scene):
+    """Frames kept while the renderer makes many more keep their values."""
+    w, h = 80, 60
+    r = Renderer(w, h)
+    cam = plant_inside_camera(scene, w, h)
+    kept = r.render(scene, cam)
+    ref = kept.depth.copy(), kept.triangle_id.copy(), kept.barycentrics.copy()
+    for _ in range(4):
+        r.render(scene, cam)   # dropped at once: their memory is recycled
+        r.render(scene, Camera.look_at(eye=(0, 0, -1e4), target=(0, 0, -2e4), up=(0, 1, 0)))
+    assert np.array_equal(kept.depth, ref[0]) and np.array_equal(kept.triangle_id, ref[1])
+    assert np.array_equal(kept.barycentrics, ref[2])
+    assert r.chain.raster.pool.free_bytes > 0

@@ -8,6 +8,7 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
+from ..arraypool import ArrayPool
 from ..config import RasterConfig
 from ..device import program, wait
 from ..params import FrameParams
@@ -16,19 +17,12 @@ from .bin import BinBuffers
 from .setup import SetupBuffers
 
 
-def host_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
-    """An uninitialised array aligned to a page, so PoCL can use its memory directly."""
-    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    raw = np.empty(nbytes + 4096, np.uint8)
-    off = (-raw.ctypes.data) % 4096
-    return raw[off:off + nbytes].view(dtype).reshape(shape)
-
-
 @dataclass
 class FrameBuffers:
     """Raster outputs, H × W image, T tiles.
 
-    The image outputs are the caller's fresh NumPy arrays, wrapped per frame as
+    The image outputs are the caller's own NumPy arrays (from `pool`, whose memory is reused
+    only once the caller has dropped them: `clraster.arraypool`), wrapped per frame as
     CL_MEM_USE_HOST_PTR buffers: on a CPU device the kernel writes straight into them, which
     saves copying ~20 bytes per pixel back (a third of the frame time of a small scene at
     1080p). row_stats: int64 (tiles_y, 2) fragments tested / passed per row of tiles.
@@ -43,6 +37,9 @@ class RasterStage:
         self.config = config
         self.buffers = FrameBuffers(GrowBuffer(ctx))
         self.ctx = ctx
+        #: memory of dropped frames' arrays, reused for new ones (at most two frames'
+        #: worth is kept: `run` raises the bound to the image size)
+        self.pool = ArrayPool(0)
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
             params: FrameParams, *, into: RasterOutput | None = None,
@@ -67,7 +64,8 @@ class RasterStage:
         tiles_x = params.tiles_x
         load = into is not None
         if into is None:
-            into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary)
+            self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
+            into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool)
         elif overdraw and into.overdraw is None:
             raise ValueError("overdraw was not counted in the earlier pass")
         want = into.overdraw is not None
@@ -106,12 +104,15 @@ class RasterOutput:
 
     @classmethod
     def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool,
-                 bary: bool = True) -> RasterOutput:
-        arrs = [host_array((height, width), np.float32), host_array((height, width), np.int32)]
+                 bary: bool = True, pool: ArrayPool | None = None) -> RasterOutput:
+        """Uninitialised page-aligned arrays (from ``pool``, else a pool of their own) and
+        the buffers over them."""
+        pool = pool or ArrayPool(0)
+        arrs = [pool.empty((height, width), np.float32), pool.empty((height, width), np.int32)]
         if bary:
-            arrs.append(host_array((height, width, 3), np.float32))
+            arrs.append(pool.empty((height, width, 3), np.float32))
         if overdraw:
-            arrs.append(host_array((height, width), np.int32))
+            arrs.append(pool.empty((height, width), np.int32))
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
         bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in arrs]
         return cls(arrs[0], arrs[1], arrs[2] if bary else None,
