@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import mmap
 import os
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -176,20 +175,14 @@ class Frame:
 
     @classmethod
     def empty(cls, width: int, height: int, stats: FrameStats | None = None,
-              bary: bool = True, alloc: Callable[..., np.ndarray] = np.empty) -> Frame:
+              bary: bool = True) -> Frame:
         """A frame with nothing drawn: depth 1.0, ids −1, barycentrics 0 (None without
-        ``bary``). ``alloc(shape, dtype)`` makes the depth and id arrays (a renderer passes
-        its `clraster.arraypool.ArrayPool`'s). The zeros are fresh pages from the OS
-        (`mmap`), which cost nothing until touched (``np.zeros`` may clear reused heap
-        memory instead: 4 ms at 1080p)."""
+        ``bary``). The zeros are fresh pages from the OS (`mmap`), which cost nothing until
+        touched (``np.zeros`` may clear reused heap memory instead: 4 ms at 1080p)."""
         n = width * height
         zeros = np.frombuffer(mmap.mmap(-1, max(12 * n, 1)), np.float32, count=3 * n)
-        depth = alloc((height, width), np.float32)
-        depth.fill(1.0)
-        ids = alloc((height, width), np.int32)
-        ids.fill(-1)
-        return cls(depth, ids, zeros.reshape(height, width, 3) if bary else None,
-                   stats or FrameStats())
+        return cls(np.ones((height, width), np.float32), np.full((height, width), -1, np.int32),
+                   zeros.reshape(height, width, 3) if bary else None, stats or FrameStats())
 
     def need_barycentrics(self) -> np.ndarray:
         """``barycentrics``, or a ValueError saying how to get them when the frame was

@@ -85,10 +85,6 @@ class Renderer:
         self.queue = cl.CommandQueue(
             self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.chain = StageChain(self.context, self.config)
-        # the frames' arrays: the raster stage's pool (clraster.arraypool), its bound set
-        # for this image size
-        self._arrays = cast(RasterStage, self.chain.raster).pool
-        self._arrays.max_bytes = 2 * 24 * self.width * self.height
         self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
         self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
@@ -172,15 +168,13 @@ class Renderer:
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
         fd = plan.frame
-        if fd.n_tris == 0:
-            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                             bary=bary, alloc=self._arrays.empty)
-            if overdraw:
-                fr.overdraw = np.zeros((h, w), np.int32)
-            if fates:
-                fr.fates = ClusterFates.from_plan(plan)
-            return fr
         params = FrameParams.make(w, h, self.config, cull)
+        if fd.n_tris == 0:   # nothing in view: the cleared frame, cleared on the device
+            out = cast(RasterStage, self.chain.raster).clear(self.queue, params, overdraw, bary)
+            return Frame(out.depth, out.ids, out.bary,
+                         FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                         overdraw=out.overdraw,
+                         fates=ClusterFates.from_plan(plan) if fates else None)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
         occluded = None
         config = self.config

@@ -138,10 +138,7 @@ class StageChain:
         """
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
-                into = RasterOutput.allocate(self.context, params.width, params.height,
-                                             overdraw, bary,
-                                             self.raster.pool if self.raster else None)
-                into.clear()
+                into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)
             return into
         bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
         setup = self.setup.buffers

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 from dataclasses import dataclass
 from typing import cast
 
@@ -15,6 +16,16 @@ from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .bin import BinBuffers
 from .setup import SetupBuffers
+
+
+def zeros_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """A zero-filled page-aligned array in fresh anonymous memory: the OS maps its pages as
+    zeros on first touch, so the parts never written cost nothing (the barycentrics of a
+    cleared frame). Not for arrays a kernel then writes all over: faulting fresh pages
+    inside the raster kernel made spot at 1080p 1.23x slower than reused memory."""
+    n = int(np.prod(shape))
+    mm = mmap.mmap(-1, max(n * np.dtype(dtype).itemsize, 1))
+    return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
 @dataclass
@@ -40,6 +51,33 @@ class RasterStage:
         #: memory of dropped frames' arrays, reused for new ones (at most two frames'
         #: worth is kept: `run` raises the bound to the image size)
         self.pool = ArrayPool(0)
+        self._zero_starts = GrowBuffer(ctx)   # an all-empty tile list (`clear`)
+        self._zero_tiles = 0
+
+    def clear(self, queue: cl.CommandQueue, params: FrameParams, overdraw: bool = False,
+              bary: bool = True) -> RasterOutput:
+        """Fresh outputs holding the cleared frame (depth 1.0, id −1, barycentrics and
+        overdraw 0), complete and readable on return: the raster kernel over an empty tile
+        list, so both cores clear depth and ids in long runs, while the barycentrics are
+        fresh zero pages (`zeros_array`) that nothing touches until a later pass draws.
+        An empty frame at 1080p: 16.6 MB written on the device instead of 41 MB on the
+        host."""
+        width, height, n_tiles = params.width, params.height, params.n_tiles
+        self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
+        into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool,
+                                     bary_zeros=True)
+        starts = self._zero_starts.ensure(4 * (n_tiles + 1))
+        if self._zero_tiles < n_tiles + 1:   # (a buffer grown since was filled here)
+            cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
+            self._zero_tiles = n_tiles + 1
+        want = into.overdraw is not None
+        self.kernel(queue, (params.tiles_y,), (1,), starts, starts, starts, np.int32(width),
+                    np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
+                    self.buffers.row_stats.ensure(16 * params.tiles_y), np.int32(0),
+                    np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0))
+        wait(queue, keep=into)
+        into.sync(queue)
+        return into
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
             params: FrameParams, *, into: RasterOutput | None = None,
@@ -104,13 +142,15 @@ class RasterOutput:
 
     @classmethod
     def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool,
-                 bary: bool = True, pool: ArrayPool | None = None) -> RasterOutput:
+                 bary: bool = True, pool: ArrayPool | None = None,
+                 bary_zeros: bool = False) -> RasterOutput:
         """Uninitialised page-aligned arrays (from ``pool``, else a pool of their own) and
-        the buffers over them."""
+        the buffers over them; ``bary_zeros``: the barycentrics are `zeros_array`."""
         pool = pool or ArrayPool(0)
         arrs = [pool.empty((height, width), np.float32), pool.empty((height, width), np.int32)]
         if bary:
-            arrs.append(pool.empty((height, width, 3), np.float32))
+            arrs.append(zeros_array((height, width, 3), np.float32) if bary_zeros
+                        else pool.empty((height, width, 3), np.float32))
         if overdraw:
             arrs.append(pool.empty((height, width), np.int32))
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
@@ -121,17 +161,6 @@ class RasterOutput:
     def arrays(self) -> list[np.ndarray]:
         """The arrays present, in the order of ``bufs``."""
         return [a for a in (self.depth, self.ids, self.bary, self.overdraw) if a is not None]
-
-    def clear(self) -> None:
-        """Set freshly allocated arrays to the cleared frame (depth 1.0, id −1,
-        barycentrics and overdraw 0) on the host, for a pass that draws nothing (the
-        buffers wrap these arrays)."""
-        self.depth.fill(1.0)
-        self.ids.fill(-1)
-        if self.bary is not None:
-            self.bary.fill(0.0)
-        if self.overdraw is not None:
-            self.overdraw.fill(0)
 
     def sync(self, queue: cl.CommandQueue) -> None:
         """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for
