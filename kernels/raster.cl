@@ -199,8 +199,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     *tile_passed += passed;
 }
 
-/* One work-item per row of tiles, walking its tiles left to right; row_stats[2·ty] and
- * [2·ty + 1]: fragments tested and passed in the row. A run of empty tiles
+/* One work-item per segment of a row of tiles (work-item g is segment g % segs of row
+ * g / segs; segs = global size / rows of tiles), walking its tiles left to right; seg_stats[2·g] and
+ * [2·g + 1]: fragments tested and passed in it. Whole rows were too coarse: with the
+ * work of a frame in a few rows (big occluders of the 10M plant), one core idled (its
+ * raster took 1.4x the time of one work-item per tile). A run of empty tiles
  * (most of a typical frame) is cleared as one span per pixel row: clearing tile by tile, in
  * 16-pixel pieces of 48 rows of three arrays, cost ~4x the time of the same bytes written
  * in long runs (spot at 1080p: the clears were ~2/3 of the raster time). A later pass
@@ -210,20 +213,24 @@ __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,
                            __global float *depth_out, __global int *id_out,
-                           __global float *bary_out, __global long *row_stats,
+                           __global float *bary_out, __global long *seg_stats,
                            const int load, const int want_overdraw,
                            __global int *overdraw, const int want_bary)
 {
-    int ty = get_global_id(0);
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
+    /* segments per row: the host's choice (clraster/stages/raster.py segments) */
+    int segs = (int)get_global_size(0) / tiles_y, seg_tiles = (tiles_x + segs - 1) / segs;
+    int g = get_global_id(0);
+    int ty = g / segs, seg = g - ty * segs;
     if (ty >= tiles_y) return;
     int y0 = ty << TILE_LOG2, y1 = min(y0 + TILE_SIZE, height) - 1;
+    int txa = min(seg * seg_tiles, tiles_x), txb = min(txa + seg_tiles, tiles_x);
     int run = -1;   /* first tile column of the current run of empty tiles, -1: none */
-    long tested = 0, passed = 0;   /* fragments of this row of tiles */
-    for (int tx = 0; tx <= tiles_x; ++tx) {
+    long tested = 0, passed = 0;   /* fragments of this segment */
+    for (int tx = txa; tx <= txb; ++tx) {
         int tile = ty * tiles_x + tx;
         int e0 = 0, e1 = 0;
-        if (tx < tiles_x) {
+        if (tx < txb) {
             e0 = tile_start[tile];
             e1 = tile_start[tile + 1];
             if (e0 == e1) {
@@ -244,11 +251,11 @@ __kernel void raster_tiles(__global const float *clip_bary,
             }
         }
         run = -1;
-        if (tx < tiles_x)
+        if (tx < txb)
             raster_tile(tile, tx << TILE_LOG2, y0, e0, e1, clip_bary, entries, width, height,
                         depth_out, id_out, bary_out, &tested, &passed, load,
                         want_overdraw, overdraw, want_bary);
     }
-    row_stats[2 * ty] = tested;
-    row_stats[2 * ty + 1] = passed;
+    seg_stats[2 * g] = tested;
+    seg_stats[2 * g + 1] = passed;
 }

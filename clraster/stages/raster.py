@@ -28,6 +28,17 @@ def zeros_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
     return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
+#: Tiles per work-item of the raster kernel, about: runs of up to 256 px to clear at 16 px
+#: tiles, 544 work-items at 1920x1080 (kernels/raster.cl says why not whole rows).
+SEG_TILES = 16
+
+
+def segments(params: FrameParams) -> int:
+    """Work-items of the raster kernel: rows of tiles × segments of each row (the kernel
+    reads the segments per row back from its global size)."""
+    return params.tiles_y * -(-params.tiles_x // SEG_TILES)
+
+
 @dataclass
 class FrameBuffers:
     """Raster outputs, H × W image, T tiles.
@@ -36,10 +47,11 @@ class FrameBuffers:
     only once the caller has dropped them: `clraster.arraypool`), wrapped per frame as
     CL_MEM_USE_HOST_PTR buffers: on a CPU device the kernel writes straight into them, which
     saves copying ~20 bytes per pixel back (a third of the frame time of a small scene at
-    1080p). row_stats: int64 (tiles_y, 2) fragments tested / passed per row of tiles.
+    1080p). seg_stats: int64 (S, 2) fragments tested / passed per segment of a row of
+    tiles (`segments`).
     """
 
-    row_stats: GrowBuffer
+    seg_stats: GrowBuffer
 
 
 class RasterStage:
@@ -71,9 +83,9 @@ class RasterStage:
             cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
             self._zero_tiles = n_tiles + 1
         want = into.overdraw is not None
-        self.kernel(queue, (params.tiles_y,), (1,), starts, starts, starts, np.int32(width),
+        self.kernel(queue, (segments(params),), (1,), starts, starts, starts, np.int32(width),
                     np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
-                    self.buffers.row_stats.ensure(16 * params.tiles_y), np.int32(0),
+                    self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0))
         wait(queue, keep=into)
         into.sync(queue)
@@ -95,8 +107,9 @@ class RasterStage:
                 them or not as it was allocated).
 
         Returns:
-            the outputs (complete and readable on return), row stats (tiles_y, 2) int64
-            (fragments tested / passed per row of tiles) and the profiling event.
+            the outputs (complete and readable on return), segment stats (S, 2) int64
+            (fragments tested / passed per segment of a row of tiles) and the profiling
+            event.
         """
         width, height = params.width, params.height
         tiles_x = params.tiles_x
@@ -110,18 +123,18 @@ class RasterStage:
         want_bary = into.bary is not None
         # an output not wanted gets another buffer as its (untouched) argument; overdraw,
         # when present, is the last buffer
-        ev = self.kernel(queue, (params.tiles_y,), (1,), setup.clip_bary.buf,
+        ev = self.kernel(queue, (segments(params),), (1,), setup.clip_bary.buf,
                          bins.tile_start.buf, bins.entries.buf,
                          np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:2],
                          into.bufs[2] if want_bary else into.bufs[1],
-                         self.buffers.row_stats.ensure(16 * params.tiles_y), np.int32(load),
+                         self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(load),
                          np.int32(want), into.bufs[-1] if want else into.bufs[1],
                          np.int32(want_bary))
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
-        rstats = np.empty((params.tiles_y, 2), np.int64)
-        cl.enqueue_copy(queue, rstats, cast(cl.Buffer, self.buffers.row_stats.buf),
+        rstats = np.empty((segments(params), 2), np.int64)
+        cl.enqueue_copy(queue, rstats, cast(cl.Buffer, self.buffers.seg_stats.buf),
                         is_blocking=False)
         into.sync(queue)   # waits for the copy too
         return into, rstats, ev
