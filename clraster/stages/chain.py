@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from typing import Any, cast
 
-import numpy as np
 import pyopencl as cl
 
 from ..config import DRAW_DTYPE, PIECE_DTYPE, WINVERT_DTYPE, RasterConfig
@@ -145,9 +144,7 @@ class StageChain:
         raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
         out, rstats, ev_r = raster.run(queue, setup, bins, params, into=into,
                                        overdraw=overdraw, bary=bary)
-        status = np.empty(setup.n_tris, np.uint8)
-        cl.enqueue_copy(queue, status, cast(cl.Buffer, setup.status.buf), is_blocking=True)
-        totals.add_status(status)
+        totals.status_counts += bins.status_counts   # counted on the device (bin_count)
         totals.fragments_tested += int(rstats[:, 0].sum())
         totals.fragments_passed += int(rstats[:, 1].sum())
         totals.add_events("raster", [ev_r])
