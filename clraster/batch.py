@@ -204,6 +204,9 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
     if renderer is None:
         renderer = Renderer(*size)
     check_render_kwargs(renderer, render_kwargs)
+    if "bary" not in outs and "shaded" not in outs and "outputs" not in render_kwargs:
+        # no file needs the barycentrics: 8 bytes a pixel are made instead of 20
+        render_kwargs = {**render_kwargs, "outputs": ("depth", "ids")}
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir {str(out)!r} exists and is not a folder")

@@ -60,15 +60,15 @@ def _check_pair(a: Frame, b: Frame) -> None:
         raise ValueError(f"cannot composite a {a.width}x{a.height} frame with a "
                          f"{b.width}x{b.height} one: render every part at the same size")
     for f in (a, b):
+        bary = f.need_barycentrics()   # frames rendered with outputs including "bary"
         if (f.depth.dtype != np.float32 or f.triangle_id.dtype != np.int32
-                or f.barycentrics.dtype != np.float32
-                or f.barycentrics.shape != f.depth.shape + (3,)
+                or bary.dtype != np.float32
+                or bary.shape != f.depth.shape + (3,)
                 or f.triangle_id.shape != f.depth.shape):
             raise ValueError("frames to composite need depth float32 (H, W), triangle_id "
                              "int32 (H, W) and barycentrics float32 (H, W, 3), got "
                              f"{f.depth.dtype} {f.depth.shape}, {f.triangle_id.dtype} "
-                             f"{f.triangle_id.shape}, {f.barycentrics.dtype} "
-                             f"{f.barycentrics.shape}")
+                             f"{f.triangle_id.shape}, {bary.dtype} {bary.shape}")
     if a.reversed_z != b.reversed_z:
         raise ValueError("cannot composite a reversed-Z frame with an ordinary one: render "
                          "every part with the same reversed_z")
@@ -109,7 +109,7 @@ def composite_into(a: Frame, b: Frame) -> Frame:
     take = _b_wins(a, b)
     np.copyto(a.depth, b.depth, where=take)
     np.copyto(a.triangle_id, b.triangle_id, where=take)
-    np.copyto(a.barycentrics, b.barycentrics, where=take[..., None])
+    np.copyto(a.need_barycentrics(), b.need_barycentrics(), where=take[..., None])
     if a.overdraw is not None and b.overdraw is not None:
         a.overdraw += b.overdraw
     else:
@@ -135,7 +135,7 @@ def composite(a: Frame, b: Frame) -> Frame:
         stats = `merge_stats` of both; fates None. Neither input is changed.
     """
     _check_pair(a, b)
-    out = Frame(a.depth.copy(), a.triangle_id.copy(), a.barycentrics.copy(), a.stats,
+    out = Frame(a.depth.copy(), a.triangle_id.copy(), a.need_barycentrics().copy(), a.stats,
                 overdraw=None if a.overdraw is None else a.overdraw.copy(),
                 reversed_z=a.reversed_z)
     return composite_into(out, b)
@@ -154,7 +154,7 @@ def composite_tree(frames: Sequence[Frame]) -> Frame:
         raise ValueError("composite_tree needs at least one frame")
     if len(level) == 1:
         f = level[0]
-        return Frame(f.depth.copy(), f.triangle_id.copy(), f.barycentrics.copy(), f.stats,
+        return Frame(f.depth.copy(), f.triangle_id.copy(), f.need_barycentrics().copy(), f.stats,
                      overdraw=None if f.overdraw is None else f.overdraw.copy(),
                      reversed_z=f.reversed_z)
     owned = [False] * len(level)   # a result of this function may be composited in place
@@ -217,7 +217,7 @@ def crop(frame: Frame) -> Crop:
 
 def _blank(width: int, height: int, overdraw: bool, stats: FrameStats,
            reversed_z: bool = False) -> Frame:
-    f = Frame.empty(width, height, stats, reversed_z)
+    f = Frame.empty(width, height, stats, reversed_z=reversed_z)
     if overdraw:
         f.overdraw = np.zeros((height, width), np.int32)
     return f
@@ -253,7 +253,7 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
     if empty_a or empty_b:
         keep = b if empty_a else a
         f = keep.frame
-        out = Frame(f.depth.copy(), f.triangle_id.copy(), f.barycentrics.copy(),
+        out = Frame(f.depth.copy(), f.triangle_id.copy(), f.need_barycentrics().copy(),
                     merge_stats(a.frame.stats, b.frame.stats),
                     overdraw=f.overdraw.copy() if od and f.overdraw is not None else None,
                     reversed_z=f.reversed_z)
@@ -265,7 +265,7 @@ def composite_crops(a: Crop, b: Crop) -> Crop:
     va = _sub(out, ra[0] - x0, ra[1] - y0, ra[2] - x0, ra[3] - y0, False)
     va.depth[...] = a.frame.depth
     va.triangle_id[...] = a.frame.triangle_id
-    va.barycentrics[...] = a.frame.barycentrics
+    va.need_barycentrics()[...] = a.frame.barycentrics
     if od and va.overdraw is not None:   # od: both parts (so the blank) have overdraw
         va.overdraw[...] = a.frame.overdraw
     vb = _sub(out, rb[0] - x0, rb[1] - y0, rb[2] - x0, rb[3] - y0, False)

@@ -185,6 +185,27 @@ def mvp_matrix(camera: CameraLike, width: int, height: int) -> np.ndarray:
     return np.ascontiguousarray(m32)
 
 
+#: Frame outputs `Renderer.render(outputs=...)` can choose among, in Frame field order.
+RENDER_OUTPUTS = ("depth", "ids", "bary")
+
+
+def check_render_outputs(outputs: object) -> bool:
+    """``outputs`` of `Renderer.render`: a name or a sequence of distinct names out of
+    `RENDER_OUTPUTS`, at least one. Returns whether barycentrics were asked for (depth
+    and ids are always made: the depth test needs both)."""
+    names = (outputs,) if isinstance(outputs, str) else outputs
+    out: tuple = ()
+    try:
+        out = tuple(names)   # type: ignore[arg-type]  # checked just below
+    except TypeError:
+        pass
+    if (not out or len(set(out)) != len(out)
+            or not all(isinstance(o, str) and o in RENDER_OUTPUTS for o in out)):
+        raise ValueError(f"outputs must be distinct names out of {', '.join(RENDER_OUTPUTS)}"
+                         f" (at least one), got {outputs!r}")
+    return "bary" in out
+
+
 def check_flag(value: object, name: str) -> bool:
     """A yes/no option: True/False (or NumPy bool) only. Strings such as "no" are truthy,
     so accepting any object would silently turn an option on."""

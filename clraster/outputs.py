@@ -127,7 +127,7 @@ def points(frame: Frame, target: Any) -> FramePoints:
     geom = _as_geometry(target)
     n_faces = geom.n_faces
     ys, xs, ids = _covered(frame, n_faces)
-    bary = np.asarray(frame.barycentrics, np.float64)[ys, xs]        # (N, 3)
+    bary = np.asarray(frame.need_barycentrics(), np.float64)[ys, xs]   # (N, 3)
     if isinstance(geom, Mesh):
         tri = geom.vertices.astype(np.float64)[geom.faces[ids]]      # (N, 3, 3)
         world = np.einsum("nk,nkc->nc", bary, tri)

@@ -6,8 +6,8 @@ import functools
 import os
 import threading
 import time
-from collections.abc import Iterable, Iterator
-from typing import Any
+from collections.abc import Iterable, Iterator, Sequence
+from typing import Any, cast
 
 import numpy as np
 import pyopencl as cl
@@ -17,11 +17,19 @@ from .device import check_process, default_context, event_ms
 from .drawlist import PlanCache, plan_frame
 from .fates import ClusterFates
 from .frame import Frame, FrameStats
-from .inputs import CameraLike, Target, check_clip_planes, check_cull, check_flag, check_size
+from .inputs import (
+    CameraLike,
+    Target,
+    check_clip_planes,
+    check_cull,
+    check_flag,
+    check_render_outputs,
+    check_size,
+)
 from .params import FrameParams, FrameTotals, finish_depth
 from .stages.chain import StageChain
 from .stages.pyramid import PyramidStage
-from .stages.raster import RasterOutput
+from .stages.raster import RasterOutput, RasterStage
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
 from .window import window_mask
@@ -46,6 +54,10 @@ class Renderer:
 
         frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
                        NumPy arrays, used in place by a CPU device)
+      + recycled       ≤ 48·W·H bytes of host memory of frames the caller has dropped,
+                       kept to make the next frames' arrays without page faults
+                       (`clraster.arraypool`: a frame's arrays are its own as long as
+                       anything refers to them)
       + per pass       ≤ 242·M + 228·E bytes (698 MiB at the defaults; draws, vertex stream,
                        setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
@@ -84,7 +96,8 @@ class Renderer:
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
                overdraw: bool = False, fates: bool = False, reversed_z: bool = False,
-               clip_planes: Any = None, window: Any = None) -> Frame:
+               clip_planes: Any = None, window: Any = None,
+               outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`, or a ``trimesh.Trimesh``
         or ``trimesh.Scene``, converted once per object: `clraster.inputs.as_target`) seen
         by ``camera`` (a `clraster.Camera`, or any object with ``view_projection(width,
@@ -129,6 +142,11 @@ class Renderer:
                 restricted to those pixels; tiles the window does not reach are not
                 rasterized, and fragments at shut pixels of the others are tested but never
                 pass (counted in fragments_tested).
+            outputs: which of "depth", "ids", "bary" to make. Without "bary" the
+                barycentrics are neither computed nor stored (``frame.barycentrics`` is
+                None): 8 bytes per pixel instead of 20, for depth, visibility and
+                occlusion users. Depth and ids are always made (the depth test needs
+                both), and they are the same with or without "bary".
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -143,10 +161,11 @@ class Renderer:
                             ("overdraw", overdraw), ("fates", fates),
                             ("reversed_z", reversed_z)):
             check_flag(value, name)
+        bary = check_render_outputs(outputs)
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates, reversed_z, planes, mask)
+                                fates, bary, reversed_z, planes, mask)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -157,7 +176,7 @@ class Renderer:
                 entry dicts, or objects with ``view_projection(width, height)``; or the path
                 of a camera list file (JSON; format and checks in `clraster.views`).
             render_kwargs: `render`'s keywords (cull, frustum, cones, occlusion, overdraw,
-                fates), the same for every view; unknown ones raise TypeError at once.
+                fates, outputs), the same for every view; unknown ones raise TypeError at once.
 
         Each frame is exactly what ``render(target, camera, **render_kwargs)`` returns in a
         loop on this renderer (with occlusion=True, each view's history is the view before
@@ -172,7 +191,8 @@ class Renderer:
 
     def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
                 cones: bool, occlusion: bool, overdraw: bool, fates: bool,
-                reversed_z: bool = False, clip_planes: np.ndarray | None = None,
+                bary: bool = True, reversed_z: bool = False,
+                clip_planes: np.ndarray | None = None,
                 window: np.ndarray | None = None) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
@@ -181,15 +201,14 @@ class Renderer:
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
         fd = plan.frame
-        if fd.n_tris == 0:
-            fr = Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                             reversed_z)
-            if overdraw:
-                fr.overdraw = np.zeros((h, w), np.int32)
-            if fates:
-                fr.fates = ClusterFates.from_plan(plan)
-            return fr
         params = FrameParams.make(w, h, self.config, cull, reversed_z, window)
+        if fd.n_tris == 0:   # nothing in view: the cleared frame, cleared on the device
+            out = cast(RasterStage, self.chain.raster).clear(self.queue, params, overdraw, bary)
+            return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
+                         FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
+                         overdraw=out.overdraw,
+                         fates=ClusterFates.from_plan(plan) if fates else None,
+                         reversed_z=reversed_z)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
         occluded = None
         config = self.config
@@ -197,7 +216,7 @@ class Renderer:
         def one_pass(batch, max_entries: int | None, into: RasterOutput | None
                      ) -> RasterOutput:
             return self.chain.draw(self.queue, plan.pool, batch, params, totals, into=into,
-                                   overdraw=overdraw, max_entries=max_entries)
+                                   overdraw=overdraw, max_entries=max_entries, bary=bary)
 
         def draw(draws, into: RasterOutput | None) -> RasterOutput:
             # a frame (or an occlusion phase) as a stream of bounded passes

@@ -1,11 +1,14 @@
 /* Binning: setup records -> per-tile lists, in submission order, exact sizes.
  *
  * The triangle slots are cut into `chunks` contiguous ranges (one work-item each).
- *   bin_count:   each chunk counts its pieces per tile into its own row counts[chunk][tile].
+ *   bin_count:   each chunk counts its pieces per tile into its own row counts[chunk][tile],
+ *                and its triangles per setup status into hist[chunk][status] (the frame's
+ *                stats: the host no longer reads and counts a status byte per triangle).
  *   bin_offsets: per tile, turns the column counts[.][tile] into exclusive offsets within the
  *                tile and writes the tile's total.
- *   bin_scan_tiles: one work-item scans the tile totals into tile_start[0..tiles]; the host
- *                reads tile_start[tiles] (total entries) and sizes the entry buffer to fit.
+ *   bin_scan_tiles: one work-item scans the tile totals into tile_start[0..tiles] and sums
+ *                the status counts into summary[]; the host reads the summary (total
+ *                entries, overflow, status counts) and sizes the entry buffer to fit.
  *   bin_scatter: each chunk walks its pieces again and copies each setup record to
  *                entries[tile_start[tile] + counts[chunk][tile]++].
  * Copying whole 96-byte records (not indices) makes the raster read its tile's list
@@ -97,12 +100,16 @@ __kernel void bin_count(__global const uchar *restrict status,
                         __global const Piece *restrict pieces,
                         __global const Piece *restrict clip_pieces, const uint m,
                         const uint chunks, const int tiles_x, const int n_tiles,
-                        __global int *restrict counts)
+                        __global int *restrict counts, __global int *restrict hist)
 {
     uint chunk = get_global_id(0);
     if (chunk >= chunks) return;
     __global int *row = counts + (size_t)chunk * n_tiles;
     for (int i = 0; i < n_tiles; ++i) row[i] = 0;
+    int h[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    uint c0 = (uint)(((ulong)chunk * m) / chunks), c1 = (uint)(((ulong)(chunk + 1) * m) / chunks);
+    for (uint t = c0; t < c1; ++t) h[status[t] & 7] += 1;
+    for (int k = 0; k < 8; ++k) hist[8 * chunk + k] = h[k];
     FOR_EACH_CHUNK_ENTRY(row[tile] += 1;)
 }
 
@@ -121,10 +128,13 @@ __kernel void bin_offsets(const uint chunks, const int n_tiles, __global int *re
     tile_count[tile] = s;
 }
 
-/* tile_start has n_tiles + 1 entries; tile_start[n_tiles] is the total. If the total does
- * not fit an int, overflow[0] is set and the host refuses the frame with an error. */
+/* tile_start has n_tiles + 1 entries; tile_start[n_tiles] is the total. summary[0]: the
+ * total (clamped), summary[1]: set if the total does not fit an int (the host refuses the
+ * frame with an error), summary[2 + k]: triangles with setup status k (hist summed over
+ * the chunks). */
 __kernel void bin_scan_tiles(const int n_tiles, __global const int *restrict tile_count,
-                             __global int *restrict tile_start, __global int *restrict overflow)
+                             __global int *restrict tile_start, const uint chunks,
+                             __global const int *restrict hist, __global int *restrict summary)
 {
     if (get_global_id(0) != 0) return;
     long s = 0;
@@ -133,7 +143,13 @@ __kernel void bin_scan_tiles(const int n_tiles, __global const int *restrict til
         s += tile_count[i];
     }
     tile_start[n_tiles] = (int)min(s, (long)INT_MAX);
-    overflow[0] = s > (long)INT_MAX;
+    summary[0] = (int)min(s, (long)INT_MAX);
+    summary[1] = s > (long)INT_MAX;
+    for (int k = 0; k < 8; ++k) {
+        int n = 0;
+        for (uint c = 0; c < chunks; ++c) n += hist[8 * c + k];
+        summary[2 + k] = n;
+    }
 }
 
 __kernel void bin_scatter(__global const uchar *restrict status,

@@ -107,11 +107,11 @@ def main(argv: list[str] | None = None) -> int:
                                                   .astype(np.float64), f.triangle_id)
                 inside = b.min(axis=1) >= 0.0
                 d32 = np.abs(f.depth[mask].astype(np.float64) - dz)[inside].max()
-                berr = np.abs(f.barycentrics[mask] - b).max(axis=1)
+                berr = np.abs(f.need_barycentrics()[mask] - b).max(axis=1)
                 p999 = np.quantile(berr[(area >= 1.0) & inside], 0.999)
                 mask, dz, b, _, _ = ray_oracle(mesh, vp64, f.triangle_id)
                 inside = b.min(axis=1) >= 0.0
-                berr = np.abs(f.barycentrics[mask] - b).max(axis=1)
+                berr = np.abs(f.need_barycentrics()[mask] - b).max(axis=1)
                 p999_64 = np.quantile(berr[(area >= 1.0) & inside], 0.999)
                 derr = np.abs(f.depth[mask].astype(np.float64) - dz)
                 ours, theirs = f"{derr[inside].max():.2e}", "-"

@@ -33,7 +33,7 @@ MESH_ALIASES = {
 }
 
 #: Renderer.render keyword arguments per culling mode.
-MODES: dict[str, dict[str, bool]] = {
+MODES: dict[str, dict[str, Any]] = {
     "off": {"frustum": False, "cones": False},
     "frustum": {"frustum": True, "cones": True},
     "occlusion": {"frustum": True, "cones": True, "occlusion": True},

@@ -16,6 +16,7 @@ twophase...), never the OpenCL side.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,15 @@ import numpy as np
 from ..config import RasterConfig
 from ..drawlist import FrameDraws, PlanCache, plan_frame
 from ..frame import Frame, FrameStats
-from ..inputs import CameraLike, Target, check_clip_planes, check_cull, check_flag, check_size
+from ..inputs import (
+    CameraLike,
+    Target,
+    check_clip_planes,
+    check_cull,
+    check_flag,
+    check_render_outputs,
+    check_size,
+)
 from ..params import FrameParams, FrameTotals, finish_depth
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
@@ -62,10 +71,12 @@ class Renderer:
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
-               reversed_z: bool = False, clip_planes: Any = None, window: Any = None) -> Frame:
+               reversed_z: bool = False, clip_planes: Any = None, window: Any = None,
+               outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
         check_cull(cull)
+        want_bary = check_render_outputs(outputs)
         check_flag(occlusion, "occlusion")
         check_flag(reversed_z, "reversed_z")
         planes = check_clip_planes(clip_planes)
@@ -79,7 +90,7 @@ class Renderer:
         counts = dict(plan.draw_list.counts)
         if fd.n_tris == 0:
             return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                               reversed_z)
+                               bary=want_bary, reversed_z=reversed_z)
         params = FrameParams.make(w, h, config, cull, reversed_z, mask)
         totals = FrameTotals(timings_ms={"cull (host)": t_cull})
 
@@ -91,7 +102,7 @@ class Renderer:
         else:
             res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts)
             depth, ids, bary = res.out
-        return Frame(finish_depth(depth, ids, reversed_z), ids, bary,
+        return Frame(finish_depth(depth, ids, reversed_z), ids, bary if want_bary else None,
                      totals.stats(counts), reversed_z=reversed_z)
 
 

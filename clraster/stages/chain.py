@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from typing import Any, cast
 
-import numpy as np
 import pyopencl as cl
 
 from ..config import DRAW_DTYPE, PIECE_DTYPE, WINVERT_DTYPE, RasterConfig
@@ -122,7 +121,8 @@ class StageChain:
 
     def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
              totals: FrameTotals, *, into: RasterOutput | None = None,
-             overdraw: bool = False, max_entries: int | None = None) -> RasterOutput:
+             overdraw: bool = False, max_entries: int | None = None, bary: bool = True
+             ) -> RasterOutput:
         """`bin`, then rasterize into ``into`` (the frame buffers of an earlier pass of the
         same frame, whose depth and ids take part in the depth test) or, when None, into
         fresh cleared frame buffers. Adds the setup status of every triangle, the fragment
@@ -130,27 +130,24 @@ class StageChain:
 
         Returns the frame buffers, complete and readable. With no triangles in ``fd``
         nothing runs: ``into`` is returned as it is, or fresh cleared buffers.
-        ``max_entries``: as in `bin` (over it, nothing is drawn or counted).
+        ``max_entries``: as in `bin` (over it, nothing is drawn or counted). ``bary``:
+        fresh buffers get barycentrics (False: none computed, ``out.bary`` is None).
 
         This is one pass of whatever size ``fd`` is; `clraster.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
         """
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
-                into = RasterOutput.allocate(self.context, params.width, params.height,
-                                             overdraw)
-                into.clear()
+                into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)
             return into
         bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
         setup = self.setup.buffers
         raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
-        out, tstats, ev_r = raster.run(queue, setup, bins, params, into=into,
-                                       overdraw=overdraw)
-        status = np.empty(setup.n_tris, np.uint8)
-        cl.enqueue_copy(queue, status, cast(cl.Buffer, setup.status.buf), is_blocking=True)
-        totals.add_status(status)
-        totals.fragments_tested += int(tstats[:, 0].sum())
-        totals.fragments_passed += int(tstats[:, 1].sum())
+        out, rstats, ev_r = raster.run(queue, setup, bins, params, into=into,
+                                       overdraw=overdraw, bary=bary)
+        totals.status_counts += bins.status_counts   # counted on the device (bin_count)
+        totals.fragments_tested += int(rstats[:, 0].sum())
+        totals.fragments_passed += int(rstats[:, 1].sum())
         totals.add_events("raster", [ev_r])
         totals.settle()   # the raster waited for the queue: every event is complete
         return out

@@ -1,13 +1,15 @@
-"""Tile raster host side (kernels/raster.cl): one work-item per tile."""
+"""Tile raster host side (kernels/raster.cl): one work-item per row of tiles."""
 
 from __future__ import annotations
 
+import mmap
 from dataclasses import dataclass
 from typing import cast
 
 import numpy as np
 import pyopencl as cl
 
+from ..arraypool import ArrayPool
 from ..config import RasterConfig
 from ..device import program, wait
 from ..params import FrameParams
@@ -16,26 +18,41 @@ from .bin import BinBuffers
 from .setup import SetupBuffers
 
 
-def host_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
-    """An uninitialised array aligned to a page, so PoCL can use its memory directly."""
-    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    raw = np.empty(nbytes + 4096, np.uint8)
-    off = (-raw.ctypes.data) % 4096
-    return raw[off:off + nbytes].view(dtype).reshape(shape)
+def zeros_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """A zero-filled page-aligned array in fresh anonymous memory: the OS maps its pages as
+    zeros on first touch, so the parts never written cost nothing (the barycentrics of a
+    cleared frame). Not for arrays a kernel then writes all over: faulting fresh pages
+    inside the raster kernel made spot at 1080p 1.23x slower than reused memory."""
+    n = int(np.prod(shape))
+    mm = mmap.mmap(-1, max(n * np.dtype(dtype).itemsize, 1))
+    return np.frombuffer(mm, dtype, count=n).reshape(shape)
+
+
+#: Tiles per work-item of the raster kernel, about: runs of up to 256 px to clear at 16 px
+#: tiles, 544 work-items at 1920x1080 (kernels/raster.cl says why not whole rows).
+SEG_TILES = 16
+
+
+def segments(params: FrameParams) -> int:
+    """Work-items of the raster kernel: rows of tiles × segments of each row (the kernel
+    reads the segments per row back from its global size)."""
+    return params.tiles_y * -(-params.tiles_x // SEG_TILES)
 
 
 @dataclass
 class FrameBuffers:
     """Raster outputs, H × W image, T tiles.
 
-    The image outputs are the caller's fresh NumPy arrays, wrapped per frame as
+    The image outputs are the caller's own NumPy arrays (from `pool`, whose memory is reused
+    only once the caller has dropped them: `clraster.arraypool`), wrapped per frame as
     CL_MEM_USE_HOST_PTR buffers: on a CPU device the kernel writes straight into them, which
     saves copying ~20 bytes per pixel back (a third of the frame time of a small scene at
-    1080p). tile_stats: int64 (T, 2) fragments tested / passed per tile. window: uint8
-    (H, W) the polygon window's mask of this frame (`clraster.window`), when it has one.
+    1080p). seg_stats: int64 (S, 2) fragments tested / passed per segment of a row of
+    tiles (`segments`). window: uint8 (H, W) the polygon window's mask of this frame
+    (`clraster.window`), when it has one.
     """
 
-    tile_stats: GrowBuffer
+    seg_stats: GrowBuffer
     window: GrowBuffer
 
 
@@ -46,6 +63,37 @@ class RasterStage:
         self.buffers = FrameBuffers(GrowBuffer(ctx), GrowBuffer(ctx))
         self._window_src: np.ndarray | None = None
         self.ctx = ctx
+        #: memory of dropped frames' arrays, reused for new ones (at most two frames'
+        #: worth is kept: `run` raises the bound to the image size)
+        self.pool = ArrayPool(0)
+        self._zero_starts = GrowBuffer(ctx)   # an all-empty tile list (`clear`)
+        self._zero_tiles = 0
+
+    def clear(self, queue: cl.CommandQueue, params: FrameParams, overdraw: bool = False,
+              bary: bool = True) -> RasterOutput:
+        """Fresh outputs holding the cleared frame (depth 1.0, id −1, barycentrics and
+        overdraw 0), complete and readable on return: the raster kernel over an empty tile
+        list, so both cores clear depth and ids in long runs, while the barycentrics are
+        fresh zero pages (`zeros_array`) that nothing touches until a later pass draws.
+        An empty frame at 1080p: 16.6 MB written on the device instead of 41 MB on the
+        host."""
+        width, height, n_tiles = params.width, params.height, params.n_tiles
+        self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
+        into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool,
+                                     bary_zeros=True)
+        starts = self._zero_starts.ensure(4 * (n_tiles + 1))
+        if self._zero_tiles < n_tiles + 1:   # (a buffer grown since was filled here)
+            cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
+            self._zero_tiles = n_tiles + 1
+        want = into.overdraw is not None
+        self.kernel(queue, (segments(params),), (1,), starts, starts, starts, np.int32(width),
+                    np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
+                    self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
+                    np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
+                    self.buffers.window.ensure(1), np.int32(0))
+        wait(queue, keep=into)
+        into.sync(queue)
+        return into
 
     def _window(self, queue: cl.CommandQueue, params: FrameParams) -> tuple[cl.Buffer, np.int32]:
         """The window mask buffer (uint8 (H, W), `FrameParams.window`) and the kernel's
@@ -61,7 +109,8 @@ class RasterStage:
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
             params: FrameParams, *, into: RasterOutput | None = None,
-            overdraw: bool = False) -> tuple[RasterOutput, np.ndarray, cl.Event]:
+            overdraw: bool = False, bary: bool = True
+            ) -> tuple[RasterOutput, np.ndarray, cl.Event]:
         """Rasterize the binned pieces (bins; the parent barycentrics of clipped pieces come
         from setup.clip_bary).
 
@@ -70,73 +119,84 @@ class RasterStage:
                 depth and ids take part in the depth test; pixels nobody beats keep their
                 values) — used by two-phase occlusion culling. None: start from clear.
             overdraw: also count fragments tested per pixel (depth complexity).
+            bary: also compute and write barycentrics (new outputs only; ``into`` has
+                them or not as it was allocated).
 
         Returns:
-            the outputs (complete and readable on return), tile stats (T, 2) int64
-            (fragments tested / passed per tile) and the profiling event.
+            the outputs (complete and readable on return), segment stats (S, 2) int64
+            (fragments tested / passed per segment of a row of tiles) and the profiling
+            event.
         """
         width, height = params.width, params.height
-        tiles_x, n_tiles = params.tiles_x, params.n_tiles
+        tiles_x = params.tiles_x
         load = into is not None
         if into is None:
-            into = RasterOutput.allocate(self.ctx, width, height, overdraw)
+            self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
+            into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool)
         elif overdraw and into.overdraw is None:
             raise ValueError("overdraw was not counted in the earlier pass")
         want = into.overdraw is not None
-        ev = self.kernel(queue, (n_tiles,), (1,), setup.clip_bary.buf, bins.tile_start.buf,
-                         bins.entries.buf,
-                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:3],
-                         self.buffers.tile_stats.ensure(16 * n_tiles), np.int32(load),
-                         np.int32(want), into.bufs[3] if want else into.bufs[1],
-                         *self._window(queue, params))
+        want_bary = into.bary is not None
+        # an output not wanted gets another buffer as its (untouched) argument; overdraw,
+        # when present, is the last buffer
+        ev = self.kernel(queue, (segments(params),), (1,), setup.clip_bary.buf,
+                         bins.tile_start.buf, bins.entries.buf,
+                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:2],
+                         into.bufs[2] if want_bary else into.bufs[1],
+                         self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(load),
+                         np.int32(want), into.bufs[-1] if want else into.bufs[1],
+                         np.int32(want_bary), *self._window(queue, params))
         # wait first: a non-blocking read here kept the GIL for the whole raster kernel
         # (~200 ms of a big frame during which no other Python thread ran)
         wait(queue, keep=into)
-        tstats = np.empty((n_tiles, 2), np.int64)
-        cl.enqueue_copy(queue, tstats, cast(cl.Buffer, self.buffers.tile_stats.buf))
-        into.sync(queue)
-        return into, tstats, ev
+        rstats = np.empty((segments(params), 2), np.int64)
+        cl.enqueue_copy(queue, rstats, cast(cl.Buffer, self.buffers.seg_stats.buf),
+                        is_blocking=False)
+        into.sync(queue)   # waits for the copy too
+        return into, rstats, ev
 
 
 @dataclass
 class RasterOutput:
     """The image outputs as the caller's NumPy arrays and the CL_MEM_USE_HOST_PTR buffers
-    over them. depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3), overdraw
-    int32 (H, W) or None."""
+    over them. depth float32 (H, W), ids int32 (H, W), bary float32 (H, W, 3) or None (not
+    asked for), overdraw int32 (H, W) or None. bufs: one buffer per array present, in
+    that order (depth, ids, then bary and overdraw when present)."""
 
     depth: np.ndarray
     ids: np.ndarray
-    bary: np.ndarray
+    bary: np.ndarray | None
     overdraw: np.ndarray | None
     bufs: list[cl.Buffer]
 
     @classmethod
-    def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool
-                 ) -> RasterOutput:
-        arrs = [host_array((height, width), np.float32), host_array((height, width), np.int32),
-                host_array((height, width, 3), np.float32)]
+    def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool,
+                 bary: bool = True, pool: ArrayPool | None = None,
+                 bary_zeros: bool = False) -> RasterOutput:
+        """Uninitialised page-aligned arrays (from ``pool``, else a pool of their own) and
+        the buffers over them; ``bary_zeros``: the barycentrics are `zeros_array`."""
+        pool = pool or ArrayPool(0)
+        arrs = [pool.empty((height, width), np.float32), pool.empty((height, width), np.int32)]
+        if bary:
+            arrs.append(zeros_array((height, width, 3), np.float32) if bary_zeros
+                        else pool.empty((height, width, 3), np.float32))
         if overdraw:
-            arrs.append(host_array((height, width), np.int32))
+            arrs.append(pool.empty((height, width), np.int32))
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
         bufs = [cl.Buffer(ctx, flags, hostbuf=a) for a in arrs]
-        return cls(arrs[0], arrs[1], arrs[2], arrs[3] if overdraw else None, bufs)
+        return cls(arrs[0], arrs[1], arrs[2] if bary else None,
+                   arrs[-1] if overdraw else None, bufs)
 
-    def clear(self) -> None:
-        """Set the arrays to the cleared frame (depth 1.0, id −1, barycentrics and overdraw
-        0) on the host, for a pass that draws nothing (the buffers wrap these arrays)."""
-        self.depth.fill(1.0)
-        self.ids.fill(-1)
-        self.bary.fill(0.0)
-        if self.overdraw is not None:
-            self.overdraw.fill(0)
+    def arrays(self) -> list[np.ndarray]:
+        """The arrays present, in the order of ``bufs``."""
+        return [a for a in (self.depth, self.ids, self.bary, self.overdraw) if a is not None]
 
     def sync(self, queue: cl.CommandQueue) -> None:
         """Make the kernels' writes visible in the arrays. map/unmap is the OpenCL way for
         USE_HOST_PTR buffers; on a CPU device the mapping is the array itself (no copy)."""
-        arrs = [self.depth, self.ids, self.bary] + ([self.overdraw] if self.overdraw is not None
-                                                    else [])
-        for a, b in zip(arrs, self.bufs, strict=True):
+        # enqueued without blocking, then one finish: each blocking map was a round trip
+        for a, b in zip(self.arrays(), self.bufs, strict=True):
             mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype,
-                                              is_blocking=True)
+                                              is_blocking=False)
             mapped.base.release(queue)
         queue.finish()

@@ -1,0 +1,160 @@
+"""A/B of whole source trees with one persistent worker process per tree, interleaved.
+
+    python bench/proc_ab.py 23d0dc1                   # spot, dragon, empty at 1920x1080
+    python bench/proc_ab.py 23d0dc1 HEAD --scenes spot bunny dragon plant10m plant10m:off
+    python bench/proc_ab.py HEAD HEAD --kwb '{"outputs": ["depth", "ids"]}'   # same tree, lean
+    python bench/proc_ab.py 23d0dc1 --size 3840x2160 --rounds 9
+
+Where `tree_ab.py` starts a process per frame, each tree here keeps one process (one
+Renderer per scene, warmed up) and renders one frame per request, the two trees taking
+turns (their order alternating per round), so a round costs two frames and rounds can be
+many. Per scene and tree: the median and min frame wall time, the median process CPU time
+of a frame (user + system over all threads, PoCL's included: less sensitive than wall time
+to other jobs on a shared machine) and the median device time per stage; B/A ratios of the
+medians; and whether the last frames' ids agree. A revision may be a git revision,
+WORKTREE (the checkout) or a folder holding a tree. Scenes: spot, bunny, armadillo, lucy,
+dragon202k, dragon (framed as the harness does), empty (spot behind the camera), plant1m,
+plant5m, plant10m (first person, occlusion culling; ":off" no object culling).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+MESHES = REPO.parent / "shared" / "meshes"
+WORKER = r'''
+import json, resource, sys, time
+tree, W, H, M = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4] + "/"
+sys.path.insert(0, tree)
+import numpy as np
+from clraster import Camera, Mesh, Renderer
+FILES = {"spot": "spot.ply", "dragon": "stanford_dragon_vrip.ply",
+         "bunny": "stanford_bunny.ply", "lucy": "stanford_lucy_100k.ply",
+         "armadillo": "armadillo_86k.ply", "dragon202k": "stanford_dragon_res2.ply"}
+PLANTS = {"plant1m": 1_000_000, "plant5m": 5_000_000, "plant10m": 10_100_000}
+renderers, scenes = {}, {}
+
+
+def scene(name):
+    if name not in scenes:
+        kw = {}
+        if name.startswith("plant"):
+            from clraster.scenes import plant, plant_inside_camera
+            t = plant(PLANTS[name.split(":")[0]])
+            cam = plant_inside_camera(t, W, H)
+            kw = ({"frustum": False, "cones": False} if name.endswith(":off")
+                  else {"occlusion": True})
+        elif name == "empty":   # spot behind the camera: nothing in view
+            t = Mesh.load(M + "spot.ply")
+            cam = Camera.look_at(eye=(0, 0, 10), target=(0, 0, 20), up=(0, 1, 0))
+        else:
+            t = Mesh.load(M + FILES[name])
+            cam = Camera.framing(*t.bounds(), aspect=W / H)
+        scenes[name] = (t, cam, kw)
+        renderers[name] = Renderer(W, H)
+    return scenes[name] + (renderers[name],)
+
+
+def cpu_ms():
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return (ru.ru_utime + ru.ru_stime) * 1e3
+
+
+for line in sys.stdin:
+    req = json.loads(line)
+    t, cam, kw, r = scene(req["scene"])
+    kw = dict(kw, **req.get("kw", {}))
+    for _ in range(req.get("warm", 0)):
+        r.render(t, cam, **kw)
+    c0, t0 = cpu_ms(), time.perf_counter()
+    f = r.render(t, cam, **kw)
+    ms, cpu = (time.perf_counter() - t0) * 1e3, cpu_ms() - c0
+    ids = f.triangle_id
+    print(json.dumps({"ms": ms, "cpu": cpu, "st": f.stats.timings_ms,
+                      "ids": int(np.count_nonzero(ids >= 0)),
+                      "idsum": int(ids.astype(np.int64).sum())}), flush=True)
+'''
+
+
+def export(rev: str, dest: Path) -> Path:
+    """The tree of ``rev``: the checkout (WORKTREE), a folder, or a git revision exported."""
+    if rev == "WORKTREE":
+        return REPO
+    if os.path.isdir(rev):
+        return Path(rev)
+    dest.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    return dest
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("a", help="tree A: git revision, WORKTREE or a folder")
+    ap.add_argument("b", nargs="?", default="WORKTREE", help="tree B (default: WORKTREE)")
+    ap.add_argument("--scenes", nargs="+", default=["spot", "dragon", "empty"])
+    ap.add_argument("--rounds", type=int, default=20)
+    ap.add_argument("--size", default="1920x1080")
+    ap.add_argument("--kwa", default="{}", help="render keywords of A, JSON")
+    ap.add_argument("--kwb", default="{}", help="render keywords of B, JSON")
+    a = ap.parse_args(argv)
+    w, h = a.size.lower().split("x")
+    tmp = Path(tempfile.mkdtemp())
+    (tmp / "worker.py").write_text(WORKER)
+    procs = {}
+    for tag, rev, kw in (("A", a.a, a.kwa), ("B", a.b, a.kwb)):
+        tree = export(rev, tmp / tag)
+        p = subprocess.Popen([sys.executable, str(tmp / "worker.py"), str(tree), w, h,
+                              str(MESHES)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             text=True, cwd=tmp)
+        procs[tag] = (p, json.loads(kw))
+
+    def ask(tag: str, scene: str, warm: int = 0) -> dict:
+        p, kw = procs[tag]
+        assert p.stdin is not None and p.stdout is not None
+        p.stdin.write(json.dumps({"scene": scene, "warm": warm, "kw": kw}) + "\n")
+        p.stdin.flush()
+        return json.loads(p.stdout.readline())
+
+    res: dict[tuple[str, str], list[dict]] = {}
+    for s in a.scenes:
+        for tag in procs:
+            ask(tag, s, warm=3)
+    for rnd in range(a.rounds):
+        for s in a.scenes:
+            for tag in (list(procs) if rnd % 2 == 0 else list(procs)[::-1]):
+                res.setdefault((s, tag), []).append(ask(tag, s))
+    for s in a.scenes:
+        line = []
+        for tag in procs:
+            rs = res[(s, tag)]
+            med = statistics.median(r["ms"] for r in rs)
+            mn = min(r["ms"] for r in rs)
+            cpu = statistics.median(r["cpu"] for r in rs)
+            st = {k: statistics.median(r["st"].get(k, 0) for r in rs) for k in rs[0]["st"]}
+            line.append(f"{tag} {med:7.2f} (min {mn:6.2f}, cpu {cpu:6.2f}) ms ["
+                        + " ".join(f"{k.split(' ')[0]} {v:.2f}" for k, v in st.items()) + "]")
+        ra, rb = res[(s, "A")], res[(s, "B")]
+        r_ms = statistics.median(r["ms"] for r in rb) / statistics.median(r["ms"] for r in ra)
+        r_cpu = (statistics.median(r["cpu"] for r in rb)
+                 / statistics.median(r["cpu"] for r in ra))
+        same = ra[-1]["idsum"] == rb[-1]["idsum"] and ra[-1]["ids"] == rb[-1]["ids"]
+        print(f"{s:>10}: " + " | ".join(line) + f" | B/A {r_ms:.3f} cpu B/A {r_cpu:.3f} ids "
+              + ("same" if same else "DIFFER"))
+    for p, _ in procs.values():
+        assert p.stdin is not None
+        p.stdin.close()
+        p.wait()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
