@@ -33,7 +33,7 @@ import numpy as np
 from .clip2d import Polygon2D, as_polygon
 from .layout import SUBPIXEL_BITS, SUBPIXEL_ONE
 
-__all__ = ["WINDOW_MAX_COORD", "window_mask", "window_tiles"]
+__all__ = ["WINDOW_MAX_COORD", "window_mask"]
 
 #: Window coordinates must lie within ±2**20 px: the edge arithmetic in 24.8 fixed point then
 #: stays far inside int64 (products below 2**58).
@@ -83,13 +83,3 @@ def window_mask(window: Any, width: int, height: int) -> np.ndarray:
     le = np.cumsum(hist, axis=1)[:, :width]          # crossings with n <= i (at or left of i)
     return ((total - le) & 1).astype(bool)
 
-
-def window_tiles(mask: np.ndarray, tile_log2: int) -> np.ndarray:
-    """uint8 (tiles_y · tiles_x,) row-major: 1 where a tile has a pixel the window lets
-    through (the raster skips the others like empty tiles)."""
-    h, w = mask.shape
-    t = 1 << tile_log2
-    ty, tx = -(-h // t), -(-w // t)
-    pad = np.zeros((ty * t, tx * t), bool)
-    pad[:h, :w] = mask
-    return pad.reshape(ty, t, tx, t).any(axis=(1, 3)).astype(np.uint8).reshape(-1)

@@ -22,14 +22,14 @@
  * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
  * cancels away more than the plane's own scale, and whole triangles vanished. Its inputs
  * are clip positions recomputed in double from the object-space vertices and the float32
- * matrix (object_clip): the vertex stage's float32 clip positions are rounded by ~4e-3 at
+ * matrix (common.h vertex_clip64, once per vertex in the vertex stage): the vertex stage's float32 clip positions are rounded by ~4e-3 at
  * |w| ~ 1e5, more than a near distance of 1e-3, and the near-plane crossing landed at
  * w <= 0. A polygon vertex that is one of the triangle's own (orig >= 0) is emitted as the
  * vertex stage's float32 position, so an edge shared with an unclipped neighbour stays
  * bit-identical; each new vertex is rounded to float once, at the end. */
 typedef struct { double4 p; double r, b0, b1, b2; int orig; } ClipVert;
 
-/* A vertex in double from object space (object_clip): clip position p, and r, the depth
+/* A vertex in double from object space (vertex_clip64): clip position p, and r, the depth
  * numerator its value planes use instead of p.z: p.z itself for ordinary depth; for
  * reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row, formed in float64 on
  * the host) times the position, so r = w − z keeps its relative precision far away, where
@@ -399,7 +399,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         } else {
             Piece pc;
             int sw = 0;
-            /* values from the double clip positions (object_clip): the float32 ones are
+            /* values from the double clip positions (vertex_clip64): the float32 ones are
              * rounded by ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the
              * barycentrics of 1-pixel triangles off by 3e-5 */
             Draw dr = draws[get_group_id(0)];

@@ -72,8 +72,8 @@ class SetupStage:
         n_draws, m = geo.n_draws, geo.n_tris
         clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
         kx, ky = params.kx, params.ky
-        # the pool and matrices too: the clipper recomputes its inputs in double from the
-        # object-space positions (kernels/setup.cl object_clip)
+        # the pool too (user clip plane distances from object space, common.h user_dist) and
+        # the vertex stage's double positions (value planes and the clipper's inputs)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
                      geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, verts.clip64.buf,
                      verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), verts.ucode.buf)
