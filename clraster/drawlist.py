@@ -164,7 +164,9 @@ class FrameDraws:
     reversed-Z depth numerator w − z, setup.cl ClipIn).
     uplanes: float64 (I, K, 4) the frame's K user clip planes moved to each instance's
     object space (world plane · model, so distances are evaluated from object-space
-    positions: common.h user_dist); K = 0 without clip planes."""
+    positions: common.h user_dist); K = 0 without clip planes. uclip: bit k set when plane k
+    clips triangles; the others (a polygon window's bounding planes) only reject triangles
+    and cull clusters wholly outside them, so they never move coverage."""
 
     draws: np.ndarray
     n_verts: int
@@ -173,6 +175,7 @@ class FrameDraws:
     mvps64: np.ndarray
     zrows: np.ndarray
     uplanes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 4)))
+    uclip: int = 0
 
     @property
     def n_user(self) -> int:
@@ -181,7 +184,8 @@ class FrameDraws:
 
 
 def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
-                clip_planes: np.ndarray | None = None) -> FrameDraws:
+                clip_planes: np.ndarray | None = None, n_clipping: int | None = None
+                ) -> FrameDraws:
     """Lay out ``draw_list`` (instance, cluster, inside) as `Draw` records.
 
     view_proj: float64 (4, 4). Each instance's matrix (view-projection · model · the
@@ -191,7 +195,8 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
     rendering). Draws of instances whose transform has a negative determinant get
     DRAW_MIRRORED: their faces keep their outward side (the Scene rule, as glTF).
     clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`),
-    moved to each instance's object space in float64 (`FrameDraws.uplanes`).
+    moved to each instance's object space in float64 (`FrameDraws.uplanes`); the first
+    ``n_clipping`` of them (default all) clip, the rest only reject and cull (`uclip`).
     """
     inst = np.asarray(draw_list.instance, np.int64)
     gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(draw_list.cluster,
@@ -223,9 +228,11 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
     # plane · model: the distance of an object-space point p is plane · (model · [p, 1])
     uplanes = (np.einsum("kj,ijl->ikl", clip_planes, model) if clip_planes is not None
                else np.zeros((len(mats), 0, 4)))
+    k = uplanes.shape[1]
+    uclip = (1 << (k if n_clipping is None else n_clipping)) - 1
     return FrameDraws(d, n_verts, n_tris, np.ascontiguousarray(mvps.reshape(-1, 16)),
                       np.ascontiguousarray(mvps64.reshape(-1, 16)), depth_rows(mvps64),
-                      np.ascontiguousarray(uplanes))
+                      np.ascontiguousarray(uplanes), uclip)
 
 
 def depth_rows(m64: np.ndarray) -> np.ndarray:
@@ -245,7 +252,7 @@ def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
     d["vert_base"] = np.cumsum(nv) - nv
     d["tri_base"] = np.cumsum(nt) - nt
     return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps, fd.mvps64, fd.zrows,
-                      fd.uplanes)
+                      fd.uplanes, fd.uclip)
 
 
 def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -311,18 +318,26 @@ class PlanCache:
 
 def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
                cones: bool, cache: PlanCache, keep_cone_culled: bool = False,
-               clip_planes: np.ndarray | None = None) -> FramePlan:
+               clip_planes: np.ndarray | None = None,
+               cull_planes: np.ndarray | None = None) -> FramePlan:
     """Cull ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene: converted once by
     `inputs.as_target`, before the cache, so the cache keys on the converted object) for
     ``camera`` and lay out this frame's draws (``keep_cone_culled``: see
     `cull.build_draw_list`). ``clip_planes``: float64 (K, 4) world-space user clip planes
     (checked, `inputs.check_clip_planes`) or None: clusters wholly outside one are culled
-    and the rest clipped."""
+    and the rest clipped. ``cull_planes``: float64 (K', 4) planes that only cull and reject
+    (a polygon window's, `window.window_planes_for`), never clip."""
     from .cull import build_draw_list
 
     vp = view_projection(camera, width, height)
     scene, pool = cache.scene_and_pool(as_target(target))
     check_depth_range(camera, width, height, scene)
+    n_clipping = None if clip_planes is None else clip_planes.shape[0]
+    if cull_planes is not None and cull_planes.shape[0]:
+        n_clipping = n_clipping or 0
+        clip_planes = (cull_planes if clip_planes is None
+                       else np.concatenate([clip_planes, cull_planes]))
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
                          keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
-    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp, clip_planes), vp)
+    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp, clip_planes,
+                                                  n_clipping), vp)

@@ -32,7 +32,7 @@ from .stages.pyramid import PyramidStage
 from .stages.raster import RasterOutput, RasterStage
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
-from .window import window_mask
+from .window import window_mask, window_planes_for
 
 
 class Renderer:
@@ -156,7 +156,10 @@ class Renderer:
         """
         check_cull(cull)
         planes = check_clip_planes(clip_planes)
-        mask = None if window is None else window_mask(window, self.width, self.height)
+        mask = cull_planes = None
+        if window is not None:   # the exact mask, and planes that cut work outside it
+            mask = window_mask(window, self.width, self.height)
+            cull_planes = window_planes_for(window, camera, self.width, self.height, planes)
         for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
                             ("overdraw", overdraw), ("fates", fates),
                             ("reversed_z", reversed_z)):
@@ -165,7 +168,7 @@ class Renderer:
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates, bary, reversed_z, planes, mask)
+                                fates, bary, reversed_z, planes, mask, cull_planes)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -193,11 +196,13 @@ class Renderer:
                 cones: bool, occlusion: bool, overdraw: bool, fates: bool,
                 bary: bool = True, reversed_z: bool = False,
                 clip_planes: np.ndarray | None = None,
-                window: np.ndarray | None = None) -> Frame:
+                window: np.ndarray | None = None,
+                cull_planes: np.ndarray | None = None) -> Frame:
         w, h = self.width, self.height
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes)
+                          cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes,
+                          cull_planes=cull_planes)
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
         fd = plan.frame

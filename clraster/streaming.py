@@ -54,13 +54,14 @@ def draw_range(fd: FrameDraws, d0: int, d1: int) -> FrameDraws:
     out consecutively, so a run of them is one contiguous range of each stream)."""
     d = fd.draws[d0:d1].copy()
     if d.size == 0:
-        return FrameDraws(d, 0, 0, fd.mvps, fd.mvps64, fd.zrows, fd.uplanes)
+        return FrameDraws(d, 0, 0, fd.mvps, fd.mvps64, fd.zrows, fd.uplanes, fd.uclip)
     v_end = int(fd.draws["vert_base"][d1]) if d1 < fd.draws.size else fd.n_verts
     t_end = int(fd.draws["tri_base"][d1]) if d1 < fd.draws.size else fd.n_tris
     v0, t0 = int(d["vert_base"][0]), int(d["tri_base"][0])
     d["vert_base"] -= v0
     d["tri_base"] -= t0
-    return FrameDraws(d, v_end - v0, t_end - t0, fd.mvps, fd.mvps64, fd.zrows, fd.uplanes)
+    return FrameDraws(d, v_end - v0, t_end - t0, fd.mvps, fd.mvps64, fd.zrows, fd.uplanes,
+                      fd.uclip)
 
 
 def stream_draws(fd: FrameDraws, max_triangles: int, max_entries: int, pass_draw: PassDraw,

@@ -33,7 +33,7 @@ import numpy as np
 from .clip2d import Polygon2D, as_polygon
 from .layout import SUBPIXEL_BITS, SUBPIXEL_ONE
 
-__all__ = ["WINDOW_MAX_COORD", "window_mask"]
+__all__ = ["WINDOW_MAX_COORD", "WINDOW_PLANE_MARGIN", "window_clip_planes", "window_mask"]
 
 #: Window coordinates must lie within ±2**20 px: the edge arithmetic in 24.8 fixed point then
 #: stays far inside int64 (products below 2**58).
@@ -49,6 +49,21 @@ def _snapped_edges(poly: Polygon2D) -> tuple[np.ndarray, np.ndarray]:
         a.append(q)
         b.append(np.roll(q, -1, axis=0))
     return np.concatenate(a), np.concatenate(b)
+
+
+def window_planes_for(window: Any, camera: Any, width: int, height: int,
+                      planes: np.ndarray | None) -> np.ndarray | None:
+    """The window's bounding planes (`window_clip_planes`) in the slots the user clip
+    planes ``planes`` (checked, or None) leave of USER_PLANES_MAX, or None: both renderers
+    cull clusters and reject triangles wholly outside them, but never clip with them (a
+    clipped piece's new vertices snap, which would move coverage inside the window)."""
+    from .inputs import view_projection
+    from .layout import USER_PLANES_MAX
+
+    n = 0 if planes is None else planes.shape[0]
+    extra = window_clip_planes(window, view_projection(camera, width, height), width,
+                               height, USER_PLANES_MAX - n)
+    return extra if extra.shape[0] else None
 
 
 def window_mask(window: Any, width: int, height: int) -> np.ndarray:
@@ -83,3 +98,62 @@ def window_mask(window: Any, width: int, height: int) -> np.ndarray:
     le = np.cumsum(hist, axis=1)[:, :width]          # crossings with n <= i (at or left of i)
     return ((total - le) & 1).astype(bool)
 
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (Andrew's monotone chain) of (N, 2) float64 points, counter-clockwise in
+    a y-up frame (so, with y down, clockwise on screen), no repeated or collinear points."""
+    p = np.unique(points, axis=0)
+    if p.shape[0] < 3:
+        return p
+
+    def half(pts):
+        out: list[np.ndarray] = []
+        for q in pts:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (q[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (q[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(q)
+        return out
+
+    lower, upper = half(p), half(p[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+#: How far (pixels) the window's clip planes lie outside its convex hull: geometric clipping
+#: only saves work, so it must never remove a pixel centre the mask lets through; a pixel is
+#: far more than the 1/512-px snap of the pieces' new vertices.
+WINDOW_PLANE_MARGIN = 1.0
+
+
+def window_clip_planes(window: Any, view_proj: np.ndarray, width: int, height: int,
+                       free: int) -> np.ndarray:
+    """World-space clip planes (float64 (K, 4), K <= ``free``) bounding what a window can
+    show: the edges of its convex hull moved out by WINDOW_PLANE_MARGIN px (its bounding
+    box's 4 edges if the hull has more than ``free``; none if fewer than 4 are free), as
+    planes through the eye. With them the renderer culls clusters and rejects triangles
+    wholly outside the window before binning (the user clip plane path, reject only), so
+    what the window cannot show is neither binned nor rasterized; the mask decides which
+    pixel centres are drawn, exactly.
+
+    A screen-space half-plane n·(x_w, y_w) + c >= 0 with x_w = (x/w + 1)·W/2 and
+    y_w = (1 − y/w)·H/2 is, times w > 0, the clip-space plane (n_x W/2, −n_y H/2, 0,
+    n_x W/2 + n_y H/2 + c), and in world space that row times view_proj.
+    """
+    if free < 4:
+        return np.zeros((0, 4))
+    ext = as_polygon(window).exterior
+    hull = _hull(ext)
+    if hull.shape[0] > free:
+        lo, hi = ext.min(axis=0), ext.max(axis=0)
+        hull = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+    a, b = hull, np.roll(hull, -1, axis=0)
+    d = b - a
+    # counter-clockwise in the (x, y) numbers: the inside is to the left, normal (−dy, dx)
+    n = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    c = -np.einsum("ij,ij->i", n, a) + WINDOW_PLANE_MARGIN
+    hw, hh = 0.5 * width, 0.5 * height
+    clip = np.stack([n[:, 0] * hw, -n[:, 1] * hh, np.zeros(len(n)),
+                     n[:, 0] * hw + n[:, 1] * hh + c], axis=1)
+    return clip @ np.asarray(view_proj, np.float64)

@@ -335,7 +335,7 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const int *restrict face_ids, __global const float *restrict pos,             \
     __global const int *restrict vert_ids, __global const double4 *restrict clip64,        \
     __global const double *restrict rnum, __global const double *restrict uplanes,        \
-    const int n_user, __global const uchar *restrict ucode
+    const int n_user, const uint uclip, __global const uchar *restrict ucode
 
 /* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
  * ud[3k + j] (vertex j, plane k): user_dist, as the vertex stage's ucode. */
@@ -373,7 +373,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         return;
     uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
     uint o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
-    /* user clip planes: all three vertices outside one → rejected; any outside → clipped */
+    /* user clip planes: all three vertices outside one → rejected; any outside one of the
+     * clipping planes (uclip bits; the others, a polygon window's, only reject) → clipped */
     uint u_or = 0, u_and = 0;
     if (n_user > 0) {
         uint u0 = ucode[i0], u1 = ucode[i1], u2 = ucode[i2];
@@ -389,7 +390,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         float4 c0 = clip[i0], c1 = clip[i1], c2 = clip[i2];
         st = facing(c0, c1, c2, draw_cull(cull, dflags));
         if (st != ST_RASTER) {
-        } else if ((o_or & OC_NEEDS_CLIP) || u_or) {
+        } else if ((o_or & OC_NEEDS_CLIP) || (u_or & uclip)) {
             /* its pieces are counted by setup_count_clipped: the clipper's polygon arrays
              * (2 × POLY_MAX vertices of 72+ bytes) inlined here made every work-item of
              * this kernel pay for them (dragon 1080p setup 1.4x with POLY_MAX 16 → 24) */
@@ -435,7 +436,7 @@ __kernel void setup_count_clipped(__global const float4 *restrict clip,
                      &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED)
         return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
-    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) : 0u;
+    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;
     Draw dr = draws[get_group_id(0)];
     double ud[3 * USER_PLANES_MAX];
     user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
@@ -461,7 +462,7 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
                      &i0, &i1, &i2, &id, &dflags) || clip_count[t] == 0)
         return;
     uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
-    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) : 0u;
+    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;
     Draw dr = draws[get_group_id(0)];
     double ud[3 * USER_PLANES_MAX];
     user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);

@@ -125,3 +125,24 @@ def test_a_window_off_screen_draws_nothing_and_bad_windows_are_refused():
                                                                           (0, 5)]):
         with pytest.raises(ValueError):
             _spot_frame(r, window=bad)
+
+
+def test_the_window_culls_and_rejects_what_it_cannot_show_but_clips_nothing():
+    """A small window over part of a dragon: its bounding planes (through the eye, one pixel
+    outside its hull) cull clusters and reject triangles wholly outside it before binning,
+    but never clip (clipped counts equal the unwindowed frame's), and the image is still
+    the unwindowed one restricted to the window."""
+    mesh = load_shared_mesh("stanford_dragon_res2.ply")
+    lo, hi = mesh.bounds()
+    cam = Camera.framing(lo, hi, direction=(0.3, 0.2, 1.0), aspect=W / H)
+    win = [(30.25, 20.5), (52.0, 18.0), (60.5, 40.0), (34.0, 44.75)]
+    r = get_renderer(W, H)
+    full, f = r.render(mesh, cam), r.render(mesh, cam, window=win)
+    m = window_mask(win, W, H)
+    np.testing.assert_array_equal(f.triangle_id, np.where(m, full.triangle_id, -1))
+    np.testing.assert_array_equal(f.depth, np.where(m, full.depth, np.float32(1.0)))
+    assert f.stats.clusters_drawn < 0.5 * full.stats.clusters_drawn
+    assert f.stats.clipped == full.stats.clipped
+    assert f.stats.fragments_tested < 0.5 * full.stats.fragments_tested
+    b = twin.render(mesh, cam, W, H, window=win)
+    assert_frames_equal(f, b, "dragon window (OpenCL vs twin)")

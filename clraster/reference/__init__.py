@@ -36,7 +36,7 @@ from ..inputs import (
 from ..params import FrameParams, FrameTotals, finish_depth
 from ..streaming import BinBudgetExceeded, stream_draws
 from ..twophase import OcclusionHistory, two_phase
-from ..window import window_mask
+from ..window import window_mask, window_planes_for
 from . import bin as bin_
 from . import pyramid as pyramid_
 from . import raster as raster_
@@ -80,11 +80,14 @@ class Renderer:
         check_flag(occlusion, "occlusion")
         check_flag(reversed_z, "reversed_z")
         planes = check_clip_planes(clip_planes)
-        mask = None if window is None else window_mask(window, self.width, self.height)
+        mask = cull_planes = None
+        if window is not None:   # as Renderer.render
+            mask = window_mask(window, self.width, self.height)
+            cull_planes = window_planes_for(window, camera, self.width, self.height, planes)
         w, h, config = self.width, self.height, self.config
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans, clip_planes=planes)
+                          cache=self._plans, clip_planes=planes, cull_planes=cull_planes)
         t_cull = (time.perf_counter() - t0) * 1e3
         pool, fd = plan.pool, plan.frame
         counts = dict(plan.draw_list.counts)
@@ -159,7 +162,7 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky,
                       setup_.object_clip(pool, fd, params.reversed_z),
                       setup_.draw_mirrored(pool, fd), params.reversed_z,
-                      setup_.user_distances(pool, fd))
+                      setup_.user_distances(pool, fd), fd.uclip)
     t2 = time.perf_counter()
     if max_entries is not None and st.clip_pieces.size > max_entries:
         raise BinBudgetExceeded(st.clip_pieces.size, max_entries)

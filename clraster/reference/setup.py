@@ -342,7 +342,8 @@ def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
 def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.ndarray,
           ids: np.ndarray, width: int, height: int, cull: str, kx: F32, ky: F32,
           clip64: np.ndarray | None = None, mirrored: np.ndarray | None = None,
-          reversed_z: bool = False, udist: np.ndarray | None = None) -> SetupResult:
+          reversed_z: bool = False, udist: np.ndarray | None = None,
+          uclip: int = 0xFF) -> SetupResult:
     """Triangle setup over the vertex stage's outputs (clip float32 (N, 4), outcode uint16
     (N,), win WINVERT_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
     int (M,). clip64: float64 (N, 5) the clipper's and value planes' inputs
@@ -351,7 +352,8 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     convention (`clraster.params.FrameParams.reversed_z`; clip64 must then hold the
     reversed numerators). udist: float64 (N, U) each vertex's distances to the U user clip
     planes (`user_distances`; None: none): a triangle with all three vertices outside one
-    is rejected (ST_TRIVIAL_REJECT), one with any outside is clipped."""
+    is rejected (ST_TRIVIAL_REJECT), one with any outside a clipping one (bit set in
+    ``uclip``, `FrameDraws.uclip`) is clipped."""
     zs, zo = (-0.5, 0.0) if reversed_z else (0.5, 0.5)   # DEPTH_MODE in setup.cl
     cull_i = CULL_MODES[cull]
     faces = tri_verts
@@ -376,6 +378,7 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     status[rest] = facing(clip[faces[rest]], cull_i,
                           None if mirrored is None else mirrored[rest])
     live = status == ST_RASTER
+    u_or = u_or & uclip   # planes that only reject (a window's) never clip
     needs = live & (((o_or & OC_NEEDS_CLIP) != 0) | (u_or != 0))
     wzero = live & ~needs & ((o_or & OC_W_NONPOS) != 0)
     plain = live & ~needs & ~wzero

@@ -18,7 +18,8 @@ class GeometryBuffers:
     positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
     draws: DRAW_DTYPE (D,), mvps: float32 (I, 16), mvps64: float64 (I, 16) and zrows:
     float64 (I, 4), uplanes: float64 (I, K, 4) (drawlist.FrameDraws), uploaded for every
-    pass. n_user: K, the user clip planes of the draws uploaded last.
+    pass. n_user: K, the user clip planes of the draws uploaded last; uclip: the bits of
+    those that clip (`FrameDraws.uclip`).
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
     uploaded last (drawlist.FrameDraws).
     """
@@ -35,6 +36,7 @@ class GeometryBuffers:
     uplanes: GrowBuffer
     n_draws: int = 0
     n_user: int = 0
+    uclip: int = 0
     n_verts: int = 0
     n_tris: int = 0
 
@@ -67,5 +69,5 @@ class GeometryStage:
             if arr.nbytes:
                 cl.enqueue_copy(queue, buf, arr, is_blocking=True)
         b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
-        b.n_user = fd.n_user
+        b.n_user, b.uclip = fd.n_user, fd.uclip
         return b

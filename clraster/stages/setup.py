@@ -76,7 +76,8 @@ class SetupStage:
         # the vertex stage's double positions (value planes and the clipper's inputs)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
                      geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, verts.clip64.buf,
-                     verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), verts.ucode.buf)
+                     verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
+                     verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
