@@ -451,7 +451,7 @@ def grid(draw, holes=True):
 
 
 ANY_POLY = st.one_of(star(), star(holed=True), convex(), grid())
-PROPS = settings(max_examples=100, deadline=None,
+PROPS = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                  suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
                                         # no_dropped_chains collects over all examples
                                         HealthCheck.function_scoped_fixture])
@@ -467,7 +467,17 @@ def _check_against_shapely(a, b, out):
         assert o.is_valid, shapely.validation.explain_validity(o)
     got = unary_union(ours) if ours else sg.Polygon()
     scale = min(sa.area, sb.area)
-    assert got.symmetric_difference(expect).area <= 1e-9 * scale
+    # GEOS's floating overlay can misjudge nearly identical rings (two copies of a triangle
+    # whose vertices differ by 1e-16 gave a symmetric difference of twice its area, found
+    # by Hypothesis); a snap-rounding overlay on a 1e-12 grid is robust and its own error
+    # (~1e-12 × perimeter) is far below the bar
+    grid = 1e-12 * max(1.0, float(np.abs(np.concatenate([
+        np.asarray(sa.exterior.coords), np.asarray(sb.exterior.coords)])).max()))
+    # (only the polygonal part of shapely's result: touching inputs add lines and points)
+    parts = [g for g in getattr(expect, "geoms", [expect])
+             if g.geom_type in ("Polygon", "MultiPolygon") and not g.is_empty]
+    expect_area = unary_union(parts) if parts else sg.Polygon()
+    assert shapely.symmetric_difference(got, expect_area, grid_size=grid).area <= 1e-9 * scale
     # pieces are interior-disjoint: their areas add up to the union's
     assert abs(sum(o.area for o in ours) - got.area) <= 1e-9 * scale
 
