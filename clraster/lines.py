@@ -128,6 +128,15 @@ def clip_to_planes(seg: np.ndarray, planes: np.ndarray | None
     return np.ascontiguousarray(out), keep, status
 
 
+def undo_plane_compaction(line_id: np.ndarray, status: np.ndarray, keep: np.ndarray,
+                          pre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Line ids and statuses of the segments `clip_to_planes` drew (``keep``) back in terms
+    of the caller's segments: ids int32 (H, W) mapped to input indices, statuses merged
+    (`merge_plane_status`)."""
+    line_id = np.where(line_id >= 0, keep[np.maximum(line_id, 0)], -1).astype(np.int32)
+    return line_id, merge_plane_status(pre, keep, status)
+
+
 def merge_plane_status(pre: np.ndarray, keep: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """Per-segment status (uint8 (N,)) from `clip_to_planes`' ``pre`` and the view-volume
     status ``kernel`` of the drawn segments ``keep``: untouched segments take the kernel's;
@@ -332,8 +341,7 @@ class LineRenderer:
         line_id, zbuf, status, frags, passed = self.stage.run(self.queue, drawn, m, w, h,
                                                               dbuf, bias)
         if planes is not None:
-            line_id = np.where(line_id >= 0, keep[np.maximum(line_id, 0)], -1).astype(np.int32)
-            status = merge_plane_status(pre, keep, status)
+            line_id, status = undo_plane_compaction(line_id, status, keep, pre)
         return LineFrame(line_id, zbuf, stats_from_status(status, frags, passed))
 
 

@@ -47,12 +47,6 @@ DEPTH_BOUND = 2e-7
 BARY_P999 = 1e-5
 
 
-#: the float64 ray–plane oracle: (mask, depth, barycentrics, area px², nearest vertex
-#: depth) at the covered pixel centres (clraster/bench/accuracy.py prints the same
-#: comparisons as a table)
-oracle = ray_oracle
-
-
 class Measured:
     """One render compared with the oracle: frame, mask, oracle depth dz, |depth error|
     derr, signed error dsigned (clraster − oracle), max |barycentric error| berr per pixel,
@@ -63,7 +57,7 @@ class Measured:
         f = get_renderer(W, H).render(mesh, cam, cull=cull)
         vp = np.asarray(cam.view_projection(W, H), np.float64)
         self.frame = f
-        self.mask, self.dz, b, self.area, self.zmin = oracle(mesh, vp, f.triangle_id)
+        self.mask, self.dz, b, self.area, self.zmin = ray_oracle(mesh, vp, f.triangle_id)
         self.dsigned = f.depth[self.mask].astype(np.float64) - self.dz
         self.derr = np.abs(self.dsigned)
         self.berr = np.abs(f.barycentrics[self.mask].astype(np.float64) - b).max(axis=1)

@@ -40,8 +40,8 @@ from ..lines import (
     check_segments,
     check_view_proj,
     clip_to_planes,
-    merge_plane_status,
     stats_from_status,
+    undo_plane_compaction,
 )
 from .vertex import viewport
 
@@ -270,6 +270,5 @@ def render_lines(segments: npt.ArrayLike, view_proj: Any, width: int, height: in
     line_id, zbuf, frags, passed = raster(rec, width, height, dbuf, bias)
     status = rec["status"]
     if planes is not None:
-        line_id = np.where(line_id >= 0, keep[np.maximum(line_id, 0)], -1).astype(np.int32)
-        status = merge_plane_status(pre, keep, status)
+        line_id, status = undo_plane_compaction(line_id, status, keep, pre)
     return LineFrame(line_id, zbuf, stats_from_status(status, frags, passed))
