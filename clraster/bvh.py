@@ -1,4 +1,5 @@
-"""A bounding volume hierarchy over axis-aligned boxes, culled against frustum planes.
+"""A bounding volume hierarchy over axis-aligned boxes, culled against planes (the frustum's
+and user clip planes).
 
 :class:`BVH` is a binary tree stored in flat arrays and built level by level with NumPy:
 every node splits its items at the median of their box centroids along the axis where the
@@ -7,11 +8,16 @@ O(K log K): the items are sorted once per axis, and each level partitions those 
 stably in O(K).
 
 Culling is a level-synchronous traversal with plane masks: every (query, node) pair of the
-frontier is classified against the planes still set in its 6-bit mask (bit k = "plane k is
+frontier is classified against the planes still set in its P-bit mask (bit k = "plane k is
 still crossed higher up: test it here"); a node inside plane k clears bit k for its whole
 subtree, a node outside any plane is dropped with its subtree, a node inside every plane
 makes all its items INSIDE without further tests, and a leaf that is still intersecting
-tests its items one by one.
+tests its items one by one. P is the number of plane rows, at most `MAX_PLANES` = 14: the 6
+frustum planes (masks 0..63, as `ALL_PLANES`) and up to 8 user clip planes appended after
+them (bits 6..13; :mod:`clraster.cull` passes them so that a node wholly on a user plane's
+removed side is culled in the same traversal). The traversal returns uint16 masks; inside,
+and from `check_mask` and the classifiers, a mask has the narrowest dtype for P planes
+(uint8 up to 8: the frustum's 6 cost what they always did).
 
 Plane classification (also used by :mod:`clraster.frustum` and :mod:`clraster.cull`): a
 plane is a row (a, b, c, d) whose value ``a·x + b·y + c·z + d`` is >= 0 inside. With a
@@ -23,13 +29,17 @@ coordinate magnitudes <= m (per axis) is
 * inside plane k iff ``min over the volume of plane_k >= μ_in · (s_k[:3]·m + s_k[3])``,
 * outside plane k iff ``max over the volume of plane_k < −μ_out · (s_k[:3]·m + s_k[3])``,
 
-so both answers hold with room to spare for float32 rounding in clip space. Boxes use the
+so both answers hold with room to spare for float32 rounding in clip space. μ_in and μ_out
+are one float for every plane, or one per plane (float64 (P,)): user clip planes are
+evaluated in float64 by the vertex stage and take a much smaller margin than the frustum's
+(`clraster.cull.CLIP_PLANE_MARGIN`), with scale rows ``|plane|``. Boxes use the
 n-vertex / p-vertex (the corner that minimizes / maximizes the plane), spheres centre ± r·|n|.
 NaN bounds compare false both ways: they are never culled and never INSIDE.
 
 Public API beyond the tree, for the frustum and draw-list code: the classification
 primitives (`box_extremes`, `sphere_extremes`, `classify_extremes`, `dense_rows`,
-`dense_row_states`, `box_magnitudes`), the argument checks they share (`check_planes`,
+`dense_row_states`, `box_magnitudes`, and `plane_table` / `box_extremes_table` for one
+plane set per box), the argument checks they share (`check_planes`,
 `check_mask`; boxes: `clraster.inputs.check_boxes`) and two index helpers
 (`concat_ranges`, `argsort_distinct`).
 """
@@ -46,10 +56,11 @@ import numpy.typing as npt
 from .inputs import check_boxes
 
 __all__ = [
-    "ALL_PLANES", "BVH", "DEFAULT_MARGIN", "INSIDE", "INTERSECTING", "OUTSIDE", "Visibility",
-    "argsort_distinct", "box_extremes", "box_magnitudes", "check_mask",
+    "ALL_PLANES", "BVH", "DEFAULT_MARGIN", "INSIDE", "INTERSECTING", "MAX_PLANES", "OUTSIDE",
+    "Visibility",
+    "argsort_distinct", "box_extremes", "box_extremes_table", "box_magnitudes", "check_mask",
     "check_planes", "classify_extremes", "concat_ranges", "dense_row_states", "dense_rows",
-    "sphere_extremes",
+    "plane_table", "sphere_extremes",
 ]
 
 
@@ -67,57 +78,106 @@ INSIDE, INTERSECTING, OUTSIDE = 0, 1, 2
 #: :mod:`clraster.frustum`): 1e-5 of the float32 term magnitude, about 170× float32's unit
 #: roundoff and >10× the error of evaluating a plane through an object and a view matrix.
 DEFAULT_MARGIN = 1e-5
-#: Mask with all 6 plane bits set (test every plane).
+#: Mask with all 6 frustum plane bits set (test every frustum plane).
 ALL_PLANES = np.uint8(63)
-_BITS = (1 << np.arange(6)).astype(np.uint8)
-#: _MASK_PLANES[m, k]: bit k of mask m is set.
-_MASK_PLANES = (np.arange(64, dtype=np.uint8)[:, None] & _BITS) != 0
+#: Most plane rows one classification or traversal takes: the 6 frustum planes and up to 8
+#: user clip planes (`clraster.layout.USER_PLANES_MAX`); masks are then uint16.
+MAX_PLANES = 14
+
+
+def _mask_dtype(k: int) -> type[np.unsignedinteger]:
+    """The narrowest mask dtype for k planes: uint8 up to 8 (the frustum's 6), else uint16."""
+    return np.uint8 if k <= 8 else np.uint16
+
+
+def _mask_table(k: int) -> np.ndarray:
+    """bool (k, 2**k), read-only: [j, m] = bit j of mask m is set. Cached per k: a gather
+    from it is the fastest way to expand masks into per-plane flags (2**14 columns at most,
+    229 KB)."""
+    t = _MASK_TABLES.get(k)
+    if t is None:
+        t = (np.arange(1 << k, dtype=np.int64)[None, :] >> np.arange(k)[:, None]) & 1 != 0
+        t.flags.writeable = False
+        _MASK_TABLES[k] = t
+    return t
+
+
+def _weights(k: int) -> np.ndarray:
+    """Plane bit weights for k planes, (k,) in `_mask_dtype(k)`."""
+    w = _WEIGHTS.get(k)
+    if w is None:
+        w = (1 << np.arange(k)).astype(_mask_dtype(k))
+        w.flags.writeable = False
+        _WEIGHTS[k] = w
+    return w
+
+
+_MASK_TABLES: dict[int, np.ndarray] = {}
+_WEIGHTS: dict[int, np.ndarray] = {}
+_mask_table(6)  # the frustum's: built at import, as the 6-plane table always was
+_weights(6)
+
+
+def _per_plane(margin: float | npt.ArrayLike, k: int, ndim: int) -> float | np.ndarray:
+    """A margin as a float, or a per-plane float64 (k,) array shaped (k, 1, ...) to
+    broadcast against plane-major (k, *S) arrays of `ndim` dimensions."""
+    if isinstance(margin, (float, int)):
+        return margin
+    m = np.asarray(margin, np.float64)
+    if m.ndim == 0:
+        return float(m)
+    if m.shape != (k,):
+        raise ValueError(f"per-plane margins must have shape ({k},), got {m.shape}")
+    return m.reshape((k,) + (1,) * (ndim - 1))
 
 
 # -- plane classification primitives ----------------------------------------------------
 #
-# Plane-major layout: the per-plane values of F volumes are (6, F) arrays, so the reductions
+# Plane-major layout: the per-plane values of F volumes are (P, F) arrays, so the reductions
 # over the planes run along the first axis (row operations, fast in NumPy; a reduction
-# along a length-6 last axis is not).
-
-#: Plane bit weights, (6, 1) for broadcasting against (6, F).
-_WEIGHTS = (1 << np.arange(6)).astype(np.uint8)
+# along a length-P last axis is not).
 
 
 def classify_extremes(dmin: np.ndarray, dmax: np.ndarray, mterm: np.ndarray,
-                      mask: np.ndarray, inside_margin: float,
-                      outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
+                      mask: np.ndarray, inside_margin: float | np.ndarray,
+                      outside_margin: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """States and reduced masks from the plane values' extremes over each volume.
 
-    dmin, dmax, mterm: float64 (6, *S) plane-major (min and max of each plane over each
-    volume, and its margin term: `box_extremes` / `sphere_extremes`); mask: uint8 plane
-    masks (bit k = test plane k) broadcastable to S. Returns (state, mask), uint8, of shape
-    S (broadcast with the mask's): state is a `Visibility` value (OUTSIDE if some tested
-    plane has ``dmax < −outside_margin · mterm``), and the mask loses the bits of the planes
-    with ``dmin >= inside_margin · mterm``; INSIDE iff no bit remains. NaN compares false
-    both ways, so NaN volumes stay INTERSECTING.
+    dmin, dmax, mterm: float64 (P, *S) plane-major, P <= `MAX_PLANES` (min and max of each
+    plane over each volume, and its margin term: `box_extremes` / `sphere_extremes`); mask:
+    unsigned plane masks < 2**P (bit k = test plane k; uint8 for the 6 frustum planes,
+    uint16 with user planes) broadcastable to S; inside_margin, outside_margin: floats, or
+    float64 (P,) one per plane. Returns (state uint8, mask) of shape S (broadcast with the
+    mask's; the mask keeps the input's dtype, widened to uint16 if P > 8): state is a
+    `Visibility` value (OUTSIDE if some tested plane has ``dmax < −outside_margin ·
+    mterm``), and the mask loses the bits of the planes with ``dmin >= inside_margin ·
+    mterm``; INSIDE iff no bit remains. NaN compares false both ways, so NaN volumes stay
+    INTERSECTING.
     """
-    active = np.take(_MASK_PLANES.T, mask, axis=1)  # (6, *mask.shape)
-    out = dmax < mterm * -outside_margin
+    k = dmin.shape[0]
+    active = np.take(_mask_table(k), mask, axis=1)  # (P, *mask.shape)
+    out = dmax < mterm * -_per_plane(outside_margin, k, dmax.ndim)
     out &= active
     outside = out.any(axis=0)
-    inside = dmin >= mterm * inside_margin
+    inside = dmin >= mterm * _per_plane(inside_margin, k, dmin.ndim)
     inside &= active
-    weights = _WEIGHTS.reshape((6,) + (1,) * (inside.ndim - 1))
-    inside_bits = (inside.view(np.uint8) * weights).sum(axis=0, dtype=np.uint8)
-    new_mask = mask & ~inside_bits
+    weights = _weights(k).reshape((k,) + (1,) * (inside.ndim - 1))
+    inside_bits = (inside.view(np.uint8) * weights).sum(axis=0, dtype=weights.dtype)
+    # inside ⊆ active, so XOR clears exactly those bits; unlike `mask & ~bits` it cannot
+    # clear high bits of a uint16 mask through a uint8 complement
+    new_mask = mask ^ inside_bits
     state = (new_mask != 0).view(np.uint8)  # INTERSECTING (1) or INSIDE (0)
     state[outside] = OUTSIDE
     return state, new_mask
 
 
-def _plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
-    """(66, Q) per-query rows for `_box_extremes_table`: n⁺ (3×6, axis-major), n⁻ (3×6),
-    d (6), scale xyz (3×6), scale w (6)."""
-    n = np.moveaxis(planes[..., :3], -1, 0)  # (3, Q, 6) → rows j, columns (q, k)
+def plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
+    """(11P, Q) per-query rows for `box_extremes_table`, for planes and scales (Q, P, 4):
+    n⁺ (3×P, axis-major), n⁻ (3×P), d (P), scale xyz (3×P), scale w (P)."""
+    n = np.moveaxis(planes[..., :3], -1, 0)  # (3, Q, P) → rows j, columns (q, k)
     q = planes.shape[0]
 
-    def rows(a: np.ndarray) -> np.ndarray:  # (..., Q, 6) → (... · 6, Q)
+    def rows(a: np.ndarray) -> np.ndarray:  # (..., Q, P) → (... · P, Q)
         return np.moveaxis(a, -2, -1).reshape(-1, q)
 
     return np.concatenate([rows(np.maximum(n, 0.0)), rows(np.minimum(n, 0.0)),
@@ -127,9 +187,9 @@ def _plane_table(planes: np.ndarray, scales: np.ndarray) -> np.ndarray:
 
 def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                  mag: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Min and max of each plane over each box, and the margin term: float64 (6, F) each.
+    """Min and max of each plane over each box, and the margin term: float64 (P, F) each.
 
-    planes, scales: float64 (6, 4) shared by all boxes. lo, hi, mag: float64 (3, F)
+    planes, scales: float64 (P, 4) shared by all boxes. lo, hi, mag: float64 (3, F)
     coordinate-major (box corners and per-axis margin magnitudes). Feed the result to
     `classify_extremes`.
     """
@@ -143,25 +203,27 @@ def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.
     return dmin, dmax, mterm
 
 
-def _box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`box_extremes` with one plane set per box: table (66, F) from `_plane_table`
+def box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`box_extremes` with one plane set per box: table (11K, F) from `plane_table`
     (gathered per box), lo, hi, mag (3, F)."""
     f = lo.shape[1]
-    npos = table[0:18].reshape(3, 6, f)
-    nneg = table[18:36].reshape(3, 6, f)
-    s3 = table[42:60].reshape(3, 6, f)
+    k = table.shape[0] // 11
+    npos = table[0:3 * k].reshape(3, k, f)
+    nneg = table[3 * k:6 * k].reshape(3, k, f)
+    d = table[6 * k:7 * k]
+    s3 = table[7 * k:10 * k].reshape(3, k, f)
     lo3, hi3, mag3 = lo[:, None, :], hi[:, None, :], mag[:, None, :]
-    dmin = table[36:42] + (npos * lo3).sum(axis=0) + (nneg * hi3).sum(axis=0)
-    dmax = table[36:42] + (npos * hi3).sum(axis=0) + (nneg * lo3).sum(axis=0)
-    mterm = table[60:66] + (s3 * mag3).sum(axis=0)
+    dmin = d + (npos * lo3).sum(axis=0) + (nneg * hi3).sum(axis=0)
+    dmax = d + (npos * hi3).sum(axis=0) + (nneg * lo3).sum(axis=0)
+    mterm = table[10 * k:11 * k] + (s3 * mag3).sum(axis=0)
     return dmin, dmax, mterm
 
 
 def sphere_extremes(planes: np.ndarray, scales: np.ndarray, centers: np.ndarray,
                     radii: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Like `box_extremes` for spheres (centre ± r·|n|): planes, scales float64 (6, 4),
-    centers float64 (K, 3), radii float64 (K,); float64 (6, K) results. The margin
+    """Like `box_extremes` for spheres (centre ± r·|n|): planes, scales float64 (P, 4),
+    centers float64 (K, 3), radii float64 (K,); float64 (P, K) results. The margin
     magnitude of a sphere is ``|centre| + r`` per axis."""
     n = planes[:, :3]
     dist = n @ centers.T + planes[:, 3:4]
@@ -183,21 +245,23 @@ def dense_rows(lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
 
 def dense_row_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
                      rows: tuple[np.ndarray, np.ndarray, np.ndarray], *,
-                     inside_margin: float, outside_margin: float):
-    """Classify every box against every plane set: states and masks, uint8 (Q, K).
+                     inside_margin: float | np.ndarray, outside_margin: float | np.ndarray):
+    """Classify every box against every plane set: states uint8 and masks (the masks'
+    dtype, see `classify_extremes`), (Q, N) each.
 
-    planes, scales: (Q, 6, 4); masks: (Q,) uint8; rows: the boxes' `dense_rows`. Three
-    matrix products of (6Q, 7) by (7, K) (plane value at the n-vertex, at the p-vertex,
-    margin term), so it pays for small K and many plane sets, where a per-(query, node)
+    planes, scales: (Q, P, 4), P <= `MAX_PLANES` planes per set; masks: (Q,) unsigned,
+    < 2**P; rows: the N boxes' `dense_rows`; margins: floats or float64 (P,). Three
+    matrix products of (PQ, 7) by (7, N) (plane value at the n-vertex, at the p-vertex,
+    margin term), so it pays for small N and many plane sets, where a per-(query, node)
     traversal would gather planes for every pair.
     """
     lohi, hilo, mag1 = rows
-    n_q, n_k = planes.shape[0], lohi.shape[1]
+    n_q, n_p, n_k = planes.shape[0], planes.shape[1], lohi.shape[1]
     n = planes[..., :3]
     w = np.concatenate([np.maximum(n, 0.0), np.minimum(n, 0.0), planes[..., 3:]], axis=-1)
-    w = np.ascontiguousarray(np.swapaxes(w, 0, 1)).reshape(6 * n_q, 7)  # rows (k, q)
-    sc = np.ascontiguousarray(np.swapaxes(scales, 0, 1)).reshape(6 * n_q, 4)
-    shape = (6, n_q, n_k)
+    w = np.ascontiguousarray(np.swapaxes(w, 0, 1)).reshape(n_p * n_q, 7)  # rows (k, q)
+    sc = np.ascontiguousarray(np.swapaxes(scales, 0, 1)).reshape(n_p * n_q, 4)
+    shape = (n_p, n_q, n_k)
     dmin = (w @ lohi).reshape(shape)
     dmax = (w @ hilo).reshape(shape)
     mterm = (sc @ mag1).reshape(shape)
@@ -205,14 +269,24 @@ def dense_row_states(planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
 
 
 def check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None,
-                 batch: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Validated (planes, scales), float64 (6, 4), or (Q, 6, 4) when `batch`; scales
-    default to ``abs(planes)``. Raises ValueError on a wrong shape."""
-    shape = "(Q, 6, 4)" if batch else "(6, 4)"
+                 batch: bool, max_planes: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (planes, scales), float64 (P, 4), or (Q, P, 4) when `batch`; scales
+    default to ``abs(planes)``. P is 6 (the frustum planes) unless `max_planes` (<=
+    `MAX_PLANES`) allows 1..max_planes rows (the frustum's 6 and user clip planes after
+    them). Raises ValueError on a wrong shape."""
     p = np.asarray(planes, dtype=np.float64)
-    if p.shape[-2:] != (6, 4) or p.ndim != (3 if batch else 2):
-        raise ValueError(f"planes must have shape {shape} (left, right, bottom, top, near, "
-                         f"far rows a, b, c, d), got shape {p.shape}")
+    ndim = 3 if batch else 2
+    if max_planes == 6:
+        ok = p.ndim == ndim and p.shape[-2:] == (6, 4)
+        shape = "(Q, 6, 4)" if batch else "(6, 4)"
+        rows = "left, right, bottom, top, near, far rows a, b, c, d"
+    else:
+        ok = p.ndim == ndim and p.shape[-1] == 4 and 1 <= p.shape[-2] <= max_planes
+        shape = (f"(Q, P, 4), 1 <= P <= {max_planes}" if batch
+                 else f"(P, 4), 1 <= P <= {max_planes}")
+        rows = "rows a, b, c, d: the 6 frustum planes, then any user clip planes"
+    if not ok:
+        raise ValueError(f"planes must have shape {shape} ({rows}), got shape {p.shape}")
     if scales is None:
         s = np.abs(p)
     else:
@@ -222,18 +296,22 @@ def check_planes(planes: npt.ArrayLike, scales: npt.ArrayLike | None,
     return p, s
 
 
-def check_mask(mask: npt.ArrayLike | None, n: int) -> np.ndarray:
-    """Plane masks as uint8 (n,): None → all 63; a scalar is broadcast. Raises ValueError
-    unless it is an integer scalar or (n,) array with values in 0..63."""
+def check_mask(mask: npt.ArrayLike | None, n: int, n_planes: int = 6) -> np.ndarray:
+    """Plane masks for `n_planes` planes (P, default the frustum's 6) as (n,) uint8 when
+    P <= 8, else uint16: None → all P bits (63 for 6); a scalar is broadcast. Raises
+    ValueError unless it is an integer scalar or (n,) array with values in 0..2**P − 1."""
+    top = (1 << n_planes) - 1
+    dt = _mask_dtype(n_planes)
     if mask is None:
-        return np.full(n, ALL_PLANES, np.uint8)
+        return np.full(n, top, dt)
     m = np.asarray(mask)
     if m.ndim == 0:
         m = np.full(n, m)
-    if m.shape != (n,) or m.dtype.kind not in "iu" or (m.size and (m.min() < 0 or m.max() > 63)):
-        raise ValueError(f"mask must be a scalar or ({n},) array of 6-bit plane masks in "
-                         f"0..63, got {m.dtype} {m.shape}")
-    return m.astype(np.uint8)
+    if m.shape != (n,) or m.dtype.kind not in "iu" or (m.size and (m.min() < 0
+                                                                    or m.max() > top)):
+        raise ValueError(f"mask must be a scalar or ({n},) array of {n_planes}-bit plane "
+                         f"masks in 0..{top}, got {m.dtype} {m.shape}")
+    return m.astype(dt)
 
 
 
@@ -433,54 +511,68 @@ class BVH:
     # -- culling --------------------------------------------------------------------------
 
     def cull(self, planes: npt.ArrayLike, scales: npt.ArrayLike | None = None, *,
-             mask: int = 63, inside_margin: float = DEFAULT_MARGIN,
-             outside_margin: float = DEFAULT_MARGIN, return_mask: bool = False):
+             mask: int | None = None, inside_margin: float | npt.ArrayLike = DEFAULT_MARGIN,
+             outside_margin: float | npt.ArrayLike = DEFAULT_MARGIN, return_mask: bool = False):
         """Items not outside the planes, with their state.
 
         Args:
-            planes: (6, 4) plane rows (>= 0 inside), e.g. `clraster.frustum.frustum_planes`.
-            scales: (6, 4) margin scales (default ``abs(planes)``).
-            mask: planes to test (bit k = plane k), 0..63.
-            inside_margin, outside_margin: relative margins (see the module docstring).
+            planes: (P, 4) plane rows (>= 0 inside), 1 <= P <= `MAX_PLANES`: e.g. the 6 of
+                `clraster.frustum.frustum_planes`, then any user clip planes.
+            scales: (P, 4) margin scales (default ``abs(planes)``).
+            mask: planes to test (bit k = plane k), 0..2**P − 1 (default all P; 63 for the
+                6 frustum planes).
+            inside_margin, outside_margin: relative margins (see the module docstring): a
+                float, or float64 (P,) one per plane.
             return_mask: also return each item's remaining plane mask (bits of the planes
                 it may still cross; 0 for INSIDE items).
 
         Returns:
             (items int32 (D,), state uint8 (D,)) sorted by item index — OUTSIDE items are
-            left out, the others are `Visibility.INSIDE` or `INTERSECTING` — and the masks
-            uint8 (D,) if `return_mask`. Equal to classifying every item box on its own
-            with :func:`clraster.frustum.classify_aabbs` (same margins), minus the OUTSIDE ones.
+            left out, the others are `Visibility.INSIDE` (every bit cleared) or
+            `INTERSECTING` — and the masks uint16 (D,) if `return_mask`. Equal to
+            classifying every item box on its own against the P planes (for the 6 frustum
+            planes :func:`clraster.frustum.classify_aabbs`; same margins), minus the
+            OUTSIDE ones.
         """
-        p, s = check_planes(planes, scales, batch=False)
-        m = check_mask(mask, 1)
+        p, s = check_planes(planes, scales, batch=False, max_planes=MAX_PLANES)
+        m = check_mask(mask, 1, p.shape[0])
         _, items, state, masks = self.cull_batch(p[None], s[None], m, inside_margin=inside_margin,
                                                  outside_margin=outside_margin)
         return (items, state, masks) if return_mask else (items, state)
 
     def cull_batch(self, planes: np.ndarray, scales: np.ndarray | None = None,
                    masks: npt.ArrayLike | None = None, *,
-                   inside_margin: float = DEFAULT_MARGIN,
-                   outside_margin: float = DEFAULT_MARGIN):
+                   inside_margin: float | npt.ArrayLike = DEFAULT_MARGIN,
+                   outside_margin: float | npt.ArrayLike = DEFAULT_MARGIN):
         """Cull the tree against Q plane sets at once (e.g. one per instance of a mesh).
 
         Args:
-            planes, scales: (Q, 6, 4) plane rows and margin scales (scales default
-                ``abs(planes)``).
-            masks: (Q,) uint8 starting plane masks (default all 63).
+            planes, scales: (Q, P, 4) plane rows and margin scales, 1 <= P <=
+                `MAX_PLANES` (the 6 frustum planes, then up to 8 user clip planes; scales
+                default ``abs(planes)``).
+            masks: (Q,) starting plane masks, integers in 0..2**P − 1 (default all P bits;
+                63 for the 6 frustum planes). A query's node pairs are tested only against
+                the planes still set in their masks.
+            inside_margin, outside_margin: floats, or float64 (P,) one per plane.
 
         Returns:
-            (query int32, item int32, state uint8, mask uint8), all (D,), sorted by
-            (query, item); OUTSIDE pairs left out.
+            (query int32, item int32, state uint8, mask uint16), all (D,), sorted by
+            (query, item); OUTSIDE pairs left out. A pair is INSIDE iff no bit of its mask
+            remains (so with user planes appended, INSIDE means inside them too).
         """
-        p, s = check_planes(planes, scales, batch=True)
-        n_q = p.shape[0]
-        qmask = check_mask(masks, n_q)
+        p, s = check_planes(planes, scales, batch=True, max_planes=MAX_PLANES)
+        n_q, n_p = p.shape[0], p.shape[1]
+        # the frontier keeps the narrowest mask dtype (uint8 for the frustum's 6 planes:
+        # the common case stays as fast as before); the result is widened to uint16
+        qmask = check_mask(masks, n_q, n_p)
+        mu_in = _per_plane(inside_margin, n_p, 1)
+        mu_out = _per_plane(outside_margin, n_p, 1)
         empty = (np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0, np.uint8),
-                 np.zeros(0, np.uint8))
+                 np.zeros(0, np.uint16))
         if self.n_items == 0 or n_q == 0:
             return empty
         single = n_q == 1
-        table = None if single else _plane_table(p, s)
+        table = None if single else plane_table(p, s)
         out_q, out_item, out_state, out_mask = [], [], [], []
         fq = np.arange(n_q)
         fn = np.zeros(n_q, np.int64)
@@ -491,9 +583,9 @@ class BVH:
             if single:
                 ext = box_extremes(p[0], s[0], lo, hi, mag)
             else:
-                ext = _box_extremes_table(np.take(cast(np.ndarray, table), fq, axis=1), lo, hi,
-                                          mag)
-            state, nmask = classify_extremes(*ext, fm, inside_margin, outside_margin)
+                ext = box_extremes_table(np.take(cast(np.ndarray, table), fq, axis=1), lo, hi,
+                                         mag)
+            state, nmask = classify_extremes(*ext, fm, mu_in, mu_out)
             inside = state == INSIDE
             if inside.any():  # every item of the node is inside: no further tests
                 pos = concat_ranges(self.first[fn[inside]].astype(np.int64),
@@ -502,7 +594,7 @@ class BVH:
                 out_q.append(np.repeat(fq[inside], n_each))
                 out_item.append(np.take(self.order, pos))
                 out_state.append(np.zeros(pos.size, np.uint8))
-                out_mask.append(np.zeros(pos.size, np.uint8))
+                out_mask.append(np.zeros(pos.size, qmask.dtype))
             inter = state == INTERSECTING
             child = self.left[fn]
             leaf = inter & (child < 0)
@@ -517,9 +609,9 @@ class BVH:
                 if single:
                     ext = box_extremes(p[0], s[0], lo_i, hi_i, mag_i)
                 else:
-                    ext = _box_extremes_table(np.take(cast(np.ndarray, table), iq, axis=1), lo_i,
-                                              hi_i, mag_i)
-                ist, imask = classify_extremes(*ext, im, inside_margin, outside_margin)
+                    ext = box_extremes_table(np.take(cast(np.ndarray, table), iq, axis=1),
+                                             lo_i, hi_i, mag_i)
+                ist, imask = classify_extremes(*ext, im, mu_in, mu_out)
                 keep = ist != OUTSIDE
                 out_q.append(iq[keep])
                 out_item.append(items[keep])
@@ -537,7 +629,7 @@ class BVH:
         mk = np.concatenate(out_mask)
         order = argsort_distinct(q * self.n_items + item, n_q * self.n_items)
         return (q[order].astype(np.int32), item[order].astype(np.int32), st[order],
-                mk[order])
+                mk[order].astype(np.uint16))
 
 
 def argsort_distinct(keys: np.ndarray, key_range: int) -> np.ndarray:

@@ -23,6 +23,18 @@ three equivalent-in-spirit, all-conservative paths chosen by mesh size:
 Planes move to object space as rows times the object transform and boxes are never
 transformed (see :mod:`clraster.frustum`), so every path stays exact under any affine
 transform; INSIDE and OUTSIDE use the float32 margins described there.
+
+User clip planes (``clip_planes``: ``render(clip_planes=)`` and a polygon window's
+reject-only planes) are appended to the six frustum planes as rows 6.. of every test
+above (`_ViewPlanes`; plane masks are then up to 14 bits, :mod:`clraster.bvh`): an instance
+or cluster (or a BVH node) wholly on a plane's removed side is culled where the frustum's
+outside ones are, and counted with them as frustum-culled; one wholly on its kept side
+drops the plane's bit, so what lies below is not tested against it again. User planes are
+tested in world space for instances and in each instance's object space (plane · model,
+float64, as the vertex stage evaluates them: common.h user_dist) for clusters, with scale
+rows ``|plane|`` and the small margin `CLIP_PLANE_MARGIN`. They never make a cluster
+INSIDE: `DrawList.inside` speaks of the frustum planes only (the vertex stage tests user
+planes for every draw).
 """
 
 from __future__ import annotations
@@ -30,7 +42,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -41,13 +52,16 @@ from .bvh import (
     DEFAULT_MARGIN,
     INSIDE,
     INTERSECTING,
+    MAX_PLANES,
     OUTSIDE,
     argsort_distinct,
     box_extremes,
+    box_extremes_table,
     box_magnitudes,
     classify_extremes,
     concat_ranges,
     dense_row_states,
+    plane_table,
 )
 from .clusters import ClusteredMesh, clusters_of, cone_kernel, cone_table
 from .config import CULL_MODES
@@ -55,11 +69,19 @@ from .frustum import check_view_proj, eye_and_flip, normalize_planes, raw_planes
 from .mesh import Mesh
 from .scene import Scene
 
-__all__ = ["COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList", "build_draw_list"]
+__all__ = ["CLIP_PLANE_MARGIN", "COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList",
+           "build_draw_list"]
 
 #: Cone-culling margin in radians: a culled cluster's triangles are all seen at least this
 #: far from edge-on (in world space).
 DEFAULT_CONE_MARGIN = 1e-3
+#: Relative margin of the user clip-plane tests (outside and inside): the kernels evaluate a
+#: vertex's distance in double from its float32 position and the float64 object-space plane
+#: (common.h user_dist), off by a few 1e-16 of the terms' magnitude; the box bounds here are
+#: exact up to the same rounding, so 1e-9 of the magnitude keeps the test conservative many
+#: times over. (The frustum planes need float32's DEFAULT_MARGIN: the vertex stage tests
+#: them on float32 clip coordinates.)
+CLIP_PLANE_MARGIN = 1e-9
 
 
 # -- draw lists -------------------------------------------------------------------------
@@ -195,7 +217,9 @@ class _SceneCull:
             else np.zeros((0, 3))
         hi_c = np.concatenate([mc.cm.aabb_max for mc in umesh]).astype(np.float64) if umesh \
             else np.zeros((0, 3))
-        self.g_lo, self.g_hi = lo_c, hi_c   # object-space cluster boxes (user clip planes)
+        # object-space cluster boxes and their magnitudes (flat-path user clip planes)
+        self.g_lo, self.g_hi = lo_c, hi_c
+        self.g_mag = box_magnitudes(lo_c, hi_c)
         for p0 in range(0, pi.size, 1 << 16):  # bounded temporaries
             sl = slice(p0, p0 + (1 << 16))
             g, lin, am = self.flat_g[sl], self.m[pi[sl]], self.abs_m[pi[sl]]
@@ -241,54 +265,74 @@ _DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
 
 
 def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
-                     inside_margin: float, outside_margin: float):
-    """(query, item, state) of the non-OUTSIDE (instance, cluster) pairs, sorted."""
+                     inside_margin: float | np.ndarray, outside_margin: float | np.ndarray):
+    """(query, item, mask) of the non-OUTSIDE (instance, cluster) pairs, sorted; planes,
+    scales (Q, K, 4) object space, masks (Q,) K-bit; mask: the planes each pair may still
+    cross (0 for INSIDE)."""
     if bvh.n_items > DENSE_CLUSTERS and planes.shape[0] * bvh.n_items > DENSE_PAIRS:
-        q, item, st, _ = bvh.cull_batch(planes, scales, masks, inside_margin=inside_margin,
+        q, item, _, mk = bvh.cull_batch(planes, scales, masks, inside_margin=inside_margin,
                                         outside_margin=outside_margin)
-        return q, item, st
-    out_q, out_i, out_s = [], [], []
+        return q, item, mk
+    out_q, out_i, out_m = [], [], []
     step = max(1, _DENSE_CHUNK // max(bvh.n_items, 1))
     for q0 in range(0, planes.shape[0], step):
         sl = slice(q0, q0 + step)
-        st, _ = dense_row_states(planes[sl], scales[sl], masks[sl], bvh.dense_rows,
-                                 inside_margin=inside_margin, outside_margin=outside_margin)
+        st, mk = dense_row_states(planes[sl], scales[sl], masks[sl], bvh.dense_rows,
+                                  inside_margin=inside_margin, outside_margin=outside_margin)
         q, item = np.nonzero(st != OUTSIDE)
         out_q.append(q + q0)
         out_i.append(item)
-        out_s.append(st[q, item])
-    return np.concatenate(out_q), np.concatenate(out_i), np.concatenate(out_s)
+        out_m.append(mk[q, item])
+    return np.concatenate(out_q), np.concatenate(out_i), np.concatenate(out_m)
 
 
 def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarray,
-                  planes: np.ndarray | None, scales: np.ndarray | None,
-                  inside_margin: float, outside_margin: float):
-    """Frustum test of the flat-path pairs: (inst, cluster, inside, triangles, global
-    cluster) of those not culled, in (instance, cluster) order."""
+                  view: _ViewPlanes):
+    """Plane test of the flat-path pairs: (inst, cluster, inside, triangles, global
+    cluster) of those not culled, in (instance, cluster) order. The frustum rows test the
+    pairs' world boxes (`_SceneCull.flat_boxes`) against the world planes; user rows test
+    the object-space cluster boxes against the instance's object-space planes, as the
+    cluster BVH does for the other meshes."""
     ids = prep.flat_ids
     st = inst_state[ids]
-    keep_inst = st != OUTSIDE
-    if planes is None:  # frustum off: every pair, none marked inside
-        pos = concat_ranges(prep.flat_start[keep_inst], prep.flat_count[keep_inst])
-        ins = np.zeros(pos.size, bool)
+    mk = inst_mask[ids]
+    # INSIDE instances, and INTERSECTING ones with nothing to test (frustum off, no user
+    # plane left): every pair, inside iff the instance is
+    test = (st == INTERSECTING) & (mk != 0)
+    free = (st != OUTSIDE) & ~test
+    pos_f = concat_ranges(prep.flat_start[free], prep.flat_count[free])
+    ins_f = np.repeat(st[free] == INSIDE, prep.flat_count[free])
+    pos_t = concat_ranges(prep.flat_start[test], prep.flat_count[test])
+    if pos_t.size:
+        mask = np.repeat(mk[test], prep.flat_count[test])
+        alive = np.empty(pos_t.size, bool)
+        ins_t = np.empty(pos_t.size, bool)
+        for c0 in range(0, pos_t.size, _DENSE_CHUNK):  # bounded temporaries
+            sl = slice(c0, c0 + _DENSE_CHUNK)
+            p = pos_t[sl]
+            box = np.take(prep.flat_boxes, p, axis=1)
+            dmin, dmax, mterm = box_extremes(view.planes[:6], view.scales[:6], box[0:3],
+                                             box[3:6], box[6:9])
+            if view.n_user:  # user rows: object-space boxes, each instance's planes
+                g = prep.flat_g[p]
+                umin, umax, uterm = box_extremes_table(
+                    np.take(view.user_table, prep.flat_inst[p], axis=1), prep.g_lo[g].T,
+                    prep.g_hi[g].T, prep.g_mag[g].T)
+                dmin = np.concatenate([dmin, umin])
+                dmax = np.concatenate([dmax, umax])
+                mterm = np.concatenate([mterm, uterm])
+            cst, cmask = classify_extremes(dmin, dmax, mterm, mask[sl], view.inside_margin,
+                                           view.outside_margin)
+            alive[sl] = cst != OUTSIDE
+            ins_t[sl] = view.inside(cmask)
+        pos_t, ins_t = pos_t[alive], ins_t[alive]
     else:
-        test = st == INTERSECTING
-        pos_in = concat_ranges(prep.flat_start[st == INSIDE], prep.flat_count[st == INSIDE])
-        pos_t = concat_ranges(prep.flat_start[test], prep.flat_count[test])
-        if pos_t.size:
-            box = np.take(prep.flat_boxes, pos_t, axis=1)
-            mask = np.repeat(inst_mask[ids[test]], prep.flat_count[test])
-            ext = box_extremes(planes, cast(np.ndarray, scales), box[0:3], box[3:6], box[6:9])
-            cst, _ = classify_extremes(*ext, mask, inside_margin, outside_margin)
-            alive = cst != OUTSIDE
-            pos_t, cst = pos_t[alive], cst[alive]
-        else:
-            cst = np.zeros(0, np.uint8)
-        pos = np.concatenate([pos_in, pos_t])
-        ins = np.concatenate([np.ones(pos_in.size, bool), cst == INSIDE])
-        if pos_in.size and pos_t.size:  # merge the two sorted runs
-            order = argsort_distinct(pos, prep.flat_inst.size)
-            pos, ins = pos[order], ins[order]
+        ins_t = np.zeros(0, bool)
+    pos = np.concatenate([pos_f, pos_t])
+    ins = np.concatenate([ins_f, ins_t])
+    if pos_f.size and pos_t.size:  # merge the two sorted runs
+        order = argsort_distinct(pos, prep.flat_inst.size)
+        pos, ins = pos[order], ins[order]
     g = prep.flat_g[pos]
     return (prep.flat_inst[pos].astype(np.int64), prep.flat_cl[pos].astype(np.int64), ins,
             prep.g_tri[g], g)
@@ -373,12 +417,11 @@ def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndar
 
 
 def _group_frustum(prep: _SceneCull, mc: _MeshCull, members: np.ndarray,
-                   inst_state: np.ndarray, inst_mask: np.ndarray, raw: np.ndarray,
-                   rmag: np.ndarray, inside_margin: float, outside_margin: float):
-    """Frustum test of the clusters of one mesh's group instances (`members`, int64, some
-    not OUTSIDE), against each instance's world planes (`raw`, `rmag`: `raw_planes`)
-    moved to object space: (inst int64, cluster int64, inside bool), (P,) each, the pairs
-    not culled, grouped by how they were decided (not in draw order)."""
+                   inst_state: np.ndarray, inst_mask: np.ndarray, view: _ViewPlanes):
+    """Plane test of the clusters of one mesh's group instances (`members`, int64, some
+    not OUTSIDE), against each instance's world planes (`view`) moved to object space:
+    (inst int64, cluster int64, inside bool), (P,) each, the pairs not culled, grouped by
+    how they were decided (not in draw order)."""
     st = inst_state[members]
     c_count = mc.cm.n_clusters
     inside_i = members[st == INSIDE]
@@ -397,15 +440,12 @@ def _group_frustum(prep: _SceneCull, mc: _MeshCull, members: np.ndarray,
             pc_list.append(np.tile(np.arange(c_count, dtype=np.int64), untested.size))
             pin_list.append(np.zeros(untested.size * c_count, bool))
         if tested.size:
-            m = prep.m[tested]
-            oraw = np.einsum("kj,qjl->qkl", raw, m)
-            omag = np.einsum("kj,qjl->qkl", rmag, prep.abs_m[tested])
-            oplanes, oscales = normalize_planes(oraw, omag)
-            q, item, cst = _cluster_frustum(mc.bvh, oplanes, oscales, inst_mask[tested],
-                                            inside_margin, outside_margin)
+            oplanes, oscales = view.object_space(prep, tested)
+            q, item, cmask = _cluster_frustum(mc.bvh, oplanes, oscales, inst_mask[tested],
+                                              view.inside_margin, view.outside_margin)
             pi_list.append(tested[q])
             pc_list.append(mc.bvh_ids[item].astype(np.int64))
-            pin_list.append(cst == INSIDE)
+            pin_list.append(view.inside(cmask))
             if mc.unbounded.size:  # clusters with NaN/Inf vertices: never culled
                 pi_list.append(np.repeat(tested, mc.unbounded.size))
                 pc_list.append(np.tile(mc.unbounded.astype(np.int64), tested.size))
@@ -431,24 +471,109 @@ def _check_draw_args(scene: Scene, view_proj: npt.ArrayLike, cull: str, inside_m
     return vp
 
 
-def _classify_instances(prep: _SceneCull, planes: np.ndarray, scales: np.ndarray,
-                        frustum: bool, inside_margin: float,
-                        outside_margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Top level: (state, plane mask), uint8 (I,) each, per instance.
+@dataclass(frozen=True)
+class _ViewPlanes:
+    """The K = 6 + U planes one view's object culling tests: rows 0..5 the frustum's (bits
+    0..5 of the masks), rows 6.. the U user clip planes (bits 6..)."""
+
+    #: float64 (K, 4) world space: the normalized frustum rows, then the user planes as
+    #: given (scaling a plane changes no test: both sides of the margin scale with it).
+    planes: np.ndarray
+    #: float64 (K, 4) margin scales: `normalize_planes`' (float32 terms) for the frustum
+    #: rows, ``|plane|`` (the terms of a float64 evaluation) for the user rows.
+    scales: np.ndarray
+    #: float64 (6, 4) each: the frustum rows and magnitude rows before normalizing
+    #: (`raw_planes`), moved to object space as they are (``@ M``, ``@ |M|``).
+    raw: np.ndarray
+    rmag: np.ndarray
+    #: float64 (I, U, 4): the user planes in each instance's object space (plane · model,
+    #: as `drawlist.frame_draws` gives the vertex stage), and their `bvh.plane_table`
+    #: (11U, I) for per-pair gathers on the flat path.
+    user_obj: np.ndarray
+    user_table: np.ndarray
+    #: Relative margins: floats without user planes (the frustum's, as always), else
+    #: float64 (K,): the frustum's, then CLIP_PLANE_MARGIN for each user plane.
+    inside_margin: float | np.ndarray
+    outside_margin: float | np.ndarray
+    #: The mask every instance starts from: bits 0..5 with the frustum test on, plus the
+    #: user bits; 0 = nothing to test.
+    start: int
+    frustum: bool
+
+    @property
+    def n_user(self) -> int:
+        return int(self.user_obj.shape[1])
+
+    @classmethod
+    def make(cls, prep: _SceneCull, raw: np.ndarray, rmag: np.ndarray, frustum: bool,
+             clip_planes: npt.ArrayLike | None, inside_margin: float,
+             outside_margin: float) -> _ViewPlanes:
+        planes, scales = normalize_planes(raw, rmag)
+        user = (np.zeros((0, 4)) if clip_planes is None
+                else np.asarray(clip_planes, np.float64).reshape(-1, 4))
+        n_u = user.shape[0]
+        if n_u > MAX_PLANES - 6:
+            raise ValueError(f"at most {MAX_PLANES - 6} clip planes, got {n_u}")
+        start = (int(ALL_PLANES) if frustum else 0) | (((1 << n_u) - 1) << 6)
+        if not n_u:
+            return cls(planes, scales, raw, rmag, np.zeros((prep.n, 0, 4)),
+                       np.zeros((0, prep.n)), inside_margin, outside_margin, start, frustum)
+        # plane · model in float64, as drawlist.frame_draws moves them for the vertex stage
+        user_obj = np.einsum("kj,ijl->ikl", user, prep.m)
+        mu_in = np.concatenate([np.full(6, inside_margin), np.full(n_u, CLIP_PLANE_MARGIN)])
+        mu_out = np.concatenate([np.full(6, outside_margin),
+                                 np.full(n_u, CLIP_PLANE_MARGIN)])
+        return cls(np.concatenate([planes, user]), np.concatenate([scales, np.abs(user)]),
+                   raw, rmag, user_obj, plane_table(user_obj, np.abs(user_obj)), mu_in,
+                   mu_out, start, frustum)
+
+    def object_space(self, prep: _SceneCull, inst: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(planes, scales), float64 (Q, K, 4): the view's planes in the object space of
+        the instances `inst` (int64 (Q,))."""
+        oraw = np.einsum("kj,qjl->qkl", self.raw, prep.m[inst])
+        omag = np.einsum("kj,qjl->qkl", self.rmag, prep.abs_m[inst])
+        oplanes, oscales = normalize_planes(oraw, omag)
+        if self.n_user:
+            uo = self.user_obj[inst]
+            oplanes = np.concatenate([oplanes, uo], axis=1)
+            oscales = np.concatenate([oscales, np.abs(uo)], axis=1)
+        return oplanes, oscales
+
+    def inside(self, mask: np.ndarray) -> np.ndarray:
+        """bool: pairs with these remaining masks are INSIDE the frustum (`DrawList.inside`:
+        no frustum bit left, and the frustum test on; user bits do not matter)."""
+        if not self.frustum:
+            return np.zeros(mask.shape, bool)
+        return (mask & int(ALL_PLANES)) == 0
+
+
+def _classify_instances(prep: _SceneCull, view: _ViewPlanes
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Top level: (state uint8, plane mask uint16), (I,) each, per instance.
 
     Empty instances are OUTSIDE; unbounded ones (NaN/Inf vertices) INTERSECTING with every
-    plane to test. With frustum=False every non-empty instance is INTERSECTING with mask 0
-    (no plane tests below)."""
+    plane to test. INSIDE means inside every plane (frustum and user: all clusters drawn
+    without further tests, marked inside). With frustum=False every non-empty instance not
+    wholly outside a user plane is INTERSECTING, with the user bits it still crosses (mask 0
+    without user planes: no plane tests below)."""
     inst_state = np.full(prep.n, OUTSIDE, np.uint8)
-    inst_mask = np.zeros(prep.n, np.uint8)
-    if frustum:
-        items, st, mk = prep.inst_bvh.cull(planes, scales, inside_margin=inside_margin,
-                                           outside_margin=outside_margin, return_mask=True)
+    inst_mask = np.zeros(prep.n, np.uint16)
+    if view.start:
+        # User planes test the world boxes here, with the instance BVH's magnitudes (|M| @
+        # [object magnitudes, 1], which bound |plane · model| terms too): an instance culled
+        # by a user plane is culled by each of its clusters' object-space tests below.
+        items, st, mk = prep.inst_bvh.cull(view.planes, view.scales, mask=view.start,
+                                           inside_margin=view.inside_margin,
+                                           outside_margin=view.outside_margin,
+                                           return_mask=True)
         ids = prep.inst_ids[items]
         inst_state[ids] = st
         inst_mask[ids] = mk
         inst_state[prep.unbounded_ids] = INTERSECTING
-        inst_mask[prep.unbounded_ids] = ALL_PLANES
+        inst_mask[prep.unbounded_ids] = view.start
+        if not view.frustum:  # inside the user planes only: not INSIDE the frustum
+            inst_state[inst_state == INSIDE] = INTERSECTING
     else:
         inst_state[prep.nonempty] = INTERSECTING  # mask 0: no plane tests below
     return inst_state, inst_mask
@@ -570,9 +695,13 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             :mod:`clraster.frustum`).
         cone_margin: radians, >= 0.
         keep_cone_culled: also return the cone-culled pairs (``DrawList.cone_culled``).
-        clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`)
-            or None: clusters whose box lies wholly outside one of them are culled too, and
-            counted with the frustum-culled ones (`_clip_plane_cull`).
+        clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`;
+            at most 8, with a window's reject-only planes) or None: instances and clusters
+            whose box lies wholly outside one of them (by `CLIP_PLANE_MARGIN`; clusters in
+            their instance's object space) are culled in the same traversals as the
+            frustum's (their planes appended, see the module docstring), also with
+            frustum=False, and counted with the frustum-culled ones. They never change
+            `DrawList.inside`.
 
     Returns:
         A `DrawList`.
@@ -588,9 +717,9 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
 
     # Top level: instances.
     raw, rmag = raw_planes(vp)
-    planes, scales = normalize_planes(raw, rmag)
-    inst_state, inst_mask = _classify_instances(prep, planes, scales, frustum, inside_margin,
-                                                outside_margin)
+    view = _ViewPlanes.make(prep, raw, rmag, frustum, clip_planes, inside_margin,
+                            outside_margin)
+    inst_state, inst_mask = _classify_instances(prep, view)
     t_inst = time.perf_counter()
     timings["instances"] = (t_inst - t_prep) * 1e3
 
@@ -598,9 +727,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     pairs = _Pairs(keep_cone_culled)
     if prep.flat_ids.size:  # small meshes: all their (instance, cluster) pairs at once
         t0 = time.perf_counter()
-        inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, planes if frustum
-                                              else None, scales if frustum else None,
-                                              inside_margin, outside_margin)
+        inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, view)
         t1 = pairs.frustum_done(cl, tri, t0)
         if cone_view is not None and cl.size:
             back = _flat_cone_cull(prep, inst, g, cone_view)
@@ -613,8 +740,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         vis = inst_state[members] != OUTSIDE
         if not vis.any():
             continue
-        inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, raw, rmag,
-                                       inside_margin, outside_margin)
+        inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, view)
         pairs.in_order = False
         tri = mc.tri_count[cl]
         t1 = pairs.frustum_done(cl, tri, t0)
@@ -627,11 +753,6 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     t_order = time.perf_counter()
     inst, cl, ins = pairs.in_draw_order(prep)
     counts = pairs.counts(prep, inst_state, int(cl.size))
-    if clip_planes is not None and cl.size:
-        t_planes = time.perf_counter()
-        inst, cl, ins = _clip_plane_cull(prep, scene, inst, cl, ins, clip_planes,
-                                         inst_state, counts)
-        timings["clip planes"] = (time.perf_counter() - t_planes) * 1e3
     t_end = time.perf_counter()
     timings.update(clusters=pairs.t_clusters * 1e3, cones=pairs.t_cones * 1e3,
                    order=(t_end - t_order) * 1e3, total=(t_end - t_start) * 1e3)
@@ -639,53 +760,3 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     inside=ins.astype(bool), counts=counts,
                     timings_ms=timings, cone_culled=pairs.cone_culled())
 
-
-#: Relative margin of the clip-plane cluster test: the kernels evaluate a vertex's distance
-#: in double from its float32 position and the float64 object-space plane (common.h
-#: user_dist), off by a few 1e-16 of the terms' magnitude; the box bound here is exact up to
-#: the same rounding, so 1e-9 of the magnitude keeps the test conservative many times over.
-CLIP_PLANE_MARGIN = 1e-9
-
-
-def _clip_plane_cull(prep: _SceneCull, scene: Scene, inst: np.ndarray, cl: np.ndarray,
-                     ins: np.ndarray, planes: np.ndarray, inst_state: np.ndarray,
-                     counts: dict[str, int]):
-    """Drop the (instance, cluster) pairs whose object-space cluster box lies wholly on the
-    removed side of a user clip plane (moved to the instance's object space: plane ·
-    model), updating ``counts`` in place: the clusters and triangles dropped move from drawn
-    to frustum-culled, and instances whose world box lies wholly outside a plane (and were
-    not frustum-culled already) count as frustum-culled. Unbounded clusters (NaN/Inf
-    vertices) are never dropped. A post-filter over the frustum test's survivors, O(pairs),
-    not through the BVH's plane masks (they hold the 6 frustum planes). Returns the kept
-    (inst, cl, ins)."""
-    g = prep.mesh_base[prep.inst_umesh[inst]] + cl
-    keep = np.ones(inst.size, bool)
-    for p0 in range(0, inst.size, 1 << 16):   # bounded temporaries
-        sl = slice(p0, p0 + (1 << 16))
-        lo, hi = prep.g_lo[g[sl]], prep.g_hi[g[sl]]
-        q = np.einsum("kj,pjl->pkl", planes, prep.m[inst[sl]])    # (P, K, 4) object space
-        n = q[:, :, :3]
-        with np.errstate(invalid="ignore", over="ignore"):   # NaN/Inf boxes: kept
-            centre, half = (lo + hi) * 0.5, (hi - lo) * 0.5
-            top = (np.einsum("pkj,pj->pk", n, centre)
-                   + np.einsum("pkj,pj->pk", np.abs(n), half) + q[:, :, 3])
-            mag = (np.einsum("pkj,pj->pk", np.abs(n), np.abs(centre) + half)
-                   + np.abs(q[:, :, 3]))
-            out = top < -CLIP_PLANE_MARGIN * mag
-        keep[sl] = ~out.any(axis=1)
-    dropped = ~keep
-    if dropped.any():
-        n_cl, n_tri = int(dropped.sum()), int(prep.g_tri[g[dropped]].sum())
-        counts["clusters_frustum_culled"] += n_cl
-        counts["clusters_drawn"] -= n_cl
-        counts["triangles_frustum_culled"] += n_tri
-        counts["triangles_drawn"] -= n_tri
-        lo_w, hi_w = scene.world_aabbs()
-        c_w, h_w = (lo_w + hi_w) * 0.5, (hi_w - lo_w) * 0.5
-        with np.errstate(invalid="ignore"):
-            top_w = (c_w @ planes[:, :3].T + h_w @ np.abs(planes[:, :3]).T + planes[:, 3])
-            mag_w = ((np.abs(c_w) + h_w) @ np.abs(planes[:, :3]).T + np.abs(planes[:, 3]))
-            outside = (top_w < -CLIP_PLANE_MARGIN * mag_w).any(axis=1)
-        newly = outside & (inst_state != OUTSIDE) & prep.nonempty
-        counts["instances_frustum_culled"] += int(newly.sum())
-    return inst[keep], cl[keep], ins[keep]
