@@ -3,6 +3,7 @@
     python bench/proc_ab.py 23d0dc1                   # spot, dragon, empty at 1920x1080
     python bench/proc_ab.py 23d0dc1 HEAD --scenes spot bunny dragon plant10m plant10m:off
     python bench/proc_ab.py HEAD HEAD --kwb '{"outputs": ["depth", "ids"]}'   # same tree, lean
+    python bench/proc_ab.py HEAD HEAD --env-b '{"POCL_WORK_GROUP_METHOD": "loops"}'   # PoCL option
     python bench/proc_ab.py 23d0dc1 --size 3840x2160 --rounds 9
 
 Where `tree_ab.py` starts a process per frame, each tree here keeps one process (one
@@ -105,16 +106,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--kwa", default="{}", help="render keywords of A, JSON")
     ap.add_argument("--kwb", default="{}", help="render keywords of B, JSON")
+    ap.add_argument("--env-a", default="{}", help="extra environment of A's worker, JSON "
+                    '(e.g. \'{"POCL_WORK_GROUP_METHOD": "loops"}\')')
+    ap.add_argument("--env-b", default="{}", help="extra environment of B's worker, JSON")
     a = ap.parse_args(argv)
     w, h = a.size.lower().split("x")
     tmp = Path(tempfile.mkdtemp())
     (tmp / "worker.py").write_text(WORKER)
     procs = {}
-    for tag, rev, kw in (("A", a.a, a.kwa), ("B", a.b, a.kwb)):
+    for tag, rev, kw, env in (("A", a.a, a.kwa, a.env_a), ("B", a.b, a.kwb, a.env_b)):
         tree = export(rev, tmp / tag)
         p = subprocess.Popen([sys.executable, str(tmp / "worker.py"), str(tree), w, h,
                               str(MESHES)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                             text=True, cwd=tmp)
+                             text=True, cwd=tmp, env={**os.environ, **json.loads(env)})
         procs[tag] = (p, json.loads(kw))
 
     def ask(tag: str, scene: str, warm: int = 0) -> dict:
