@@ -16,9 +16,9 @@ import logging
 import os
 import re
 import threading
+import time
 import warnings
 from pathlib import Path
-from queue import SimpleQueue
 
 import pyopencl as cl
 
@@ -241,31 +241,6 @@ def device_busy() -> bool:
     return bool(_in_flight)
 
 
-class _Waiter:
-    """One daemon thread, per process, that blocks in ``Event.wait`` for the main thread.
-
-    The main thread then waits on a lock, which a signal interrupts (POSIX), instead of
-    inside the C call, where Python runs signal handlers only when it returns."""
-
-    def __init__(self) -> None:
-        self.pid = os.getpid()
-        self.jobs: SimpleQueue = SimpleQueue()
-        threading.Thread(target=self._run, name="clraster-wait", daemon=True).start()
-
-    def _run(self) -> None:
-        while True:
-            ev, done = self.jobs.get()
-            try:
-                ev.wait()
-            except Exception:   # noqa: BLE001 - the caller re-waits on ev and sees the error
-                pass
-            finally:
-                done.release()
-
-
-_waiter: _Waiter | None = None
-
-
 def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     """Block until everything enqueued on ``queue`` has run, interruptibly.
 
@@ -274,31 +249,28 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
 
     ``queue.finish()`` waits inside one C call: the GIL is released, but Python runs its
     signal handlers only when the call returns, so Ctrl-C during a long frame took effect
-    only at the frame's end (16 s late in a 19 s frame). Only the main thread runs signal
-    handlers, so other threads wait inside the C call (GIL released); the main thread hands
-    the wait to a helper thread (`_Waiter`) and blocks on a lock that Ctrl-C interrupts.
-    The earlier way, polling a marker's status with sleeps of 20 µs doubling to 250 µs,
-    added ~125 µs of latency on average per wait, several waits per frame (an empty frame
-    at 1080p: 4.1 ms, of which ~0.4 ms such latency); the hand-off costs ~10 µs.
+    only at the frame's end (16 s late in a 19 s frame). Polling a marker's status with
+    short sleeps (20 µs doubling to 250 µs) keeps the GIL free for other threads and lets
+    KeyboardInterrupt through within a millisecond; its cost is a few status reads per
+    wait and at most ~250 µs of latency after the device finishes.
     """
-    global _waiter
     ev = cl.enqueue_marker(queue)
     queue.flush()
-    if threading.current_thread() is not threading.main_thread():
-        ev.wait()
-        return
-    if _waiter is None or _waiter.pid != os.getpid():   # a forked child has no thread
-        _waiter = _Waiter()
-    done = threading.Lock()
-    done.acquire()
-    _waiter.jobs.put((ev, done))
+    delay = 2e-5
+    complete = cl.command_execution_status.COMPLETE
     try:
-        done.acquire()
+        while True:
+            status = ev.command_execution_status
+            if status == complete:
+                return
+            if status < 0:   # the command failed: let pyopencl raise its error
+                ev.wait()
+                return
+            time.sleep(delay)
+            delay = min(2.0 * delay, 2.5e-4)
     except BaseException:   # KeyboardInterrupt: the device goes on regardless
         _in_flight.append((ev, keep))
         raise
-    if ev.command_execution_status < 0:   # the command failed: let pyopencl raise its error
-        ev.wait()
 
 
 def event_ms(events) -> float:
