@@ -136,14 +136,16 @@ def perspective_matrix(fov_y: float, aspect: float, near: float, far: float) -> 
     aspect = float(aspect)
     if not (math.isfinite(aspect) and aspect > 0.0):
         raise ValueError(f"aspect must be finite and > 0, got {aspect}")
+    return _perspective(fov_y, aspect, near, far)
+
+
+def _perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """`perspective_matrix` of already checked floats: a look_at camera's, every frame
+    (its lens was checked when it was made; the checks cost more than the matrix)."""
     f = 1.0 / math.tan(math.radians(fov_y) / 2.0)
-    proj = np.zeros((4, 4))
-    proj[0, 0] = f / aspect
-    proj[1, 1] = f
-    proj[2, 2] = (far + near) / (near - far)
-    proj[2, 3] = 2.0 * far * near / (near - far)
-    proj[3, 2] = -1.0
-    return proj
+    return np.array([[f / aspect, 0.0, 0.0, 0.0], [0.0, f, 0.0, 0.0],
+                     [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
+                     [0.0, 0.0, -1.0, 0.0]])
 
 def _check_near_far(near: float, far: float) -> tuple[float, float]:
     """near/far as floats with 0 < near < far, both finite."""
@@ -675,7 +677,7 @@ class Camera:
         if self._projection is not None:
             return self._projection
         assert self._fov_y is not None and self._near is not None and self._far is not None
-        return perspective_matrix(self._fov_y, width / height, self._near, self._far)
+        return _perspective(self._fov_y, width / height, self._near, self._far)
 
     def view_projection(self, width: int, height: int) -> np.ndarray:
         """World → clip matrix ``P @ V`` for a ``width × height`` image, (4, 4) float64."""

@@ -99,7 +99,7 @@ def check_mat4(value: npt.ArrayLike, name: str, *, read_only: bool = False) -> n
     if arr.shape != (4, 4):
         raise ValueError(f"{name} must have shape (4, 4), got shape {arr.shape}")
     arr = arr.astype(np.float64, copy=True)
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValueError(f"{name} must be finite; it contains NaN or Inf")
     if read_only:
         arr.flags.writeable = False
@@ -170,7 +170,7 @@ def view_projection(camera: CameraLike, width: int, height: int) -> np.ndarray:
         m = np.asarray(camera.view_projection(width, height), dtype=np.float64)
     except AttributeError:
         raise ValueError(f"expected a clraster.Camera, got {type(camera).__name__}") from None
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+    if m.shape != (4, 4) or not np.isfinite(m).all():
         raise ValueError("camera.view_projection() must return a finite (4, 4) matrix")
     return m
 
