@@ -55,8 +55,8 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
 inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
 {
     int bx0 = bb_x(pc->bb_min), bx1 = bb_x(pc->bb_max);
-    int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
-    int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
+    int y0 = imax(bb_y(pc->bb_min), ty << TILE_LOG2);
+    int y1 = imin(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
     for (int e = 0; e < 3 && *lo <= *hi; ++e) {
         int a = e == 0 ? 1 : (e == 1 ? 2 : 0), b = e == 0 ? 2 : (e == 1 ? 0 : 1);
         int ax = pc->x[a], ay = pc->y[a], bx = pc->x[b], by = pc->y[b];
@@ -82,10 +82,10 @@ inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
  * rect_outside, the test row_span answers a row at a time. */
 inline bool tile_missed(__global const Piece *pc, int tx, int ty)
 {
-    int x0 = max(bb_x(pc->bb_min), tx << TILE_LOG2);
-    int x1 = min(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
-    int y0 = max(bb_y(pc->bb_min), ty << TILE_LOG2);
-    int y1 = min(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
+    int x0 = imax(bb_x(pc->bb_min), tx << TILE_LOG2);
+    int x1 = imin(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
+    int y0 = imax(bb_y(pc->bb_min), ty << TILE_LOG2);
+    int y1 = imin(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
     return rect_outside(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
                         x0, y0, x1, y1);
 }

@@ -193,13 +193,13 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1
         double4 tc = c1; c1 = c2; c2 = tc;
         area2 = -area2;
     }
-    int xmin = min(min(v0.x, v1.x), v2.x), xmax = max(max(v0.x, v1.x), v2.x);
-    int ymin = min(min(v0.y, v1.y), v2.y), ymax = max(max(v0.y, v1.y), v2.y);
+    int xmin = imin(imin(v0.x, v1.x), v2.x), xmax = imax(imax(v0.x, v1.x), v2.x);
+    int ymin = imin(imin(v0.y, v1.y), v2.y), ymax = imax(imax(v0.y, v1.y), v2.y);
     /* pixel x is inside iff its centre 256x + 128 lies in [xmin, xmax] */
-    int px0 = max((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
-    int px1 = min((xmax - SUB_HALF) >> SUBPIXEL_BITS, width - 1);
-    int py0 = max((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
-    int py1 = min((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
+    int px0 = imax((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
+    int px1 = imin((xmax - SUB_HALF) >> SUBPIXEL_BITS, width - 1);
+    int py0 = imax((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
+    int py1 = imin((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
     pc->x[0] = v0.x; pc->x[1] = v1.x; pc->x[2] = v2.x;
     pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
