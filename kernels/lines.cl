@@ -160,8 +160,8 @@ __kernel void line_setup(__global const float *pos, const uint n, __global const
     if (i >= n) return;
     float4 c0 = seg_clip(mvp, pos + 6 * (size_t)i), c1 = seg_clip(mvp, pos + 6 * (size_t)i + 3);
     LineRec r = {0, 0, 0, 0, 0.0f, 0.0f, LS_INVALID, 0};
-    bool finite = isfinite(c0.x) && isfinite(c0.y) && isfinite(c0.z) && isfinite(c0.w)
-                  && isfinite(c1.x) && isfinite(c1.y) && isfinite(c1.z) && isfinite(c1.w);
+    bool finite = finite_f(c0.x) && finite_f(c0.y) && finite_f(c0.z) && finite_f(c0.w)
+                  && finite_f(c1.x) && finite_f(c1.y) && finite_f(c1.z) && finite_f(c1.w);
     if (finite) {
         uint o0 = frustum_outcode(c0), o1 = frustum_outcode(c1);
         if (o0 & o1) {

@@ -40,7 +40,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         const int want_bary, __global const uchar *wmask,
                         const int use_window)
 {
-    int tx1 = min(tx0 + TILE_SIZE, width) - 1, ty1 = min(ty0 + TILE_SIZE, height) - 1;
+    int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
     float zbuf[TILE_PIXELS];
     int win[TILE_PIXELS];   /* winning entry index, -1 = background */
     int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
@@ -72,8 +72,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
 
     for (int k = e0; k < e1; ++k) {
         __global const Piece *pc = &entries[k];
-        int x0 = max(bb_x(pc->bb_min), tx0), x1 = min(bb_x(pc->bb_max), tx1);
-        int y0 = max(bb_y(pc->bb_min), ty0), y1 = min(bb_y(pc->bb_max), ty1);
+        int x0 = imax(bb_x(pc->bb_min), tx0), x1 = imin(bb_x(pc->bb_max), tx1);
+        int y0 = imax(bb_y(pc->bb_min), ty0), y1 = imin(bb_y(pc->bb_max), ty1);
         if (x0 > x1 || y0 > y1) continue;
         int X0 = pc->x[0], X1 = pc->x[1], X2 = pc->x[2];
         int Y0 = pc->y[0], Y1 = pc->y[1], Y2 = pc->y[2];
@@ -205,8 +205,8 @@ __kernel void raster_tiles(__global const float *clip_bary,
     int g = get_global_id(0);
     int ty = g / segs, seg = g - ty * segs;
     if (ty >= tiles_y) return;
-    int y0 = ty << TILE_LOG2, y1 = min(y0 + TILE_SIZE, height) - 1;
-    int txa = min(seg * seg_tiles, tiles_x), txb = min(txa + seg_tiles, tiles_x);
+    int y0 = ty << TILE_LOG2, y1 = imin(y0 + TILE_SIZE, height) - 1;
+    int txa = imin(seg * seg_tiles, tiles_x), txb = imin(txa + seg_tiles, tiles_x);
     int run = -1;   /* first tile column of the current run of empty tiles, -1: none */
     long tested = 0, passed = 0;   /* fragments of this segment */
     for (int tx = txa; tx <= txb; ++tx) {
@@ -219,7 +219,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
                 /* a polygon window (clraster.window): a tile it lets no pixel of is
                  * drawn as empty */
                 int open = 0, ya = ty << TILE_LOG2, xa = tx << TILE_LOG2;
-                int yb = min(ya + TILE_SIZE, height), xb = min(xa + TILE_SIZE, width);
+                int yb = imin(ya + TILE_SIZE, height), xb = imin(xa + TILE_SIZE, width);
                 for (int y = ya; y < yb; ++y)
                     for (int x = xa; x < xb; ++x) open |= wmask[(size_t)y * width + x];
                 if (!open) e1 = e0;
@@ -231,7 +231,7 @@ __kernel void raster_tiles(__global const float *clip_bary,
         }
         if (run >= 0 && !load) {
             /* clear values, in plain loops that vectorize */
-            int xa = run << TILE_LOG2, xb = min(tx << TILE_LOG2, width);
+            int xa = run << TILE_LOG2, xb = imin(tx << TILE_LOG2, width);
             for (int y = y0; y <= y1; ++y) {
                 size_t o = (size_t)y * width;
                 for (int x = xa; x < xb; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }

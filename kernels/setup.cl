@@ -193,13 +193,13 @@ inline int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1
         double4 tc = c1; c1 = c2; c2 = tc;
         area2 = -area2;
     }
-    int xmin = min(min(v0.x, v1.x), v2.x), xmax = max(max(v0.x, v1.x), v2.x);
-    int ymin = min(min(v0.y, v1.y), v2.y), ymax = max(max(v0.y, v1.y), v2.y);
+    int xmin = imin(imin(v0.x, v1.x), v2.x), xmax = imax(imax(v0.x, v1.x), v2.x);
+    int ymin = imin(imin(v0.y, v1.y), v2.y), ymax = imax(imax(v0.y, v1.y), v2.y);
     /* pixel x is inside iff its centre 256x + 128 lies in [xmin, xmax] */
-    int px0 = max((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
-    int px1 = min((xmax - SUB_HALF) >> SUBPIXEL_BITS, width - 1);
-    int py0 = max((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
-    int py1 = min((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
+    int px0 = imax((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
+    int px1 = imin((xmax - SUB_HALF) >> SUBPIXEL_BITS, width - 1);
+    int py0 = imax((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
+    int py1 = imin((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
     pc->x[0] = v0.x; pc->x[1] = v1.x; pc->x[2] = v2.x;
     pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
@@ -364,7 +364,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global const WinVert *restrict win, DRAW_ARGS, const int width,
                               const int height, const int cull, const float kx, const float ky,
                               const int reversed, __global Piece *restrict pieces,
-                              __global uchar *restrict status, __global int *restrict clip_count)
+                              __global uchar *restrict status, __global int *restrict clip_count,
+                              const int tiles_x, __global int *restrict tile1)
 {
     DEPTH_MODE(reversed);
     int t, i0, i1, i2, id, dflags;
@@ -381,7 +382,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         u_or = u0 | u1 | u2;
         u_and = u0 & u1 & u2;
     }
-    int st, nclip = 0;
+    int st, nclip = 0, one = -1;   /* tile1: -1 nothing to bin (bin.cl TILE1_NONE) */
     if (o_or & OC_INVALID) {
         st = ST_INVALID;
     } else if ((o_and & OC_FRUSTUM) || u_and) {
@@ -414,11 +415,18 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                 pc.id = id;
                 pc.flags = sw ? PF_SWAPPED : 0;
                 pieces[t] = pc;
+                /* the one tile of a piece whose pixel box lies in one tile (most pieces of
+                 * a dense mesh): binning counts it from this word alone (bin.cl) */
+                int tx0 = bb_x(pc.bb_min) >> TILE_LOG2, ty0 = bb_y(pc.bb_min) >> TILE_LOG2;
+                bool single = tx0 == bb_x(pc.bb_max) >> TILE_LOG2
+                              && ty0 == bb_y(pc.bb_max) >> TILE_LOG2;
+                one = single ? ty0 * tiles_x + tx0 : -2;   /* -2: TILE1_WALK */
             }
         }
     }
     status[t] = (uchar)st;
     clip_count[t] = nclip;
+    tile1[t] = st == ST_CLIPPED ? -2 : one;
 }
 
 /* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into

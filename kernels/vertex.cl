@@ -40,7 +40,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
     __global const float *mvp = mvps + 16 * dr.instance;
     float4 c = clip_transform(mvp, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]);
     uint oc = 0;
-    if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z) && isfinite(c.w))) {
+    if (!(finite_f(c.x) && finite_f(c.y) && finite_f(c.z) && finite_f(c.w))) {
         oc = OC_INVALID;
     } else if (!(dr.flags & DRAW_INSIDE)) {
         /* clusters inside the frustum by a margin skip the tests: all bits would be 0 */

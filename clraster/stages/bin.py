@@ -75,7 +75,8 @@ class BinStage:
         counts = b.counts.ensure(4 * chunks * n_tiles)
         common = (setup.status.buf, setup.clip_count.buf, setup.clip_offset.buf,
                   setup.pieces.buf, setup.clip_pieces.buf, np.uint32(m),
-                  np.uint32(chunks), np.int32(tiles_x), np.int32(n_tiles), counts)
+                  np.uint32(chunks), np.int32(tiles_x), np.int32(n_tiles), counts,
+                  setup.tile1.buf)
         hist = b.hist.ensure(4 * 8 * chunks)
         ev = [self.k_count(queue, (chunks,), (1,), *common, hist)]
         ev.append(self.k_offsets(queue, (n_tiles,), None, np.uint32(chunks),

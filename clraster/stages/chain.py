@@ -53,9 +53,10 @@ class StageChain:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
         least one triangle), vertex stream 75 bytes × 3·M vertices (a draw has at most 3
-        vertices per triangle), setup 105·M (96-byte record, status, clip count and
-        offset), clipped pieces 132·E (record + barycentrics; a pass with more pieces than
-        E is split like one with too many entries), bin entries 96·E. The per-tile buffers
+        vertices per triangle), setup 109·M (96-byte record, status, clip count and
+        offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
+        pieces than E is split like one with too many entries), bin entries 96·E. The
+        per-tile buffers
         (C·T counts, tile starts, tile stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
         g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,
@@ -63,7 +64,7 @@ class StageChain:
         return {g.draws: DRAW_DTYPE.itemsize * m, v.clip: 16 * 3 * m, v.outcode: 2 * 3 * m,
                 v.ucode: 3 * m, v.clip64: 32 * 3 * m, v.rnum: 8 * 3 * m,
                 v.win: WINVERT_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
-                s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m,
+                s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
                 b.entries: PIECE_DTYPE.itemsize * e}
 

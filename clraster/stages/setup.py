@@ -30,6 +30,8 @@ class SetupBuffers:
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
+    tile1: int32 (M,) for an ST_RASTER slot whose pixel box lies in one tile, that tile's
+    index (binning counts it without reading the 96-byte record), else −1.
     n_tris, n_clip_pieces: M and P of the last run.
     """
 
@@ -40,6 +42,7 @@ class SetupBuffers:
     clip_total: GrowBuffer
     clip_pieces: GrowBuffer
     clip_bary: GrowBuffer
+    tile1: GrowBuffer
     n_tris: int = 0
     n_clip_pieces: int = 0
 
@@ -56,7 +59,7 @@ class SetupStage:
         self.k_count = cl.Kernel(prg, "setup_count_clipped")
         self.k_partials = cl.Kernel(prg, "scan_partials")
         self.k_offsets = cl.Kernel(prg, "scan_offsets")
-        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(7)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.partial = GrowBuffer(ctx)
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
@@ -84,7 +87,8 @@ class SetupStage:
         ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
-                           b.status.ensure(m), b.clip_count.ensure(4 * m))]
+                           b.status.ensure(m), b.clip_count.ensure(4 * m),
+                           np.int32(params.tiles_x), b.tile1.ensure(4 * m))]
         ev.append(self.k_count(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
                                b.status.buf, b.clip_count.buf))
