@@ -135,10 +135,19 @@ __kernel void bin_count(__global const uchar *restrict status,
     if (chunk >= chunks) return;
     __global int *row = counts + (size_t)chunk * n_tiles;
     for (int i = 0; i < n_tiles; ++i) row[i] = 0;
-    int h[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    /* four histograms taken in turn: with one, runs of equal statuses made a chain of
+     * dependent increments of one counter (15% of the kernel's perf samples) */
+    int h[4][8] = {{0}};
     uint c0 = (uint)(((ulong)chunk * m) / chunks), c1 = (uint)(((ulong)(chunk + 1) * m) / chunks);
-    for (uint t = c0; t < c1; ++t) h[status[t] & 7] += 1;
-    for (int k = 0; k < 8; ++k) hist[8 * chunk + k] = h[k];
+    uint t = c0;
+    for (; t + 4 <= c1; t += 4) {
+        h[0][status[t] & 7] += 1;
+        h[1][status[t + 1] & 7] += 1;
+        h[2][status[t + 2] & 7] += 1;
+        h[3][status[t + 3] & 7] += 1;
+    }
+    for (; t < c1; ++t) h[0][status[t] & 7] += 1;
+    for (int k = 0; k < 8; ++k) hist[8 * chunk + k] = (h[0][k] + h[1][k]) + (h[2][k] + h[3][k]);
     CHUNK_SLOTS
     for (uint t = s0; t < s1; ++t) {
         int c = tile1[t];

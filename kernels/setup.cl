@@ -439,6 +439,11 @@ __kernel void setup_count_clipped(__global const float4 *restrict clip,
                                   __global int *restrict clip_count)
 {
     DEPTH_MODE(reversed);
+    /* a draw inside the frustum by a margin has no outcode bits (vertex.cl), so without
+     * clipping user planes none of its triangles is clipped: its group leaves at once
+     * (most of a framed mesh; the kernel runs over every triangle of the frame) */
+    uint g = get_group_id(0);
+    if (g < n_draws && (draws[g].flags & DRAW_INSIDE) && !(n_user > 0 && uclip)) return;
     int t, i0, i1, i2, id, dflags;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
                      &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED)
