@@ -90,6 +90,17 @@ inline bool tile_missed(__global const Piece *pc, int tx, int ty)
                         x0, y0, x1, y1);
 }
 
+/* Copy a 96-byte record with non-temporal stores (three aligned 32-byte halves of lines:
+ * records start at multiples of 96 bytes in a page-aligned buffer). */
+inline void put_piece(__global Piece *dst, __global const Piece *src)
+{
+    __global const float8 *s8 = (__global const float8 *)src;
+    __global float8 *d8 = (__global float8 *)dst;
+    __builtin_nontemporal_store(s8[0], d8);
+    __builtin_nontemporal_store(s8[1], d8 + 1);
+    __builtin_nontemporal_store(s8[2], d8 + 2);
+}
+
 /* Visit every (piece, tile) pair of triangle slot t (status st) in order. BODY sees `pc`
  * (the piece) and `tile`. */
 #define FOR_SLOT_ENTRY(t, st, BODY)                                                       \
@@ -220,10 +231,10 @@ __kernel void bin_scatter(__global const uchar *restrict status,
         int c = tile1[t];
         if (c == TILE1_NONE) continue;
         if (c >= 0) {
-            entries[tile_start[c] + row[c]++] = pieces[t];
+            put_piece(&entries[tile_start[c] + row[c]++], &pieces[t]);
         } else {
             uchar st = status[t];
-            FOR_SLOT_ENTRY(t, st, entries[tile_start[tile] + row[tile]++] = *pc;)
+            FOR_SLOT_ENTRY(t, st, put_piece(&entries[tile_start[tile] + row[tile]++], pc);)
         }
     }
 }
