@@ -145,8 +145,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
      * leaves the earlier pass's pixels that nothing beat as they are. */
     int nx = tx1 - tx0 + 1;
     for (int y = ty0; y <= ty1; ++y) {
-        float rd[TILE_SIZE], rb[3 * TILE_SIZE];
-        int ri[TILE_SIZE];
+        /* aligned for the float8 copies below (OpenCL's vload8 is a library call on PoCL) */
+        float rd[TILE_SIZE] __attribute__((aligned(32)));
+        float rb[3 * TILE_SIZE] __attribute__((aligned(32)));
+        int ri[TILE_SIZE] __attribute__((aligned(32)));
         size_t orow = (size_t)y * width + tx0;
         int lrow = (y - ty0) << TILE_LOG2;
         for (int lx = 0; lx < nx; ++lx) {
@@ -187,13 +189,13 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             __global float8 *d8 = (__global float8 *)(depth_out + orow);
             __global int8 *i8 = (__global int8 *)(id_out + orow);
             for (int j = 0; j < TILE_SIZE / 8; ++j) {
-                __builtin_nontemporal_store(vload8(j, rd), d8 + j);
-                __builtin_nontemporal_store(vload8(j, ri), i8 + j);
+                __builtin_nontemporal_store(((float8 *)rd)[j], d8 + j);
+                __builtin_nontemporal_store(((int8 *)ri)[j], i8 + j);
             }
             if (want_bary) {
                 __global float8 *b8 = (__global float8 *)(bary_out + 3 * orow);
                 for (int j = 0; j < 3 * TILE_SIZE / 8; ++j)
-                    __builtin_nontemporal_store(vload8(j, rb), b8 + j);
+                    __builtin_nontemporal_store(((float8 *)rb)[j], b8 + j);
             }
             continue;
         }
