@@ -71,6 +71,10 @@
 inline int imin(int a, int b) { return a < b ? a : b; }
 inline int imax(int a, int b) { return a > b ? a : b; }
 inline bool finite_f(float x) { return (as_uint(x) & 0x7f800000u) != 0x7f800000u; }
+/* max / min of non-NaN values as NumPy's maximum / minimum (the twin's): the first
+ * argument on a tie (PoCL's fmax and fmin are library calls too) */
+inline float maxf(float a, float b) { return a >= b ? a : b; }
+inline double mind(double a, double b) { return a <= b ? a : b; }
 
 /* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M, the operation order the NumPy twin
  * uses (vertex.cl for triangles, lines.cl for line endpoints). */

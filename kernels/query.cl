@@ -97,7 +97,7 @@ __kernel void query_tiles(__global const int *tile_start, __global const Piece *
                 int lx = cx + j;
                 long w0 = r0 + lx * sx0, w1 = r1 + lx * sx1, w2 = r2 + lx * sx2;
                 bool in = lx >= lx0 && lx <= lx1 && w0 >= b0 && w1 >= b1 && w2 >= b2;
-                float z = fmax(zrow + dzdx * (float)(lx - qx0), zlo);   /* as raster_tiles */
+                float z = maxf(zrow + dzdx * (float)(lx - qx0), zlo);   /* as raster_tiles */
                 int i = row + lx;
                 hit[i] |= (uchar)(in && z < zt[i]);   /* LESS: equal depth does not pass */
             }

@@ -119,7 +119,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                     continue;
                 /* never nearer than the nearest vertex: a covered centre up to 1/512 px
                  * outside the unsnapped triangle must not extrapolate past it (Hi-Z) */
-                float z = fmax(zrow + dzdx * (float)(lx - rx0), zlo);
+                float z = maxf(zrow + dzdx * (float)(lx - rx0), zlo);
                 int i = row + lx;
                 float zb = zbuf[i];
                 int wd = wid[i];

@@ -172,7 +172,7 @@ inline void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1
     pc->r1 = (float)(a.w / b.w);
     pc->r2 = (float)(a.w / c.w);
     /* nearest vertex depth: the raster raises fragment depth to it (layout.py PIECE_DTYPE) */
-    pc->zlo = (float)fmin(fmin(z0, z1), z2);
+    pc->zlo = (float)mind(mind(z0, z1), z2);
     pc->pad[0] = 0; pc->pad[1] = 0;
 }
 
