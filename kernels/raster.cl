@@ -169,7 +169,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 float l0 = (1.0f - l1) - l2;
                 float q1 = l1 * pc->r1, q2 = l2 * pc->r2;
                 float s = (l0 + q1) + q2;
-                float c0 = l0 / s, c1 = q1 / s, c2 = q2 / s;
+                /* one division: three chained divisions per pixel were 30% of spot's
+                 * raster samples (perf); the twin multiplies by the same reciprocal */
+                float inv = 1.0f / s;
+                float c0 = l0 * inv, c1 = q1 * inv, c2 = q2 * inv;
                 if (pc->flags & PF_CLIPPED) {
                     __global const float *pb = clip_bary + 9 * (pc->flags >> PF_INDEX_SHIFT);
                     B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];

@@ -201,7 +201,8 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         l0 = (F32(1) - l1) - l2
         q1, q2 = l1 * pc["r1"], l2 * pc["r2"]
         ssum = (l0 + q1) + q2
-        c = np.stack([l0 / ssum, q1 / ssum, q2 / ssum], axis=1)
+        inv = F32(1) / ssum   # raster.cl: one division, three products
+        c = np.stack([l0 * inv, q1 * inv, q2 * inv], axis=1)
         clipped = (pc["flags"] & PF_CLIPPED) != 0
         swapped = ((pc["flags"] & PF_SWAPPED) != 0) & ~clipped
         c[swapped] = c[swapped][:, [0, 2, 1]]
