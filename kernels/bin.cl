@@ -96,9 +96,9 @@ inline void put_piece(__global Piece *dst, __global const Piece *src)
 {
     __global const float8 *s8 = (__global const float8 *)src;
     __global float8 *d8 = (__global float8 *)dst;
-    __builtin_nontemporal_store(s8[0], d8);
-    __builtin_nontemporal_store(s8[1], d8 + 1);
-    __builtin_nontemporal_store(s8[2], d8 + 2);
+    NT_STORE(s8[0], d8);
+    NT_STORE(s8[1], d8 + 1);
+    NT_STORE(s8[2], d8 + 2);
 }
 
 /* Visit every (piece, tile) pair of triangle slot t (status st) in order. BODY sees `pc`

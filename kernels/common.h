@@ -64,6 +64,16 @@
 #define RINTF(x) __builtin_rintf(x)
 #endif
 
+/* A non-temporal store of value v to *p (p aligned to v's size): the line is written
+ * without being read into the cache first, half the memory traffic of an ordinary store
+ * for outputs written once and read much later (the frame arrays, bin entries, setup
+ * records). Clang's builtin; plain stores on other platforms (-DCLRASTER_PORTABLE). */
+#ifdef CLRASTER_PORTABLE
+#define NT_STORE(v, p) (*(p) = (v))
+#else
+#define NT_STORE(v, p) __builtin_nontemporal_store((v), (p))
+#endif
+
 /* Integer min/max and a finiteness test written out: PoCL's OpenCL min(), max() and
  * isfinite() are calls into its builtin library that are not inlined (perf on the dragon at
  * 1080p: _cl_max + _cl_min 2.1% of the frame's samples in setup alone, _cl_isfinite 1.1% in

@@ -192,13 +192,13 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             __global float8 *d8 = (__global float8 *)(depth_out + orow);
             __global int8 *i8 = (__global int8 *)(id_out + orow);
             for (int j = 0; j < TILE_SIZE / 8; ++j) {
-                __builtin_nontemporal_store(((float8 *)rd)[j], d8 + j);
-                __builtin_nontemporal_store(((int8 *)ri)[j], i8 + j);
+                NT_STORE(((float8 *)rd)[j], d8 + j);
+                NT_STORE(((int8 *)ri)[j], i8 + j);
             }
             if (want_bary) {
                 __global float8 *b8 = (__global float8 *)(bary_out + 3 * orow);
                 for (int j = 0; j < 3 * TILE_SIZE / 8; ++j)
-                    __builtin_nontemporal_store(((float8 *)rb)[j], b8 + j);
+                    NT_STORE(((float8 *)rb)[j], b8 + j);
             }
             continue;
         }
@@ -279,13 +279,13 @@ __kernel void raster_tiles(__global const float *clip_bary,
                     __global float8 *d8 = (__global float8 *)(depth_out + o + xa);
                     __global int8 *i8 = (__global int8 *)(id_out + o + xa);
                     for (int j = 0; j < n8; ++j) {
-                        __builtin_nontemporal_store((float8)(1.0f), d8 + j);
-                        __builtin_nontemporal_store((int8)(-1), i8 + j);
+                        NT_STORE((float8)(1.0f), d8 + j);
+                        NT_STORE((int8)(-1), i8 + j);
                     }
                     if (want_bary) {
                         __global float8 *b8 = (__global float8 *)(bary_out + 3 * (o + xa));
                         for (int j = 0; j < 3 * n8; ++j)
-                            __builtin_nontemporal_store((float8)(0.0f), b8 + j);
+                            NT_STORE((float8)(0.0f), b8 + j);
                     }
                     xs = xa + (n8 << 3);
                 }

@@ -417,9 +417,9 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                 /* non-temporal: 96 aligned bytes written once and read back only by
                  * binning, after the whole stage (dragon 1080p setup 0.96x) */
                 __global float8 *d8 = (__global float8 *)&pieces[t];
-                __builtin_nontemporal_store(((float8 *)&pc)[0], d8);
-                __builtin_nontemporal_store(((float8 *)&pc)[1], d8 + 1);
-                __builtin_nontemporal_store(((float8 *)&pc)[2], d8 + 2);
+                NT_STORE(((float8 *)&pc)[0], d8);
+                NT_STORE(((float8 *)&pc)[1], d8 + 1);
+                NT_STORE(((float8 *)&pc)[2], d8 + 2);
                 /* the one tile of a piece whose pixel box lies in one tile (most pieces of
                  * a dense mesh): binning counts it from this word alone (bin.cl) */
                 int tx0 = bb_x(pc.bb_min) >> TILE_LOG2, ty0 = bb_y(pc.bb_min) >> TILE_LOG2;
