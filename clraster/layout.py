@@ -62,7 +62,7 @@ ST_INVALID = 2  #: a vertex is NaN/Inf (or its clip position is): dropped and co
 ST_TRIVIAL_REJECT = 3  #: all three vertices outside one frustum plane or one user clip plane
 ST_BACKFACE = 4  #: culled by the cull mode
 ST_DEGENERATE = 5  #: zero area after the fixed-point snap
-ST_NO_SAMPLE = 6  #: bounding box holds no pixel centre: covers nothing (exact, not a guess)
+ST_NO_SAMPLE = 6  #: covers no pixel centre (box holds none, or a <= 2x2 box tested exactly)
 STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "degenerate",
                 "no_sample")
 

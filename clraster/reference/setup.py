@@ -172,6 +172,27 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     py1 = np.minimum((Y.max(1) - half) >> SUBPIXEL_BITS, height - 1)
     alive = status == ST_RASTER
     status[alive & ((px0 > px1) | (py0 > py1))] = ST_NO_SAMPLE
+    # a box of at most 2 x 2 pixel centres that covers none of them (exact edge functions,
+    # top-left rule): no sample either (setup.cl make_piece)
+    small = np.flatnonzero((status == ST_RASTER) & (px1 - px0 <= 1) & (py1 - py0 <= 1))
+    if small.size:
+        Xs, Ys = X[small], Y[small]
+
+        def edge(a, b, qx, qy):
+            ax, ay, bx, by = Xs[:, a], Ys[:, a], Xs[:, b], Ys[:, b]
+            dx, dy = bx - ax, by - ay
+            bias = np.where((dy < 0) | ((dy == 0) & (dx > 0)), 0, 1)
+            return dx * (qy - ay) - dy * (qx - ax) >= bias
+
+        anyc = np.zeros(small.size, bool)
+        for oy in (0, 1):
+            for ox in (0, 1):
+                qxp, qyp = px0[small] + ox, py0[small] + oy
+                inbox = (qxp <= px1[small]) & (qyp <= py1[small])
+                qx = (qxp << SUBPIXEL_BITS) + half
+                qy = (qyp << SUBPIXEL_BITS) + half
+                anyc |= inbox & edge(1, 2, qx, qy) & edge(2, 0, qx, qy) & edge(0, 1, qx, qy)
+        status[small[~anyc]] = ST_NO_SAMPLE
     ok = status == ST_RASTER
     pc = np.zeros(k, PIECE_DTYPE)
     pc["x"][ok] = X[ok]
