@@ -113,9 +113,29 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 edge_columns(r1, sx1, b1, &c0, &c1);
                 edge_columns(r2, sx2, b2, &c0, &c1);
             }
+            if (wide) {
+                /* the run is all covered: depth tests with selects and whole stores,
+                 * which LLVM vectorizes with blends (a branch here became masked stores:
+                 * tile raster spot 0.92x, bunny 0.93x; the narrow loop below keeps its
+                 * branches, where selects cost 1.1-1.3x) */
+                for (int lx = c0; lx <= c1; ++lx) {
+                    float z = maxf(zrow + dzdx * (float)(lx - rx0), zlo);   /* as below */
+                    int i = row + lx;
+                    float zb = zbuf[i];
+                    int wd = wid[i], wk = win[i];
+                    bool pass = (z < zb) | ((z == zb) & (id < wd) & (wd != INT_MAX));
+                    zbuf[i] = pass ? z : zb;
+                    wid[i] = pass ? id : wd;
+                    win[i] = pass ? k : wk;
+                    passed += pass;
+                    if (want_overdraw) ++odc[i];
+                }
+                tested += c1 >= c0 ? c1 - c0 + 1 : 0;
+                r0 += sy0; r1 += sy1; r2 += sy2;
+                continue;
+            }
             for (int lx = c0; lx <= c1; ++lx) {
-                if (!wide && !(r0 + lx * sx0 >= b0 && r1 + lx * sx1 >= b1
-                               && r2 + lx * sx2 >= b2))
+                if (!(r0 + lx * sx0 >= b0 && r1 + lx * sx1 >= b1 && r2 + lx * sx2 >= b2))
                     continue;
                 /* never nearer than the nearest vertex: a covered centre up to 1/512 px
                  * outside the unsnapped triangle must not extrapolate past it (Hi-Z) */
