@@ -48,7 +48,7 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
     int bx = g % blocks_x, by = g / blocks_x;
     __global const float *src = src_level == 0 ? depth : pyr + S.x;
     if (src_level == 0) {
-        int x0 = bx * nb, x1 = min(x0 + nb, ws), y1 = min(by * nb + nb, hs);
+        int x0 = bx * nb, x1 = imin(x0 + nb, ws), y1 = imin(by * nb + nb, hs);
         for (int y = by * nb; y < y1; ++y)
             for (int x = x0; x < x1; ++x) pyr[(size_t)y * ws + x] = src[(size_t)y * ws + x];
     }
@@ -57,13 +57,13 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
     int side = nb >> 1;
     int4 D = levels[src_level + 1];
     int gx0 = bx * side, gy0 = by * side;
-    int lw = min(side, D.y - gx0), lh = min(side, D.z - gy0);
+    int lw = imin(side, D.y - gx0), lh = imin(side, D.z - gy0);
     for (int j = 0; j < lh; ++j) {
-        int ya = 2 * (gy0 + j), yb = min(ya + 1, hs - 1);
+        int ya = 2 * (gy0 + j), yb = imin(ya + 1, hs - 1);
         __global const float *ra = src + (size_t)ya * ws, *rb = src + (size_t)yb * ws;
         __global float *out = pyr + D.x + (size_t)(gy0 + j) * D.y + gx0;
         for (int i = 0; i < lw; ++i) {
-            int xa = 2 * (gx0 + i), xb = min(xa + 1, ws - 1);
+            int xa = 2 * (gx0 + i), xb = imin(xa + 1, ws - 1);
             float v = far4(ra[xa], ra[xb], rb[xa], rb[xb]);
             t[j * PYR_HALF + i] = v;
             out[i] = v;
@@ -71,19 +71,19 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
     }
     /* Further levels from the private copy, in place: texel (i, j) is written after its
      * reads, and every later texel reads indices >= 2j·PYR_HALF + 2i > j·PYR_HALF + i. The
-     * clamp min(2i+1, lw−1) is the global clamp min(2g+1, w−1): the block's last valid
+     * clamp imin(2i+1, lw−1) is the global clamp imin(2g+1, w−1): the block's last valid
      * column is either the block edge (never exceeded) or the level's last column. */
     for (int k = 2; k <= n_make; ++k) {
         D = levels[src_level + k];
         side >>= 1;
         gx0 = bx * side;
         gy0 = by * side;
-        int nw = min(side, D.y - gx0), nh = min(side, D.z - gy0);
+        int nw = imin(side, D.y - gx0), nh = imin(side, D.z - gy0);
         for (int j = 0; j < nh; ++j) {
-            int ja = 2 * j, jb = min(ja + 1, lh - 1);
+            int ja = 2 * j, jb = imin(ja + 1, lh - 1);
             __global float *out = pyr + D.x + (size_t)(gy0 + j) * D.y + gx0;
             for (int i = 0; i < nw; ++i) {
-                int ia = 2 * i, ib = min(ia + 1, lw - 1);
+                int ia = 2 * i, ib = imin(ia + 1, lw - 1);
                 float v = far4(t[ja * PYR_HALF + ia], t[ja * PYR_HALF + ib],
                                t[jb * PYR_HALF + ia], t[jb * PYR_HALF + ib]);
                 t[j * PYR_HALF + i] = v;
