@@ -393,7 +393,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               const int height, const int cull, const float kx, const float ky,
                               const int reversed, __global Piece *restrict pieces,
                               __global uchar *restrict status, __global int *restrict clip_count,
-                              const int tiles_x, __global int *restrict tile1)
+                              const int tiles_x, __global int *restrict tile1,
+                              __global int *restrict any_clipped)
 {
     DEPTH_MODE(reversed);
     int t, i0, i1, i2, id, dflags;
@@ -424,6 +425,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
              * (2 × POLY_MAX vertices of 72+ bytes) inlined here made every work-item of
              * this kernel pay for them (dragon 1080p setup 1.4x with POLY_MAX 16 → 24) */
             st = ST_CLIPPED;
+            /* the host skips the clipper's count and scan when no triangle needs it */
+            atomic_or(any_clipped, 1);
         } else if (o_or & OC_W_NONPOS) {
             st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
         } else {
