@@ -112,8 +112,6 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 edge_columns(r0, sx0, b0, &c0, &c1);
                 edge_columns(r1, sx1, b1, &c0, &c1);
                 edge_columns(r2, sx2, b2, &c0, &c1);
-            }
-            if (wide) {
                 /* the run is all covered: depth tests with selects and whole stores,
                  * which LLVM vectorizes with blends (a branch here became masked stores:
                  * tile raster spot 0.92x, bunny 0.93x; the narrow loop below keeps its
