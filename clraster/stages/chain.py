@@ -101,6 +101,7 @@ class StageChain:
         """
         self.geometry.upload_pool(queue, pool)
         geo = self.geometry.upload_frame(queue, fd)
+        self.setup.prepare(queue)   # while the queue is idle (SetupStage.prepare)
         verts, ev_v = self.vertex.run(queue, geo, params)
         stage = "setup"
         try:

@@ -63,6 +63,13 @@ class SetupStage:
         self.partial = GrowBuffer(ctx)
         self.flag = GrowBuffer(ctx)   # any triangle ST_CLIPPED (setup_triangles)
 
+    def prepare(self, queue: cl.CommandQueue) -> None:
+        """Zero the any-clipped flag `run` reads; call before the pass's first kernel.
+        Enqueued behind a running kernel, this host-to-device write blocked the calling
+        thread, GIL held, until that kernel was done (~15 ms of a 3.5M-triangle frame in
+        which no other Python thread ran: tests/test_processes.py)"""
+        cl.enqueue_copy(queue, self.flag.ensure(4), np.zeros(1, np.int32), is_blocking=False)
+
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
             params: FrameParams, max_pieces: int | None = None
             ) -> tuple[SetupBuffers, list[cl.Event]]:
@@ -85,8 +92,7 @@ class SetupStage:
         size = np.int32(params.width), np.int32(params.height)
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)   # one work-group per draw (kernels/setup.cl triangle_of)
-        flag = self.flag.ensure(4)
-        cl.enqueue_copy(queue, flag, np.zeros(1, np.int32), is_blocking=False)
+        flag = cast(cl.Buffer, self.flag.buf)   # zeroed by `prepare`
         ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
