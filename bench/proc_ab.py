@@ -29,6 +29,9 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "bench"))
+from tree_ab import export  # noqa: E402  (bench/ is not a package)
+
 MESHES = REPO.parent / "shared" / "meshes"
 WORKER = r'''
 import json, resource, sys, time
@@ -82,19 +85,6 @@ for line in sys.stdin:
                       "ids": int(np.count_nonzero(ids >= 0)),
                       "idsum": int(ids.astype(np.int64).sum())}), flush=True)
 '''
-
-
-def export(rev: str, dest: Path) -> Path:
-    """The tree of ``rev``: the checkout (WORKTREE), a folder, or a git revision exported."""
-    if rev == "WORKTREE":
-        return REPO
-    if os.path.isdir(rev):
-        return Path(rev)
-    dest.mkdir(parents=True)
-    archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], check=True,
-                             capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
-    return dest
 
 
 def main(argv: list[str] | None = None) -> int:

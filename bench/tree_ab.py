@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -50,9 +51,12 @@ print(json.dumps({"median": statistics.median(ts), "min": min(ts)}))
 
 
 def export(rev: str, dest: Path) -> Path:
-    """`rev`'s tracked files under ``dest`` (``None``-like "WORKTREE": the checkout)."""
+    """The tree of ``rev``: the checkout ("WORKTREE"), a folder as it is, or a git
+    revision's tracked files exported under ``dest``. (bench/proc_ab.py uses it too.)"""
     if rev == "WORKTREE":
         return REPO
+    if os.path.isdir(rev):
+        return Path(rev)
     dest.mkdir(parents=True)
     archive = subprocess.run(["git", "-C", str(REPO), "archive", rev], check=True,
                              capture_output=True).stdout

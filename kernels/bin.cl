@@ -149,17 +149,16 @@ __kernel void bin_count(__global const uchar *restrict status,
     /* four histograms taken in turn: with one, runs of equal statuses made a chain of
      * dependent increments of one counter (15% of the kernel's perf samples) */
     int h[4][8] = {{0}};
-    uint c0 = (uint)(((ulong)chunk * m) / chunks), c1 = (uint)(((ulong)(chunk + 1) * m) / chunks);
-    uint t = c0;
-    for (; t + 4 <= c1; t += 4) {
-        h[0][status[t] & 7] += 1;
-        h[1][status[t + 1] & 7] += 1;
-        h[2][status[t + 2] & 7] += 1;
-        h[3][status[t + 3] & 7] += 1;
-    }
-    for (; t < c1; ++t) h[0][status[t] & 7] += 1;
-    for (int k = 0; k < 8; ++k) hist[8 * chunk + k] = (h[0][k] + h[1][k]) + (h[2][k] + h[3][k]);
     CHUNK_SLOTS
+    uint u = s0;
+    for (; u + 4 <= s1; u += 4) {
+        h[0][status[u] & 7] += 1;
+        h[1][status[u + 1] & 7] += 1;
+        h[2][status[u + 2] & 7] += 1;
+        h[3][status[u + 3] & 7] += 1;
+    }
+    for (; u < s1; ++u) h[0][status[u] & 7] += 1;
+    for (int k = 0; k < 8; ++k) hist[8 * chunk + k] = (h[0][k] + h[1][k]) + (h[2][k] + h[3][k]);
     for (uint t = s0; t < s1; ++t) {
         int c = tile1[t];
         if (c >= TILE1_NONE) {

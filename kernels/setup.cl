@@ -465,6 +465,23 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     tile1[t] = st == ST_CLIPPED ? -2 : one;
 }
 
+/* The clipper on triangle (i0, i1, i2) of this work-item's draw (setup_count_clipped and
+ * setup_clipped, whose arguments carry these names): its frustum/guard-band planes and
+ * clipping user planes from the outcodes, the user-plane distances, then clip_and_emit
+ * with (write, out, out_bary, base), its piece count into `count`. A macro because the
+ * buffers are kernel arguments of both kernels. */
+#define CLIP_TRIANGLE(count, write, out, out_bary, base) do {                             \
+    uint o_or_ = outcode[i0] | outcode[i1] | outcode[i2];                                 \
+    uint u_or_ = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;      \
+    double ud_[3 * USER_PLANES_MAX];                                                      \
+    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or_, draws[get_group_id(0)],   \
+               i0, i1, i2, ud_);                                                          \
+    count = clip_and_emit(clip[i0], clip[i1], clip[i2], clip_in(clip64, rnum, i0),        \
+                  clip_in(clip64, rnum, i1), clip_in(clip64, rnum, i2),                   \
+                  o_or_ & OC_NEEDS_CLIP, u_or_, ud_, kx, ky, width, height, zs, zo, id,   \
+                  (write), (out), (out_bary), (base));                                    \
+} while (0)
+
 /* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into
  * clip_count; other triangles keep setup_triangles' 0. */
 __kernel void setup_count_clipped(__global const float4 *restrict clip,
@@ -484,17 +501,7 @@ __kernel void setup_count_clipped(__global const float4 *restrict clip,
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
                      &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED)
         return;
-    uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
-    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;
-    Draw dr = draws[get_group_id(0)];
-    double ud[3 * USER_PLANES_MAX];
-    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
-    clip_count[t] = clip_and_emit(clip[i0], clip[i1], clip[i2],
-                  clip_in(clip64, rnum, i0),
-                  clip_in(clip64, rnum, i1),
-                  clip_in(clip64, rnum, i2),
-                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
-                  id, 0, 0, 0, 0);
+    CLIP_TRIANGLE(clip_count[t], 0, 0, 0, 0);
 }
 
 __kernel void setup_clipped(__global const float4 *restrict clip,
@@ -510,17 +517,8 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
                      &i0, &i1, &i2, &id, &dflags) || clip_count[t] == 0)
         return;
-    uint o_or = outcode[i0] | outcode[i1] | outcode[i2];
-    uint u_or = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;
-    Draw dr = draws[get_group_id(0)];
-    double ud[3 * USER_PLANES_MAX];
-    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or, dr, i0, i1, i2, ud);
-    clip_and_emit(clip[i0], clip[i1], clip[i2],
-                  clip_in(clip64, rnum, i0),
-                  clip_in(clip64, rnum, i1),
-                  clip_in(clip64, rnum, i2),
-                  o_or & OC_NEEDS_CLIP, u_or, ud, kx, ky, width, height, zs, zo,
-                  id, 1, clip_pieces, clip_bary, clip_offset[t]);
+    int written;   /* clip_count[t], counted before */
+    CLIP_TRIANGLE(written, 1, clip_pieces, clip_bary, clip_offset[t]);
 }
 
 /* Exclusive scan of clip_count into clip_offset (and the total), in two launches over

@@ -121,13 +121,7 @@ def test_wireframe_overlay(tmp_path, capsys):
     assert np.all(wire[painted] == 20)   # the overlay colour
     # edges lie on the surface or its silhouette: a painted background pixel can only be
     # one next to a drawn pixel (a silhouette edge lights pixel centres the faces miss)
-    drawn = np.pad(ids >= 0, 1)
-    h, w = ids.shape
-    near = np.zeros_like(ids, dtype=bool)
-    for dy in range(3):
-        for dx in range(3):
-            near |= drawn[dy:dy + h, dx:dx + w]
-    assert np.all(near[painted])
+    assert np.all(_near_drawn(ids)[painted])
     assert np.array_equal(wire, wire_ref)
     assert "wireframe:" in capsys.readouterr().out
 

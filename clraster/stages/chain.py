@@ -79,7 +79,7 @@ class StageChain:
         stages: list[Any] = [self.geometry, self.vertex, self.setup, self.binning]
         if self.raster is not None:
             stages.append(self.raster)
-        total = self.setup.partial.capacity
+        total = self.setup.partial.capacity + self.setup.flag.capacity
         for st in stages:
             total += sum(gb.capacity for gb in vars(st.buffers).values()
                          if isinstance(gb, GrowBuffer))
