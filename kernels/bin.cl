@@ -52,7 +52,7 @@ inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int 
  * bound is one exact division: the first (last) pixel column where the edge function at
  * the row's test y reaches the bias, then the tile holding it. O(1) per edge and row; it
  * replaced a binary search over the columns (same columns). */
-inline void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
+ALWAYS_INLINE void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
 {
     int bx0 = bb_x(pc->bb_min), bx1 = bb_x(pc->bb_max);
     int y0 = imax(bb_y(pc->bb_min), ty << TILE_LOG2);

@@ -133,7 +133,7 @@ inline int facing(float4 a, float4 b, float4 c, int cull)
  * exact): a sub-pixel sliver whose snap changed its shape that much (or flipped it) falls
  * back to the snapped positions, so weights at its covered pixel centres stay bounded.
  * clraster/reference/setup.py `value_planes` does the same double operations in order. */
-inline void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1, int Y1,
+ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1, int Y1,
                          int X2, int Y2, long area2, double hw, double hh, int px0, int py0,
                          double zs, double zo, Piece *pc)
 {
@@ -180,7 +180,7 @@ inline void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1
  * vertices in clip space, double (values: value_planes). Returns ST_RASTER when it
  * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
  * exchanged to make the doubled area positive. */
-inline int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1, double4 c2,
+ALWAYS_INLINE int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1, double4 c2,
                       int width, int height, double zs, double zo, Piece *pc, int *swapped)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
