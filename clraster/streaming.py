@@ -40,6 +40,8 @@ class BinBudgetExceeded(Exception):
                          f"{max_entries:,}")
         self.entries = int(entries)
         self.events = list(events or [])
+        #: the events of the pass's work by stage (filled in by clraster.stages.chain)
+        self.stage_events: dict[str, list] = {}
 
 
 #: pass_draw(batch, max_entries, into) → the frame buffers with ``batch`` drawn into

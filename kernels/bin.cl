@@ -220,10 +220,14 @@ __kernel void bin_scatter(__global const uchar *restrict status,
                           const uint chunks, const int tiles_x, const int n_tiles,
                           __global int *restrict counts, __global const int *restrict tile1,
                           __global const int *restrict tile_start,
-                          __global Piece *restrict entries)
+                          __global Piece *restrict entries,
+                          __global const int *restrict summary, const int cap)
 {
     uint chunk = get_global_id(0);
-    if (chunk >= chunks) return;
+    /* entries holds cap records: a list that does not fit (summary from bin_scan_tiles)
+     * writes nothing; the host reads the total afterwards and scatters again into a
+     * larger buffer (clraster/stages/bin.py BinStage.run, defer) */
+    if (chunk >= chunks || BIN_LIST_OVER(summary, cap)) return;
     __global int *row = counts + (size_t)chunk * n_tiles;
     CHUNK_SLOTS
     for (uint t = s0; t < s1; ++t) {

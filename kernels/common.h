@@ -190,6 +190,12 @@ inline long edge_bias(int ax, int ay, int bx, int by)
 /* floor(a / d) for d > 0, exact in 64 bits (bin.cl, raster.cl) (C division truncates towards zero). */
 inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
 
+/* Does the frame's bin list (summary from bin.cl bin_scan_tiles: [0] its length, [1] set
+ * when that overflowed) not fit the cap records of the entry buffer it was scattered
+ * into? Then bin_scatter wrote nothing and raster_tiles draws nothing; the host scatters
+ * and draws again with a larger buffer (clraster/stages/bin.py BinStage.run, defer). */
+#define BIN_LIST_OVER(summary, cap) ((summary)[1] != 0 || (summary)[0] > (cap))
+
 inline int bb_x(int packed) { return packed & 0xFFFF; }
 inline int bb_y(int packed) { return packed >> 16; }
 

@@ -254,8 +254,12 @@ __kernel void raster_tiles(__global const float *clip_bary,
                            __global float *bary_out, __global long *seg_stats,
                            const int load, const int want_overdraw,
                            __global int *overdraw, const int want_bary,
-                           __global const uchar *wmask, const int use_window)
+                           __global const uchar *wmask, const int use_window,
+                           __global const int *bin_summary, const int bin_cap)
 {
+    /* a bin list that did not fit its buffer was not scattered (bin.cl bin_scatter): draw
+     * nothing, the outputs stay untouched, the host runs the pass again */
+    if (BIN_LIST_OVER(bin_summary, bin_cap)) return;
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
     /* segments per row: the host's choice (clraster/stages/raster.py segments) */
     int segs = (int)get_global_size(0) / tiles_y, seg_tiles = (tiles_x + segs - 1) / segs;

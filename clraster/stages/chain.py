@@ -99,27 +99,38 @@ class StageChain:
         or more clipped pieces — `clraster.streaming.BinBudgetExceeded` is raised before
         anything is counted in ``totals`` (only the device times of the work done).
         """
+        try:
+            bins, events, n_clip = self._bin(queue, pool, fd, params, max_entries, False)
+        except BinBudgetExceeded as e:   # the device time spent still counts
+            _add_events(totals, e.stage_events)
+            raise
+        totals.clip_pieces += n_clip
+        totals.binned_entries += bins.n_entries
+        _add_events(totals, events)
+        return bins
+
+    def _bin(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
+             max_entries: int | None, defer: bool) -> tuple[BinBuffers, dict, int]:
+        """`bin` without touching a FrameTotals: the bin buffers (pending with ``defer``:
+        `BinStage.run`), the events by stage and the clipped pieces. On
+        BinBudgetExceeded, its ``stage_events`` are the events by stage of the work done."""
         self.geometry.upload_pool(queue, pool)
         geo = self.geometry.upload_frame(queue, fd)
         self.setup.prepare(queue)   # while the queue is idle (SetupStage.prepare)
         verts, ev_v = self.vertex.run(queue, geo, params)
+        events: dict[str, list] = {"vertex": ev_v}
         stage = "setup"
         try:
-            setup, ev_s = self.setup.run(queue, geo, verts, params, max_pieces=max_entries)
+            setup, events["setup"] = self.setup.run(queue, geo, verts, params,
+                                                    max_pieces=max_entries)
             stage = "bin"
-            bins, ev_b = self.binning.run(queue, setup, params, max_entries)
-        except BinBudgetExceeded as e:   # the device time spent still counts
-            totals.add_events("vertex", ev_v)
-            if stage == "bin":
-                totals.add_events("setup", ev_s)
-            totals.add_events(stage, e.events)
+            bins, events["bin"] = self.binning.run(queue, setup, params, max_entries,
+                                                   defer=defer)
+        except BinBudgetExceeded as e:
+            events[stage] = e.events
+            e.stage_events = events
             raise
-        totals.clip_pieces += setup.n_clip_pieces
-        totals.binned_entries += bins.n_entries
-        totals.add_events("vertex", ev_v)
-        totals.add_events("setup", ev_s)
-        totals.add_events("bin", ev_b)
-        return bins
+        return bins, events, setup.n_clip_pieces
 
     def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
              totals: FrameTotals, *, into: RasterOutput | None = None,
@@ -142,14 +153,40 @@ class StageChain:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
                 into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)
             return into
-        bins = self.bin(queue, pool, fd, params, totals, max_entries=max_entries)
-        setup = self.setup.buffers
         raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
-        out, rstats, ev_r = raster.run(queue, setup, bins, params, into=into,
-                                       overdraw=overdraw, bary=bary)
+        try:
+            bins, events, n_clip = self._bin(queue, pool, fd, params, max_entries, True)
+        except BinBudgetExceeded as e:   # the device time spent still counts
+            _add_events(totals, e.stage_events)
+            raise
+        setup = self.setup.buffers
+        out, load = raster.outputs(params, into, overdraw, bary)
+        events["raster"] = [raster.launch(queue, setup, bins, params, out, load)]
+        raster.wait(queue, out)
+        if bins.pending:
+            # the scatter and raster ran without waiting for the list's length (BinStage.run
+            # with defer); a list that did not fit drew nothing: scattered again, drawn again
+            try:
+                again = self.binning.settle(queue, params, max_entries, events["bin"])
+            except BinBudgetExceeded:   # nothing was drawn
+                _add_events(totals, events)
+                raise
+            if again:
+                events["raster"].append(raster.launch(queue, setup, bins, params, out, load))
+                raster.wait(queue, out)
+        rstats = raster.finish(queue, params, out)
+        totals.clip_pieces += n_clip
+        totals.binned_entries += bins.n_entries
         totals.status_counts += bins.status_counts   # counted on the device (bin_count)
         totals.fragments_tested += int(rstats[:, 0].sum())
         totals.fragments_passed += int(rstats[:, 1].sum())
-        totals.add_events("raster", [ev_r])
+        _add_events(totals, events)
         totals.settle()   # the raster waited for the queue: every event is complete
         return out
+
+
+def _add_events(totals: FrameTotals, events: dict[str, list]) -> None:
+    """Add the events by stage (`StageChain._bin`) to ``totals`` (pending, see
+    `FrameTotals.settle`)."""
+    for stage, ev in events.items():
+        totals.add_events(stage, ev)

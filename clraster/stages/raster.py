@@ -91,7 +91,7 @@ class RasterStage:
                     np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
                     self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
-                    self.buffers.window.ensure(1), np.int32(0))
+                    self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0))
         wait(queue, keep=into)
         into.sync(queue)
         return into
@@ -112,8 +112,8 @@ class RasterStage:
             params: FrameParams, *, into: RasterOutput | None = None,
             overdraw: bool = False, bary: bool = True
             ) -> tuple[RasterOutput, np.ndarray, cl.Event]:
-        """Rasterize the binned pieces (bins; the parent barycentrics of clipped pieces come
-        from setup.clip_bary).
+        """Rasterize the binned pieces (bins, complete: not pending; the parent
+        barycentrics of clipped pieces come from setup.clip_bary).
 
         Args:
             into: outputs of an earlier pass over the same image to continue from (its
@@ -128,33 +128,63 @@ class RasterStage:
             (fragments tested / passed per segment of a row of tiles) and the profiling
             event.
         """
-        width, height = params.width, params.height
-        tiles_x = params.tiles_x
-        load = into is not None
+        out, load = self.outputs(params, into, overdraw, bary)
+        ev = self.launch(queue, setup, bins, params, out, load)
+        self.wait(queue, out)
+        rstats = self.finish(queue, params, out)
+        return out, rstats, ev
+
+    def outputs(self, params: FrameParams, into: RasterOutput | None, overdraw: bool,
+                bary: bool) -> tuple[RasterOutput, bool]:
+        """The outputs a pass draws into and whether it loads them (`run`'s ``into``,
+        ``overdraw`` and ``bary``): ``into`` itself, or fresh uninitialised arrays that
+        the raster kernel fills completely."""
         if into is None:
+            width, height = params.width, params.height
             self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
-            into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool)
-        elif overdraw and into.overdraw is None:
+            return RasterOutput.allocate(self.ctx, width, height, overdraw, bary,
+                                         self.pool), False
+        if overdraw and into.overdraw is None:
             raise ValueError("overdraw was not counted in the earlier pass")
-        want = into.overdraw is not None
-        want_bary = into.bary is not None
+        return into, True
+
+    def launch(self, queue: cl.CommandQueue, setup: SetupBuffers, bins: BinBuffers,
+               params: FrameParams, out: RasterOutput, load: bool) -> cl.Event:
+        """Enqueue the raster kernel over ``bins`` into ``out`` (``load``: continue from
+        its contents, see `run`); it draws nothing when the bin list did not fit the
+        entry buffer (bins.cap, `BinStage.run` with defer). Returns its event; `finish`
+        waits for it."""
+        width, height = params.width, params.height
+        want = out.overdraw is not None
+        want_bary = out.bary is not None
         # an output not wanted gets another buffer as its (untouched) argument; overdraw,
         # when present, is the last buffer
-        ev = self.kernel(queue, (segments(params),), (1,), setup.clip_bary.buf,
-                         bins.tile_start.buf, bins.entries.buf,
-                         np.int32(width), np.int32(height), np.int32(tiles_x), *into.bufs[:2],
-                         into.bufs[2] if want_bary else into.bufs[1],
-                         self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(load),
-                         np.int32(want), into.bufs[-1] if want else into.bufs[1],
-                         np.int32(want_bary), *self._window(queue, params))
-        # wait first: a non-blocking read here kept the GIL for the whole raster kernel
-        # (~200 ms of a big frame during which no other Python thread ran)
-        wait(queue, keep=into)
+        return self.kernel(queue, (segments(params),), (1,), setup.clip_bary.buf,
+                           bins.tile_start.buf, bins.entries.buf,
+                           np.int32(width), np.int32(height), np.int32(params.tiles_x),
+                           *out.bufs[:2], out.bufs[2] if want_bary else out.bufs[1],
+                           self.buffers.seg_stats.ensure(16 * segments(params)),
+                           np.int32(load), np.int32(want),
+                           out.bufs[-1] if want else out.bufs[1], np.int32(want_bary),
+                           *self._window(queue, params), bins.summary.buf, np.int32(bins.cap))
+
+    def wait(self, queue: cl.CommandQueue, out: RasterOutput) -> None:
+        """Wait (interruptibly, `device.wait`) for what is enqueued, ``out`` kept alive
+        should the wait be interrupted."""
+        wait(queue, keep=out)
+
+    def finish(self, queue: cl.CommandQueue, params: FrameParams,
+               out: RasterOutput) -> np.ndarray:
+        """After `wait`: make ``out`` readable. Returns the segment stats (S, 2) int64
+        (see `run`)."""
+        # the caller waited first: a non-blocking read enqueued behind the running raster
+        # kept the GIL for the whole kernel (~200 ms of a big frame during which no other
+        # Python thread ran)
         rstats = np.empty((segments(params), 2), np.int64)
         cl.enqueue_copy(queue, rstats, cast(cl.Buffer, self.buffers.seg_stats.buf),
                         is_blocking=False)
-        into.sync(queue)   # waits for the copy too
-        return into, rstats, ev
+        out.sync(queue)   # waits for the copy too
+        return rstats
 
 
 @dataclass
