@@ -66,6 +66,10 @@ def test_json_schema(quick):
         assert _positive(cl["triangles_per_s"]) and _positive(cl["pixels_per_s"])
         assert {"vertex", "setup", "bin", "raster"} <= set(cl["stages_median_ms"])
         assert cl["counts"]["triangles_total"] == c["triangles"]
+        lean = cl["lean"]   # the same frames with depth and ids only (llvmpipe's outputs)
+        assert lean["outputs"] == ["depth", "ids"]
+        assert len(lean["runs_ms"]) == res["settings"]["repeat"]
+        assert all(_positive(t) for t in lean["runs_ms"]) and _positive(lean["median_ms"])
         assert tw["n_runs"] == len(tw["runs_ms"]) >= 1
         assert all(_positive(t) for t in tw["runs_ms"]) and _positive(tw["median_ms"])
         assert _positive(c["speedup_vs_twin"])
@@ -80,14 +84,25 @@ def test_json_schema(quick):
             assert "error" not in pe, pe
             assert _positive(pe["median_ms"]) and isinstance(pe["coverage"], dict)
             assert _positive(pe["ratio_clraster_over_llvmpipe"])
+            assert pe["ratio_lean_over_llvmpipe"] == lean["median_ms"] / pe["median_ms"]
         else:
             assert pe["skipped"].startswith("peer skipped") and res["peer"]["reason"]
 
-    names = {t["name"] for t in res["targets"]}
-    assert names == {"dragon_vs_twin", "dragon_vs_llvmpipe", "plant10m_occlusion_vs_llvmpipe",
-                     "scale_200m_renders", "scale_200m_peak_rss", "scale_linear"}
-    for t in res["targets"]:   # quick mode has neither the dragon at 1080p nor a 10M plant,
-        assert t["met"] is None and t["note"]   # and the scale sweep runs only when named
+    targets = {t["name"]: t for t in res["targets"]}
+    every = {"every_config_vs_llvmpipe", "every_config_vs_llvmpipe_lean"}
+    assert set(targets) == {"dragon_vs_twin", "dragon_vs_llvmpipe",
+                            "plant10m_occlusion_vs_llvmpipe", "dragon_vs_llvmpipe_0.2",
+                            "plant10m_occlusion_vs_llvmpipe_20", "plant10m_occlusion_vs_off",
+                            "scale_200m_renders", "scale_200m_peak_rss", "scale_linear", *every}
+    for name, t in targets.items():
+        if name in every and res["peer"]["available"]:
+            # the largest ratio over the configurations, and which one it is
+            key = "ratio_clraster_over_llvmpipe" if name == "every_config_vs_llvmpipe" \
+                else "ratio_lean_over_llvmpipe"
+            assert t["value"] == max(c["peer"][key] for c in configs)
+            assert t["met"] is (t["value"] <= 1.0) and t["config"]
+        else:   # quick mode has neither the dragon at 1080p nor a 10M plant, and the
+            assert t["met"] is None and t["note"]   # scale sweep runs only when named
     assert res["scale"] is None
     assert all("scale" not in c["sweeps"] for c in configs)
 

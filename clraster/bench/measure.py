@@ -7,7 +7,10 @@ warm) and one of the twin, then ``--repeat`` rounds interleaved (OpenCL, twin, O
 ...), so machine noise hits both alike; medians. The twin gets a time budget per configuration
 (``--twin-budget``) and renders the same culling mode (:data:`~clraster.bench.spec.TWIN_MODE`),
 through a `clraster.reference.Renderer` of its own, whose occlusion history its warm-up
-frame makes warm. The llvmpipe peer (:class:`PeerRunner`) runs once per (scene, size).
+frame makes warm. Each round also times one OpenCL frame with only the outputs the llvmpipe
+peer makes (:data:`LEAN_OUTPUTS`, depth and triangle ids; not in the scale sweep): the
+like-for-like comparison. The llvmpipe peer (:class:`PeerRunner`) runs once per (scene,
+size).
 
 The probes (:func:`measure_startup`, :func:`measure_memory`) each run a fresh Python process,
 ``python -m clraster.bench.cli --probe JSON``, whose body is :func:`probe`; it prints one
@@ -56,6 +59,11 @@ MEMORY_METHOD = (
 # =======================================================================================
 # Measuring one configuration
 # =======================================================================================
+
+#: What the llvmpipe peer makes (depth and triangle ids, `peer_llvmpipe`): the outputs of
+#: the second clraster timing of every configuration, the like-for-like comparison.
+LEAN_OUTPUTS = ("depth", "ids")
+
 
 def _median(xs: list[float]) -> float | None:
     return float(statistics.median(xs)) if xs else None
@@ -123,6 +131,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         twin_warm_ms.append(twin_spent * 1e3)
 
     cl_ms: list[float] = []
+    lean_ms: list[float] = []
     tw_ms: list[float] = []
     cl_stages: list[dict] = []
     tw_stages: list[dict] = []
@@ -133,6 +142,12 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         f = r.render(sc.target, cam, cull=a.cull, **kw)
         cl_ms.append((time.perf_counter() - t0) * 1e3)
         cl_stages.append(dict(f.stats.timings_ms))
+        if not scale_only(cfg.sweeps):
+            # the job the llvmpipe peer does: depth and triangle ids, no barycentrics
+            # (interleaved, same renderer and camera: an occlusion history stays the same)
+            t0 = time.perf_counter()
+            r.render(sc.target, cam, cull=a.cull, outputs=LEAN_OUTPUTS, **kw)
+            lean_ms.append((time.perf_counter() - t0) * 1e3)
         if g is not None and not budget_hit:
             if tw_ms and twin_spent > a.twin_budget:
                 budget_hit = True
@@ -155,6 +170,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         # the triangles that survived object culling, per second (what the stages process)
         "setup_triangles_per_s": _rate(counts["triangles_in"], cl_med),
         "counts": counts,
+        "lean": {"outputs": list(LEAN_OUTPUTS), "runs_ms": lean_ms,
+                 "median_ms": _median(lean_ms)},
     }
     if cfg.mode == "occlusion":
         rec["opencl"]["note"] = (f"{len(warm_ms)} warm-up frames before timing, so the "
@@ -189,7 +206,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
                 f"{rec['agreement']['pixels_differing']} pixels")
     note("llvmpipe")
     rec["peer"] = ({"skipped": SCALE_SKIP_PEER} if scale_only(cfg.sweeps) and peer.ok
-                   else peer.measure(cfg, sc, cam, f.depth, a, cl_med))
+                   else peer.measure(cfg, sc, cam, f.depth, a, cl_med, _median(lean_ms)))
     del r, f, g
     return rec
 
@@ -224,7 +241,8 @@ class PeerRunner:
     def status(self) -> dict[str, Any]:
         return {"available": self.ok, "reason": self.reason, "renderer": self.renderer}
 
-    def measure(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a, cl_med) -> dict:
+    def measure(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a, cl_med,
+                lean_med: float | None = None) -> dict:
         if not self.ok:
             return {"skipped": self.reason}
         key = (cfg.scene.text, cfg.width, cfg.height, a.cull)
@@ -234,6 +252,9 @@ class PeerRunner:
         if rec.get("median_ms") and cl_med:
             rec["ratio_clraster_over_llvmpipe"] = cl_med / rec["median_ms"]
             rec["speedup_vs_llvmpipe"] = rec["median_ms"] / cl_med
+        if rec.get("median_ms") and lean_med:
+            # clraster making what llvmpipe makes (depth and ids) over llvmpipe's time
+            rec["ratio_lean_over_llvmpipe"] = lean_med / rec["median_ms"]
         return rec
 
     def _run(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a) -> dict:

@@ -187,6 +187,8 @@ def _md_config_row(c: dict) -> str:
             f"{c['size'][0]}×{c['size'][1]} | {c['mode']} | "
             f"{_f(c['opencl']['median_ms'])} | {tws} | {_x(c['speedup_vs_twin'])} | "
             f"{pes} | {_f(pe.get('ratio_clraster_over_llvmpipe'), '.2f')} | "
+            f"{_f((c['opencl'].get('lean') or {}).get('median_ms'))} | "
+            f"{_f(pe.get('ratio_lean_over_llvmpipe'), '.2f')} | "
             f"{_si(c['opencl']['triangles_per_s'])} | {_si(c['opencl']['pixels_per_s'])} "
             f"| {agree} |")
 
@@ -194,8 +196,9 @@ def _md_config_row(c: dict) -> str:
 def _md_configs(res: dict) -> list[str]:
     L = ["", "## Configurations", "",
          "| sweep | scene | triangles | size | mode | OpenCL ms | twin ms (runs) | "
-         "speedup | llvmpipe ms | clraster/llvmpipe | tri/s | px/s | twin agrees |",
-         "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+         "speedup | llvmpipe ms | clraster/llvmpipe | depth+ids ms | depth+ids/llvmpipe | "
+         "tri/s | px/s | twin agrees |",
+         "|---|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     notes = []
     for c in res["configs"]:
         L.append(_md_config_row(c))
@@ -205,7 +208,10 @@ def _md_configs(res: dict) -> list[str]:
             notes.append(f"- {c['id']}: {c['twin']['skipped']}")
     mixed = any(c["twin"].get("mode", c["mode"]) != c["mode"] for c in res["configs"])
     L += ["", ("[frustum] after a twin time: the twin had no occlusion culling and rendered "
-               "the frustum mode (same image). " if mixed else "") + "⏱: the twin's time budget "
+               "the frustum mode (same image). " if mixed else "") + "depth+ids: clraster "
+          "rendering only what the llvmpipe peer makes (`outputs=(\"depth\", \"ids\")`, no "
+          "barycentrics), timed in the same rounds; llvmpipe's time is its draw and "
+          "glFinish, without reading its buffers back. ⏱: the twin's time budget "
           f"({res['settings']['twin_budget_s']:g} s per configuration) was spent; (runs) is "
           "how many timed frames it made. Occlusion configurations are timed after "
           f"{res['settings']['warmup'] + res['settings']['occlusion_warmup']} warm-up frames "

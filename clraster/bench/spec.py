@@ -317,4 +317,30 @@ def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dic
            "clraster time", plant, ps, 10.0, ">=",
            "no plant ≥ 10M triangles with occlusion mode in this run" if not plant else
            (plant.get("peer") or {}).get("skipped") or "llvmpipe not measured")
+    # issue 15 ("ahead of llvmpipe on every configuration, and far ahead on big meshes")
+    timed = [c for c in configs if (c.get("peer") or {}).get("ratio_clraster_over_llvmpipe")]
+    none_timed = "no configuration with an llvmpipe time in this run"
+    for key, what in (("ratio_clraster_over_llvmpipe", "all outputs"),
+                      ("ratio_lean_over_llvmpipe", "depth and ids, as llvmpipe")):
+        worst = max((c for c in timed if c["peer"].get(key)), default=None,
+                    key=lambda c: c["peer"][key])
+        target(f"every_config_vs_llvmpipe{'' if what == 'all outputs' else '_lean'}",
+               f"every configuration ({what}): largest clraster time / llvmpipe time",
+               worst, worst["peer"][key] if worst else None, 1.0, "<=", none_timed)
+    target("dragon_vs_llvmpipe_0.2", "dragon at 1920x1080: clraster time / llvmpipe time "
+           "(issue 15)", dragon, pr, 0.2, "<=", nodragon if not dragon else
+           (dragon.get("peer") or {}).get("skipped") or "llvmpipe not measured")
+    target("plant10m_occlusion_vs_llvmpipe_20",
+           "plant ≥ 10M triangles, occlusion culling: llvmpipe time / clraster time "
+           "(issue 15)", plant, ps, 20.0, ">=",
+           "no plant ≥ 10M triangles with occlusion mode in this run" if not plant else
+           (plant.get("peer") or {}).get("skipped") or "llvmpipe not measured")
+    off = plant and _find(configs, lambda c: c["scene"]["name"] == plant["scene"]["name"]
+                          and c["size"] == plant["size"] and c["mode"] == "off")
+    own = (off["opencl"]["median_ms"] / plant["opencl"]["median_ms"]
+           if off and plant and plant["opencl"]["median_ms"] else None)
+    target("plant10m_occlusion_vs_off",
+           "plant ≥ 10M triangles: clraster without object culling / with occlusion culling",
+           plant, own, 6.0, ">=", "no plant ≥ 10M triangles in both occlusion and off modes "
+           "in this run")
     return out + scale_targets(scale)
