@@ -1,5 +1,6 @@
 /* Vertex stage: object space -> clip space, and outcodes, for the vertices of this frame's
- * draws (instance, cluster): one work-item per (draw, cluster-local vertex). Each instance has
+ * draws (instance, cluster): one work-item per VERTEX_LANES consecutive cluster-local
+ * vertices of a draw (a work-group per draw). Each instance has
  * its own row-major float32 matrix (clip = M · [x y z 1]ᵀ) in mvps[16 * instance].
  * Output vertex i = draw.vert_base + local index; a vertex shared by two clusters is
  * transformed once per cluster, bit-identically.
@@ -11,6 +12,18 @@
  * (uplanes[(instance·n_user + k)·4 ..]), is negative: user_dist, the expression setup.cl
  * evaluates for the same vertex. */
 #include "common.h"
+
+/* Lanes per work-item: VERTEX_LANES vertices of one cluster go through the transforms as
+ * float8 / double8 vectors (the same operations per lane as scalar code, so the same bits);
+ * loads, outcodes, rounding and stores stay per vertex. PoCL does not vectorize this kernel
+ * across work-items itself (ARCHITECTURE.md, "Writing kernels for PoCL's CPU device"), so
+ * the lanes are written out: dragon 871K at 1080p, vertex 5.10 -> 3.66 ms, frame 0.95x
+ * (bench/proc_ab.py, 15 rounds). Outcodes as vector compares ORed into int8 masks came out
+ * wrong on Oclgrind (tests/test_oclgrind.py), so they are per vertex. The host launches
+ * CLUSTER_MAX / VERTEX_LANES work-items per draw (clraster/stages/vertex.py); VERTEX_LANES
+ * (8, clraster/layout.py) must match the vector types below. */
+typedef float8 fvec;
+typedef double8 dvec;
 
 __kernel void vertex_transform(__global const float *restrict pos,
                                __global const int *restrict vert_ids,
@@ -28,49 +41,103 @@ __kernel void vertex_transform(__global const float *restrict pos,
                                __global double4 *restrict clip64,
                                __global double *restrict rnum)
 {
-    /* launched with work-groups of CLUSTER_MAX: the group is the draw, so everything read
-     * per draw (record, cluster, matrix) is uniform over the group and PoCL hoists it */
-    uint d = get_group_id(0), lv = get_local_id(0);
+    /* work-groups of CLUSTER_MAX / VERTEX_LANES: the group is the draw, so everything read
+     * per draw (record, cluster, matrix) is uniform over the group */
+    uint d = get_group_id(0);
     if (d >= n_draws) return;
     Draw dr = draws[d];
     int4 ci = clusters[dr.cluster];   /* tri_offset, n_tris, vert_offset, n_verts */
-    if ((int)lv >= ci.w) return;
-    int vi = vert_ids[ci.z + lv];
-    uint i = (uint)dr.vert_base + lv;
-    __global const float *mvp = mvps + 16 * dr.instance;
-    float4 c = clip_transform(mvp, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]);
-    uint oc = 0;
-    if (!(finite_f(c.x) && finite_f(c.y) && finite_f(c.z) && finite_f(c.w))) {
-        oc = OC_INVALID;
-    } else if (!(dr.flags & DRAW_INSIDE)) {
-        /* clusters inside the frustum by a margin skip the tests: all bits would be 0 */
-        oc = frustum_outcode(c);
-        oc |= (c.x + kx * c.w < 0.0f) ? OC_GB_X_NEG : 0;
-        oc |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
-        oc |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;
-        oc |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
-        oc |= (c.w > 0.0f) ? 0 : OC_W_NONPOS;
+    int lv0 = (int)get_local_id(0) * VERTEX_LANES;
+    if (lv0 >= ci.w) return;
+    int n = imin(VERTEX_LANES, ci.w - lv0);
+    float px[VERTEX_LANES] __attribute__((aligned(32)));
+    float py[VERTEX_LANES] __attribute__((aligned(32)));
+    float pz[VERTEX_LANES] __attribute__((aligned(32)));
+    for (int l = 0; l < VERTEX_LANES; ++l) {
+        int vi = vert_ids[ci.z + lv0 + (l < n ? l : 0)];   /* spare lanes: a real vertex */
+        px[l] = pos[3 * vi]; py[l] = pos[3 * vi + 1]; pz[l] = pos[3 * vi + 2];
     }
-    /* The viewport transform is done once per vertex here rather than once per triangle
-     * corner in setup. Only meaningful for vertices that triangles use unclipped (inside the
-     * guard band, near and far, w > 0); others are left as zeros and never read. */
-    WinVert v = {0, 0, 0.0f, 0.0f};
-    if (!(oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)))
-        v = viewport_vertex(c, 0.5f * (float)width, 0.5f * (float)height);
-    uint uc = 0;
-    if (n_user > 0 && !(oc & OC_INVALID)) {
-        __global const double *q = uplanes + 4 * n_user * dr.instance;
-        for (int k = 0; k < n_user; ++k)
-            uc |= user_dist(q + 4 * k, pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2]) < 0.0
-                  ? 1u << k : 0u;
-    }
+    fvec x = *(fvec *)px, y = *(fvec *)py, z = *(fvec *)pz;
+    __global const float *m = mvps + 16 * dr.instance;
+    /* clip_transform, per lane */
+    fvec cx = ((m[0] * x + m[1] * y) + m[2] * z) + m[3];
+    fvec cy = ((m[4] * x + m[5] * y) + m[6] * z) + m[7];
+    fvec cz = ((m[8] * x + m[9] * y) + m[10] * z) + m[11];
+    fvec cw = ((m[12] * x + m[13] * y) + m[14] * z) + m[15];
+    /* viewport_vertex's arithmetic, per lane (used below only for the vertices drawn
+     * unclipped; a lane with w = 0 gets inf here, never stored) */
+    fvec iw = 1.0f / cw;
+    float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
+    fvec xs = ((cx * iw + 1.0f) * hw) * (float)SUB_ONE;
+    fvec ys = ((1.0f - cy * iw) * hh) * (float)SUB_ONE;
+    fvec wz = (cz * iw) * 0.5f + 0.5f;
     /* the double position setup's value planes and clipper use (common.h vertex_clip64) */
-    double r;
-    clip64[i] = vertex_clip64(mvps64 + 16 * dr.instance, zrows + 4 * dr.instance, reversed,
-                              pos[3 * vi], pos[3 * vi + 1], pos[3 * vi + 2], &r);
-    rnum[i] = r;
-    clip[i] = c;
-    outcode[i] = (ushort)oc;
-    win[i] = v;
-    ucode[i] = (uchar)uc;
+    dvec xd = __builtin_convertvector(x, dvec), yd = __builtin_convertvector(y, dvec);
+    dvec zd = __builtin_convertvector(z, dvec);
+    __global const double *m64 = mvps64 + 16 * dr.instance;
+    dvec dx = ((m64[0] * xd + m64[1] * yd) + m64[2] * zd) + m64[3];
+    dvec dy = ((m64[4] * xd + m64[5] * yd) + m64[6] * zd) + m64[7];
+    dvec dz = ((m64[8] * xd + m64[9] * yd) + m64[10] * zd) + m64[11];
+    dvec dw = ((m64[12] * xd + m64[13] * yd) + m64[14] * zd) + m64[15];
+    dvec r = dz;
+    if (reversed) {
+        __global const double *q = zrows + 4 * dr.instance;
+        r = ((q[0] * xd + q[1] * yd) + q[2] * zd) + q[3];
+    }
+    float acx[VERTEX_LANES] __attribute__((aligned(32)));
+    float acy[VERTEX_LANES] __attribute__((aligned(32)));
+    float acz[VERTEX_LANES] __attribute__((aligned(32)));
+    float acw[VERTEX_LANES] __attribute__((aligned(32)));
+    float axs[VERTEX_LANES] __attribute__((aligned(32)));
+    float ays[VERTEX_LANES] __attribute__((aligned(32)));
+    float awz[VERTEX_LANES] __attribute__((aligned(32)));
+    float aiw[VERTEX_LANES] __attribute__((aligned(32)));
+    double adx[VERTEX_LANES] __attribute__((aligned(64)));
+    double ady[VERTEX_LANES] __attribute__((aligned(64)));
+    double adz[VERTEX_LANES] __attribute__((aligned(64)));
+    double adw[VERTEX_LANES] __attribute__((aligned(64)));
+    double ar[VERTEX_LANES] __attribute__((aligned(64)));
+    *(fvec *)acx = cx; *(fvec *)acy = cy; *(fvec *)acz = cz; *(fvec *)acw = cw;
+    *(fvec *)axs = xs; *(fvec *)ays = ys; *(fvec *)awz = wz; *(fvec *)aiw = iw;
+    *(dvec *)adx = dx; *(dvec *)ady = dy; *(dvec *)adz = dz; *(dvec *)adw = dw;
+    *(dvec *)ar = r;
+    uint i0 = (uint)dr.vert_base + (uint)lv0;
+    for (int l = 0; l < n; ++l) {
+        uint i = i0 + l;
+        float4 c = (float4)(acx[l], acy[l], acz[l], acw[l]);
+        /* outcodes per vertex (vector compares ORed into masks came out wrong on
+         * Oclgrind, tests/test_oclgrind.py) */
+        uint o = 0;
+        if (!(finite_f(c.x) && finite_f(c.y) && finite_f(c.z) && finite_f(c.w))) {
+            o = OC_INVALID;
+        } else if (!(dr.flags & DRAW_INSIDE)) {
+            /* clusters inside the frustum by a margin skip the tests: all bits would be 0 */
+            o = frustum_outcode(c);
+            o |= (c.x + kx * c.w < 0.0f) ? OC_GB_X_NEG : 0;
+            o |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
+            o |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;
+            o |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
+            o |= (c.w > 0.0f) ? 0 : OC_W_NONPOS;
+        }
+        WinVert v = {0, 0, 0.0f, 0.0f};
+        if (!(o & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP))) {
+            /* round half to even (common.h viewport_vertex) */
+            v.x = (int)RINTF(axs[l]);
+            v.y = (int)RINTF(ays[l]);
+            v.z = awz[l];
+            v.iw = aiw[l];
+        }
+        uint uc = 0;
+        if (n_user > 0 && !(o & OC_INVALID)) {
+            __global const double *q = uplanes + 4 * n_user * dr.instance;
+            for (int k = 0; k < n_user; ++k)
+                uc |= user_dist(q + 4 * k, px[l], py[l], pz[l]) < 0.0 ? 1u << k : 0u;
+        }
+        clip[i] = c;
+        outcode[i] = (ushort)o;
+        win[i] = v;
+        ucode[i] = (uchar)uc;
+        clip64[i] = (double4)(adx[l], ady[l], adz[l], adw[l]);
+        rnum[i] = ar[l];
+    }
 }

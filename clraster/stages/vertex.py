@@ -10,6 +10,7 @@ import pyopencl as cl
 
 from ..config import CLUSTER_MAX, RasterConfig
 from ..device import program
+from ..layout import VERTEX_LANES
 from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
@@ -48,7 +49,8 @@ class VertexStage:
         ``geo.n_verts`` entries. Returns the buffers and the profiling events."""
         b = self.buffers
         n_draws, n_verts = geo.n_draws, geo.n_verts
-        ev = self.kernel(queue, (max(n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,),
+        group = CLUSTER_MAX // VERTEX_LANES   # work-items per draw (kernels/vertex.cl)
+        ev = self.kernel(queue, (max(n_draws, 1) * group,), (group,),
                          geo.positions.buf,
                          geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
                          np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
