@@ -85,6 +85,9 @@ def test_json_schema(quick):
             assert _positive(pe["median_ms"]) and isinstance(pe["coverage"], dict)
             assert _positive(pe["ratio_clraster_over_llvmpipe"])
             assert pe["ratio_lean_over_llvmpipe"] == lean["median_ms"] / pe["median_ms"]
+            # a llvmpipe frame in each round, with clraster's
+            assert pe["interleaved"] is True
+            assert len(pe["runs_ms"]) == res["settings"]["repeat"]
         else:
             assert pe["skipped"].startswith("peer skipped") and res["peer"]["reason"]
 

@@ -481,6 +481,7 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
     mem_jobs = [] if a.no_memory else memory_jobs(runnable)
     prog = _progress(runnable, mem_jobs, a)
     records, errors = _measure_configs(runnable, a, argv, peer, prog, out, skipped)
+    peer.close()
     memory = _measure_memory(mem_jobs, records, a, prog)
     startup = _measure_startup(a, prog)
     prog.close()

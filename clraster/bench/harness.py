@@ -27,8 +27,10 @@ time budget per configuration (``--twin-budget``): once spent, it stops after â‰
 and the JSON says how many it made. The twin renders the same culling mode, occlusion
 culling included (it runs the same two-phase schedule, `clraster.twophase`). The OpenCL and
 twin images are compared (triangle ids identical, largest depth difference). The llvmpipe peer
-(`clraster.bench.peer_llvmpipe`) draws the whole scene with back-face culling once per
-(scene, size), on the same view-projection; its coverage is compared with clraster's.
+(`clraster.bench.peer_llvmpipe`) draws the whole scene with back-face culling on the same
+view-projection, one frame per round after clraster's (interleaved like the twin); its
+coverage is compared with clraster's. Each round also times clraster making only what
+llvmpipe makes (depth and ids).
 
 Also measured: cold start (fresh, empty PoCL and pyopencl kernel caches) and warm start of a
 fresh process, and the peak memory (VmHWM, not ru_maxrss) of a fresh process rendering one

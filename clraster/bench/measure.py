@@ -9,8 +9,8 @@ warm) and one of the twin, then ``--repeat`` rounds interleaved (OpenCL, twin, O
 through a `clraster.reference.Renderer` of its own, whose occlusion history its warm-up
 frame makes warm. Each round also times one OpenCL frame with only the outputs the llvmpipe
 peer makes (:data:`LEAN_OUTPUTS`, depth and triangle ids; not in the scale sweep): the
-like-for-like comparison. The llvmpipe peer (:class:`PeerRunner`) runs once per (scene,
-size).
+like-for-like comparison; and one llvmpipe frame (:class:`PeerRunner`, :class:`PeerSession`:
+the same scene, camera and size, uploaded once per scene and size).
 
 The probes (:func:`measure_startup`, :func:`measure_memory`) each run a fresh Python process,
 ``python -m clraster.bench.cli --probe JSON``, whose body is :func:`probe`; it prints one
@@ -130,6 +130,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         twin_spent = time.perf_counter() - t0
         twin_warm_ms.append(twin_spent * 1e3)
 
+    # the llvmpipe peer, timed in the same rounds (None: unavailable, or the scale sweep)
+    session = None if scale_only(cfg.sweeps) else peer.session(cfg, sc, cam, a)
     cl_ms: list[float] = []
     lean_ms: list[float] = []
     tw_ms: list[float] = []
@@ -148,6 +150,8 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
             t0 = time.perf_counter()
             r.render(sc.target, cam, cull=a.cull, outputs=LEAN_OUTPUTS, **kw)
             lean_ms.append((time.perf_counter() - t0) * 1e3)
+        if session is not None:
+            session.frame()
         if g is not None and not budget_hit:
             if tw_ms and twin_spent > a.twin_budget:
                 budget_hit = True
@@ -206,7 +210,7 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
                 f"{rec['agreement']['pixels_differing']} pixels")
     note("llvmpipe")
     rec["peer"] = ({"skipped": SCALE_SKIP_PEER} if scale_only(cfg.sweeps) and peer.ok
-                   else peer.measure(cfg, sc, cam, f.depth, a, cl_med, _median(lean_ms)))
+                   else peer.result(session, f.depth, cl_med, _median(lean_ms)))
     del r, f, g
     return rec
 
@@ -216,12 +220,17 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
 # =======================================================================================
 
 class PeerRunner:
-    """Runs `clraster.bench.peer_llvmpipe` once per (scene, size) and caches the result."""
+    """The llvmpipe peer (`clraster.bench.peer_llvmpipe`), timed in the rounds of each
+    configuration (`session`): one llvmpipe frame per round, after clraster's, so a drift of
+    the shared machine's speed hits both alike. (It used to be timed apart, once per scene
+    and size: a run then put spot at 0.81× llvmpipe while frames taken in turn gave 1.26×,
+    `bench/peer_check.py`.) The uploaded scene is kept while consecutive configurations
+    draw it (the modes of one scene and size)."""
 
     def __init__(self, enabled: bool, disabled_reason: str = "--no-peer") -> None:
         self.mod: Any = None
         self.renderer: str | None = None
-        self.cache: dict[tuple, dict] = {}
+        self._live: tuple[tuple, Any, float] | None = None   # (key, LlvmpipePeer, upload s)
         if not enabled:
             self.ok, self.reason = False, f"peer skipped: {disabled_reason}"
             return
@@ -241,14 +250,39 @@ class PeerRunner:
     def status(self) -> dict[str, Any]:
         return {"available": self.ok, "reason": self.reason, "renderer": self.renderer}
 
-    def measure(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a, cl_med,
-                lean_med: float | None = None) -> dict:
+    def session(self, cfg: Config, sc: LoadedScene, cam, a) -> PeerSession | None:
+        """A peer session for one configuration (its scene uploaded, one warm-up frame
+        drawn), or None when the peer is unavailable. A failure is kept in the session and
+        reported by `result`, never raised: the peer is a comparison, not the thing under
+        test."""
         if not self.ok:
+            return None
+        import numpy as np
+
+        key = (cfg.scene.text, cfg.width, cfg.height)
+        try:
+            if self._live is None or self._live[0] != key:
+                self.close()
+                t0 = time.perf_counter()
+                p = self.mod.LlvmpipePeer(cfg.width, cfg.height)
+                self._live = (key, p, 0.0)
+                p.upload(sc.target)
+                self._live = (key, p, time.perf_counter() - t0)
+            _, p, t_up = self._live
+            vp = np.asarray(cam.view_projection(cfg.width, cfg.height), np.float64)
+            p.render(vp, cull=a.cull, repeat=1, warmup=1)   # the shader JIT, untimed
+            return PeerSession(self, p, vp, a.cull, t_up)
+        except Exception as exc:
+            self.close()
+            return PeerSession(self, None, None, a.cull, 0.0, f"{type(exc).__name__}: {exc}")
+
+    def result(self, session: PeerSession | None, cl_depth, cl_med: float | None,
+               lean_med: float | None = None) -> dict:
+        """The configuration's peer record: llvmpipe's frame times from the session's
+        rounds, coverage agreement with clraster's depth, and the ratios."""
+        if session is None:
             return {"skipped": self.reason}
-        key = (cfg.scene.text, cfg.width, cfg.height, a.cull)
-        if key not in self.cache:
-            self.cache[key] = self._run(cfg, sc, cam, cl_depth, a)
-        rec = dict(self.cache[key])
+        rec = session.record(cl_depth)
         if rec.get("median_ms") and cl_med:
             rec["ratio_clraster_over_llvmpipe"] = cl_med / rec["median_ms"]
             rec["speedup_vs_llvmpipe"] = rec["median_ms"] / cl_med
@@ -257,33 +291,56 @@ class PeerRunner:
             rec["ratio_lean_over_llvmpipe"] = lean_med / rec["median_ms"]
         return rec
 
-    def _run(self, cfg: Config, sc: LoadedScene, cam, cl_depth, a) -> dict:
-        import numpy as np
+    def close(self) -> None:
+        """Release the uploaded scene's llvmpipe context (the next session makes one)."""
+        if self._live is not None:
+            _, p, _ = self._live
+            self._live = None
+            try:
+                p.release()
+            except Exception:
+                pass
 
-        peer = None
+
+class PeerSession:
+    """llvmpipe frames of one configuration, one per `frame` call."""
+
+    def __init__(self, runner: PeerRunner, peer, vp, cull: str, upload_s: float,
+                 error: str | None = None) -> None:
+        self.runner, self.peer, self.vp, self.cull = runner, peer, vp, cull
+        self.upload_s, self.error = upload_s, error
+        self.times: list[float] = []
+        self.reads: list[float] = []
+        self.last = None
+
+    def frame(self) -> None:
+        """One timed llvmpipe frame (clear, draws, glFinish; its depth read back apart)."""
+        if self.error is not None:
+            return
         try:
-            t0 = time.perf_counter()
-            peer = self.mod.LlvmpipePeer(cfg.width, cfg.height)
-            peer.upload(sc.target)
-            t_up = time.perf_counter() - t0
-            vp = np.asarray(cam.view_projection(cfg.width, cfg.height), np.float64)
-            pf = peer.render(vp, cull=a.cull, repeat=a.repeat, warmup=1)
-            times = [float(t) for t in pf.times_ms]
-            self.renderer = str(pf.renderer)
-            cov = jsonable(self.mod.coverage_agreement(cl_depth, pf.depth))
-            return {"runs_ms": times, "median_ms": _median(times),
-                    "readback_ms": jsonable(pf.readback_ms), "renderer": str(pf.renderer),
-                    "threads": jsonable(pf.threads), "upload_s": t_up,
-                    "draws": "everything (no object culling), back-face culling "
-                             f"{a.cull}", "coverage": cov}
-        except Exception as exc:  # the peer is a comparison, not the thing under test
-            return {"error": f"{type(exc).__name__}: {exc}"}
-        finally:
-            if peer is not None:
-                try:
-                    peer.release()
-                except Exception:
-                    pass
+            pf = self.peer.render(self.vp, cull=self.cull, repeat=1, warmup=0)
+        except Exception as exc:
+            self.error = f"{type(exc).__name__}: {exc}"
+            self.runner.close()
+            return
+        self.times.append(float(pf.times_ms[0]))
+        self.reads.append(float(pf.readback_ms))
+        self.last = pf
+
+    def record(self, cl_depth) -> dict:
+        if self.error is not None:
+            return {"error": self.error}
+        if self.last is None:
+            return {"error": "no llvmpipe frame was drawn (--repeat 0?)"}
+        pf = self.last
+        self.runner.renderer = str(pf.renderer)
+        cov = jsonable(self.runner.mod.coverage_agreement(cl_depth, pf.depth))
+        return {"runs_ms": self.times, "median_ms": _median(self.times),
+                "readback_ms": _median(self.reads), "renderer": str(pf.renderer),
+                "threads": jsonable(pf.threads), "upload_s": self.upload_s,
+                "interleaved": True,
+                "draws": f"everything (no object culling), back-face culling {self.cull}",
+                "coverage": cov}
 
 
 # =======================================================================================

@@ -132,8 +132,9 @@ def _md_header(res: dict) -> list[str]:
             f"`{' '.join(res['command'])}`.", "",
             f"Machine: {summary(res['machine'])}", "",
             "Frame time = wall time of `render()` (host culling and read-back included), "
-            f"median of {res['settings']['repeat']} frames after warm-up, OpenCL and the NumPy "
-            "twin interleaved. Stage times are OpenCL profiling-event device times (median). "
+            f"median of {res['settings']['repeat']} frames after warm-up, OpenCL, the NumPy "
+            "twin and llvmpipe interleaved (a frame of each per round). Stage times are "
+            "OpenCL profiling-event device times (median). "
             f"llvmpipe: {res['peer']['reason']}.", ""]
 
 
