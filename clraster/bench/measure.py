@@ -3,14 +3,15 @@ interleaved, and the llvmpipe peer), and the subprocess probes (cold/warm start,
 
 Per configuration (:func:`run_config`): one Renderer, warm-up frames of the OpenCL path
 (occlusion gets ``--occlusion-warmup`` more, so its visible set from the previous frame is
-warm) and one of the twin, then ``--repeat`` rounds interleaved (OpenCL, twin, OpenCL, twin,
-...), so machine noise hits both alike; medians. The twin gets a time budget per configuration
-(``--twin-budget``) and renders the same culling mode (:data:`~clraster.bench.spec.TWIN_MODE`),
+warm) and one of the twin, then ``--repeat`` rounds, each a frame of every renderer, each
+round starting with the next one, so machine noise and what a frame follows hit all alike;
+medians. The renderers: OpenCL; OpenCL with only the outputs the llvmpipe peer makes
+(:data:`LEAN_OUTPUTS`, depth and triangle ids; not in the scale sweep: the like-for-like
+comparison); llvmpipe (:class:`PeerRunner`, :class:`PeerSession`: the same scene, camera and
+size, uploaded once per scene and size); the twin, with a time budget per configuration
+(``--twin-budget``), rendering the same culling mode (:data:`~clraster.bench.spec.TWIN_MODE`)
 through a `clraster.reference.Renderer` of its own, whose occlusion history its warm-up
-frame makes warm. Each round also times one OpenCL frame with only the outputs the llvmpipe
-peer makes (:data:`LEAN_OUTPUTS`, depth and triangle ids; not in the scale sweep): the
-like-for-like comparison; and one llvmpipe frame (:class:`PeerRunner`, :class:`PeerSession`:
-the same scene, camera and size, uploaded once per scene and size).
+frame makes warm.
 
 The probes (:func:`measure_startup`, :func:`measure_memory`) each run a fresh Python process,
 ``python -m clraster.bench.cli --probe JSON``, whose body is :func:`probe`; it prints one
@@ -30,7 +31,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from clraster.bench.report import jsonable
 from clraster.bench.scale import SCALE_SKIP_PEER, SCALE_SKIP_TWIN, scale_only
@@ -138,30 +139,38 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
     cl_stages: list[dict] = []
     tw_stages: list[dict] = []
     budget_hit = False
+    order = ["opencl"] + (["lean"] if not scale_only(cfg.sweeps) else [])
+    order += (["llvmpipe"] if session is not None else []) + (["twin"] if g is not None else [])
     for i in range(a.repeat):
         note(f"round {i + 1}/{a.repeat}")
-        t0 = time.perf_counter()
-        f = r.render(sc.target, cam, cull=a.cull, **kw)
-        cl_ms.append((time.perf_counter() - t0) * 1e3)
-        cl_stages.append(dict(f.stats.timings_ms))
-        if not scale_only(cfg.sweeps):
-            # the job the llvmpipe peer does: depth and triangle ids, no barycentrics
-            # (interleaved, same renderer and camera: an occlusion history stays the same)
-            t0 = time.perf_counter()
-            r.render(sc.target, cam, cull=a.cull, outputs=LEAN_OUTPUTS, **kw)
-            lean_ms.append((time.perf_counter() - t0) * 1e3)
-        if session is not None:
-            session.frame()
-        if g is not None and not budget_hit:
-            if tw_ms and twin_spent > a.twin_budget:
-                budget_hit = True
-                continue
-            t0 = time.perf_counter()
-            g = tw.render(sc.target, cam, cull=a.cull, **twin_kw)
-            dt = time.perf_counter() - t0
-            twin_spent += dt
-            tw_ms.append(dt * 1e3)
-            tw_stages.append(dict(g.stats.timings_ms))
+        # each round starts with the next renderer: what a frame follows (the twin's
+        # memory churn, llvmpipe's framebuffer) changes its time on this machine, and a
+        # fixed order gave a renderer the same neighbour every round
+        k = i % len(order)
+        for what in order[k:] + order[:k]:
+            if what == "opencl":
+                t0 = time.perf_counter()
+                f = r.render(sc.target, cam, cull=a.cull, **kw)
+                cl_ms.append((time.perf_counter() - t0) * 1e3)
+                cl_stages.append(dict(f.stats.timings_ms))
+            elif what == "lean":
+                # the job the llvmpipe peer does: depth and triangle ids, no barycentrics
+                # (same renderer and camera: an occlusion history stays the same)
+                t0 = time.perf_counter()
+                r.render(sc.target, cam, cull=a.cull, outputs=LEAN_OUTPUTS, **kw)
+                lean_ms.append((time.perf_counter() - t0) * 1e3)
+            elif what == "llvmpipe":
+                cast(PeerSession, session).frame()
+            elif not budget_hit:   # the twin, within its time budget
+                if tw_ms and twin_spent > a.twin_budget:
+                    budget_hit = True
+                    continue
+                t0 = time.perf_counter()
+                g = tw.render(sc.target, cam, cull=a.cull, **twin_kw)
+                dt = time.perf_counter() - t0
+                twin_spent += dt
+                tw_ms.append(dt * 1e3)
+                tw_stages.append(dict(g.stats.timings_ms))
     assert f is not None
     cl_med = _median(cl_ms)
     counts = f.stats.counts()
