@@ -154,6 +154,7 @@ class StageChain:
                 into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)
             return into
         raster = cast(RasterStage, self.raster)   # a chain built with raster=True draws
+        raster.prepare(queue, params)   # while the queue is idle
         try:
             bins, events, n_clip = self._bin(queue, pool, fd, params, max_entries, True)
         except BinBudgetExceeded as e:   # the device time spent still counts

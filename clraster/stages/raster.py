@@ -129,6 +129,7 @@ class RasterStage:
             event.
         """
         out, load = self.outputs(params, into, overdraw, bary)
+        self.prepare(queue, params)
         ev = self.launch(queue, setup, bins, params, out, load)
         self.wait(queue, out)
         rstats = self.finish(queue, params, out)
@@ -152,8 +153,9 @@ class RasterStage:
                params: FrameParams, out: RasterOutput, load: bool) -> cl.Event:
         """Enqueue the raster kernel over ``bins`` into ``out`` (``load``: continue from
         its contents, see `run`); it draws nothing when the bin list did not fit the
-        entry buffer (bins.cap, `BinStage.run` with defer). Returns its event; `finish`
-        waits for it."""
+        entry buffer (bins.cap, `BinStage.run` with defer). Returns its event; `wait`
+        waits for it, then `finish` makes the outputs readable. Call `prepare` first,
+        while the queue is idle."""
         width, height = params.width, params.height
         want = out.overdraw is not None
         want_bary = out.bary is not None
@@ -167,6 +169,13 @@ class RasterStage:
                            np.int32(load), np.int32(want),
                            out.bufs[-1] if want else out.bufs[1], np.int32(want_bary),
                            *self._window(queue, params), bins.summary.buf, np.int32(bins.cap))
+
+    def prepare(self, queue: cl.CommandQueue, params: FrameParams) -> None:
+        """Upload the frame's window mask, if it has a new one, before the pass's first
+        kernel: a host-to-device write enqueued behind running kernels (the vertex, setup
+        and bin stages of a deferred pass) blocks the calling thread with the GIL held
+        (docs/ARCHITECTURE.md)."""
+        self._window(queue, params)
 
     def wait(self, queue: cl.CommandQueue, out: RasterOutput) -> None:
         """Wait (interruptibly, `device.wait`) for what is enqueued, ``out`` kept alive
