@@ -9,6 +9,9 @@ Two renderers are built, one from each set of sources (kernel files taken with
 ``--rounds`` times; per-stage min / median (ms) are printed. The machine is shared and
 noisy, so compare the two rows of one run, never across runs. It also checks that both
 give identical ids, depth and barycentrics: a kernel change must never change the image.
+The host code is the working tree's for both, so REV's kernels must take the same
+arguments and launch sizes (across a change of those, e.g. d19f502's bin_scatter and
+raster_tiles or d40dce6's vertex work-items, compare whole trees with proc_ab.py).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ whole frame here), A and B taking turns, and the profiling event of each launch 
 Prints min / median device ms per tree, B/A of the medians, and whether the outputs (ids,
 depth, barycentrics) are identical. Whole frames are noisier than one kernel on fixed
 inputs; this is how the raster figures of bench/README.md's performance log were taken.
+As with `kernel_ab.py`, REV's kernels must take the working tree's arguments.
 """
 
 from __future__ import annotations
