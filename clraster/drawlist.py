@@ -243,7 +243,9 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
     if inst.size:   # (nothing in view: no records to fill, ~12 µs of small NumPy calls)
         gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(
             draw_list.cluster, np.int64)
-        info = pool.clusters[gcl]
+        # np.take, not pool.clusters[gcl]: NumPy's fancy indexing of rows took ~1 ms for the
+        # 83K draws of the 10M plant (its general mapiter path), take 0.06 ms
+        info = np.take(pool.clusters, gcl, axis=0)
         d["cluster"] = gcl
         d["instance"] = inst
         nv, nt = info[:, 3].astype(np.int64), info[:, 1].astype(np.int64)
@@ -284,7 +286,7 @@ def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
     """The draws of ``fd`` where ``mask`` (bool (D,)) is set, in the same order, with their
     places in the vertex and triangle streams recomputed."""
     d = fd.draws[mask].copy()
-    info = pool.clusters[d["cluster"]].astype(np.int64)
+    info = np.take(pool.clusters, d["cluster"], axis=0).astype(np.int64)   # see frame_draws
     nv, nt = info[:, 3], info[:, 1]
     d["vert_base"] = np.cumsum(nv) - nv
     d["tri_base"] = np.cumsum(nt) - nt
