@@ -50,6 +50,25 @@ def revision_source(rev: str):
     return source
 
 
+def warm_renderers(sources, w: int, h: int, target, cam, kw: dict) -> dict:
+    """A Renderer (w × h) per (name, kernel_source function) in ``sources``, each built from
+    its source (the program cache is cleared first; PoCL's on-disk cache keeps both) and
+    warmed up with 3 frames of ``target`` from ``cam`` (``kw``: render keywords; the
+    frames also fill an occlusion history). Returns {name: Renderer}."""
+    current = dev.kernel_source
+    renderers = {}
+    for name, source in sources:
+        dev.clear_program_cache(dev.default_context())   # rebuild from `source`
+        dev.kernel_source = source
+        try:
+            renderers[name] = clraster.Renderer(w, h)
+        finally:
+            dev.kernel_source = current
+        for _ in range(3):
+            renderers[name].render(target, cam, **kw)
+    return renderers
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("rev", help="git revision whose kernels/ is the baseline (A)")
@@ -68,17 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         target = clraster.Mesh.load(a.mesh)
         cam = clraster.Camera.framing(*target.bounds(), aspect=w / h)
         kw = {}
-    current = dev.kernel_source
-    renderers = {}
-    for name, source in ((a.rev, revision_source(a.rev)), ("working tree", current)):
-        dev.clear_program_cache(dev.default_context())   # rebuild from `source`
-        dev.kernel_source = source
-        try:
-            renderers[name] = clraster.Renderer(w, h)
-        finally:
-            dev.kernel_source = current
-        for _ in range(3):      # warm-up (and the occlusion history)
-            renderers[name].render(target, cam, **kw)
+    renderers = warm_renderers(((a.rev, revision_source(a.rev)),
+                                ("working tree", dev.kernel_source)), w, h, target, cam, kw)
     times = collections.defaultdict(lambda: collections.defaultdict(list))
     frames = {}
     for _ in range(a.rounds):

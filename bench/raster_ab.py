@@ -29,7 +29,7 @@ import clraster.device as dev
 from clraster.stages import chain as chain_mod
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from kernel_ab import REPO, revision_source  # noqa: E402  (bench/ is not a package)
+from kernel_ab import REPO, revision_source, warm_renderers  # noqa: E402  (bench/ is not a package)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,17 +61,8 @@ def main(argv: list[str] | None = None) -> int:
         return draw(self, queue, pool, fd, params, totals, **k)
 
     chain_mod.StageChain.draw = recording_draw   # type: ignore[method-assign]
-    current = dev.kernel_source
-    renderers = {}
-    for name, source in (("A", revision_source(a.rev)), ("B", current)):
-        dev.clear_program_cache(dev.default_context())   # rebuild from `source`
-        dev.kernel_source = source
-        try:
-            renderers[name] = clraster.Renderer(w, h)
-        finally:
-            dev.kernel_source = current
-        for _ in range(3):
-            renderers[name].render(target, cam, **kw)
+    renderers = warm_renderers((("A", revision_source(a.rev)), ("B", dev.kernel_source)),
+                               w, h, target, cam, kw)
     chain_mod.StageChain.draw = draw   # type: ignore[method-assign]
 
     times: dict[str, list[float]] = {name: [] for name in renderers}

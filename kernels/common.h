@@ -76,7 +76,8 @@
 
 /* A helper PoCL must inline. Its inliner left some larger helpers called once per triangle
  * or vertex as real calls (perf shows them as symbols of their own in the kernel's .so:
- * make_piece, value_planes, vertex_clip64, rect_outside, row_span), their struct and double4
+ * make_piece, value_planes, rect_outside, row_span and the vertex stage's double transform,
+ * since written per lane in vertex.cl), their struct and double4
  * arguments passed through the stack. Forced inline on the dragon at 1080p
  * (bench/kernel_ab.py, 14 rounds, medians): setup 12.1 -> 10.6 ms, vertex 5.3 -> 5.0, bin
  * 6.5 -> 6.1, frame 0.95x. */
@@ -94,36 +95,20 @@ inline bool finite_f(float x) { return (as_uint(x) & 0x7f800000u) != 0x7f800000u
 inline float maxf(float a, float b) { return a >= b ? a : b; }
 inline double mind(double a, double b) { return a <= b ? a : b; }
 
-/* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M, the operation order the NumPy twin
- * uses (vertex.cl for triangles, lines.cl for line endpoints). */
+/* Row r of M · [x y z 1]ᵀ for a row-major 4 × 4 matrix m (float or double), in the order
+ * the NumPy twin sums (vertex.cl for triangles, lines.cl for line endpoints, user planes and
+ * depth rows too). x, y, z are scalars or vectors (the vertex stage's lanes): the same
+ * operations per lane. Products are rounded, so it matters that nothing is fused
+ * (FP_CONTRACT is off). */
+#define MAT_ROW(m, r, x, y, z)                                                              \
+    ((((m)[4 * (r)] * (x) + (m)[4 * (r) + 1] * (y)) + (m)[4 * (r) + 2] * (z)) + (m)[4 * (r) + 3])
+
+/* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M (lines.cl; vertex.cl does the same
+ * per lane with MAT_ROW). */
 inline float4 clip_transform(__global const float *m, float px, float py, float pz)
 {
-    float4 c;
-    c.x = ((m[0] * px + m[1] * py) + m[2] * pz) + m[3];
-    c.y = ((m[4] * px + m[5] * py) + m[6] * pz) + m[7];
-    c.z = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
-    c.w = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
-    return c;
-}
-
-/* Clip position of an object-space vertex in double from the instance's float64 matrix m
- * (FrameDraws.mvps64: VP · model before it is rounded to float32 for coverage, so the value
- * planes do not inherit that rounding, ~1e-7 relative, which put barycentrics of 1-px
- * triangles off by up to 2.6e-5), and into *r its depth numerator (setup.cl ClipIn): z, or
- * with `reversed` the depth row q (FrameDraws.zrows, w row − z row formed in float64) times
- * the position. The twin (reference/setup.py object_clip) sums in the same order; products
- * of doubles are rounded, so it matters that nothing is fused (FP_CONTRACT is off). */
-ALWAYS_INLINE double4 vertex_clip64(__global const double *m, __global const double *q, int reversed,
-                             float fx, float fy, float fz, double *r)
-{
-    double px = (double)fx, py = (double)fy, pz = (double)fz;
-    double4 c;
-    c.x = ((m[0] * px + m[1] * py) + m[2] * pz) + m[3];
-    c.y = ((m[4] * px + m[5] * py) + m[6] * pz) + m[7];
-    c.z = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
-    c.w = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
-    *r = reversed ? ((q[0] * px + q[1] * py) + q[2] * pz) + q[3] : c.z;
-    return c;
+    return (float4)(MAT_ROW(m, 0, px, py, pz), MAT_ROW(m, 1, px, py, pz),
+                    MAT_ROW(m, 2, px, py, pz), MAT_ROW(m, 3, px, py, pz));
 }
 
 /* Signed distance of an object-space vertex to a user clip plane q (a, b, c, d, already in
@@ -132,7 +117,7 @@ ALWAYS_INLINE double4 vertex_clip64(__global const double *m, __global const dou
  * so the two never disagree on a vertex's side. */
 inline double user_dist(__global const double *q, float px, float py, float pz)
 {
-    return ((q[0] * (double)px + q[1] * (double)py) + q[2] * (double)pz) + q[3];
+    return MAT_ROW(q, 0, (double)px, (double)py, (double)pz);
 }
 
 /* The classic 6-bit frustum outcode of a clip-space point: bit k set iff the signed distance
@@ -150,22 +135,26 @@ inline uint frustum_outcode(float4 c)
     return oc;
 }
 
+/* The viewport transform of clip x, y, z given iw = 1/w (floats or float vectors): window x
+ * and y in 1/256 px before rounding (y down), and window depth (z/w + 1)/2. viewport_vertex
+ * and the vertex stage's lanes both use these, so their results are bit-identical. */
+#define WIN_X_SUB(x, iw, hw) ((((x) * (iw) + 1.0f) * (hw)) * (float)SUB_ONE)
+#define WIN_Y_SUB(y, iw, hh) (((1.0f - (y) * (iw)) * (hh)) * (float)SUB_ONE)
+#define WIN_Z(z, iw) (((z) * (iw)) * 0.5f + 0.5f)
+
 /* A vertex after the viewport transform (WinVert): 24.8 fixed-point window x/y (y down),
  * window depth (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the
- * guard band and per clipped vertex in setup.cl, with this one function, so both are
- * bit-identical. */
+ * guard band (8 lanes at a time, with the same WIN_* expressions and rounding) and per
+ * clipped vertex in setup.cl, so both are bit-identical. */
 inline WinVert viewport_vertex(float4 c, float hw, float hh)
 {
     WinVert v;
     float iw = 1.0f / c.w;
-    float xn = c.x * iw, yn = c.y * iw, zn = c.z * iw;
-    float xw = (xn + 1.0f) * hw;
-    float yw = (1.0f - yn) * hh;
     /* round half to even (rint in the default rounding mode); the guard band keeps the
      * values in range */
-    v.x = (int)RINTF(xw * (float)SUB_ONE);
-    v.y = (int)RINTF(yw * (float)SUB_ONE);
-    v.z = zn * 0.5f + 0.5f;
+    v.x = (int)RINTF(WIN_X_SUB(c.x, iw, hw));
+    v.y = (int)RINTF(WIN_Y_SUB(c.y, iw, hh));
+    v.z = WIN_Z(c.z, iw);
     v.iw = iw;
     return v;
 }

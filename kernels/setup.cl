@@ -22,14 +22,14 @@
  * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
  * cancels away more than the plane's own scale, and whole triangles vanished. Its inputs
  * are clip positions recomputed in double from the object-space vertices and the float32
- * matrix (common.h vertex_clip64, once per vertex in the vertex stage): the vertex stage's float32 clip positions are rounded by ~4e-3 at
+ * matrix (vertex.cl, once per vertex in the vertex stage): the vertex stage's float32 clip positions are rounded by ~4e-3 at
  * |w| ~ 1e5, more than a near distance of 1e-3, and the near-plane crossing landed at
  * w <= 0. A polygon vertex that is one of the triangle's own (orig >= 0) is emitted as the
  * vertex stage's float32 position, so an edge shared with an unclipped neighbour stays
  * bit-identical; each new vertex is rounded to float once, at the end. */
 typedef struct { double4 p; double r, b0, b1, b2; int orig; } ClipVert;
 
-/* A vertex in double from object space (vertex_clip64): clip position p, and r, the depth
+/* A vertex in double from object space (the vertex stage's clip64 and rnum): clip position p, and r, the depth
  * numerator its value planes use instead of p.z: p.z itself for ordinary depth; for
  * reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row, formed in float64 on
  * the host) times the position, so r = w − z keeps its relative precision far away, where
@@ -69,7 +69,7 @@ inline double4 onto_plane(int p, double4 v, double kx, double ky)
 }
 
 /* The vertex stage's double clip position and depth numerator of vertex-stream vertex i
- * (vertex.cl, common.h vertex_clip64): computed once per vertex there rather than once per
+ * (vertex.cl): computed once per vertex there rather than once per
  * triangle corner here, which cost ~17 ms of setup on the dragon at 1080p. A macro, not a
  * function returning the struct: inlining that (an sret pointer, noalias) emitted an
  * intrinsic Oclgrind cannot run. */
@@ -432,7 +432,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         } else {
             Piece pc __attribute__((aligned(32)));   /* copied out as 3 float8 */
             int sw = 0;
-            /* values from the double clip positions (vertex_clip64): the float32 ones are
+            /* values from the double clip positions (vertex.cl): the float32 ones are
              * rounded by ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the
              * barycentrics of 1-pixel triangles off by 3e-5 */
             Draw dr = draws[get_group_id(0)];

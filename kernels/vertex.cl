@@ -60,30 +60,26 @@ __kernel void vertex_transform(__global const float *restrict pos,
     fvec x = *(fvec *)px, y = *(fvec *)py, z = *(fvec *)pz;
     __global const float *m = mvps + 16 * dr.instance;
     /* clip_transform, per lane */
-    fvec cx = ((m[0] * x + m[1] * y) + m[2] * z) + m[3];
-    fvec cy = ((m[4] * x + m[5] * y) + m[6] * z) + m[7];
-    fvec cz = ((m[8] * x + m[9] * y) + m[10] * z) + m[11];
-    fvec cw = ((m[12] * x + m[13] * y) + m[14] * z) + m[15];
+    fvec cx = MAT_ROW(m, 0, x, y, z), cy = MAT_ROW(m, 1, x, y, z);
+    fvec cz = MAT_ROW(m, 2, x, y, z), cw = MAT_ROW(m, 3, x, y, z);
     /* viewport_vertex's arithmetic, per lane (used below only for the vertices drawn
      * unclipped; a lane with w = 0 gets inf here, never stored) */
     fvec iw = 1.0f / cw;
     float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
-    fvec xs = ((cx * iw + 1.0f) * hw) * (float)SUB_ONE;
-    fvec ys = ((1.0f - cy * iw) * hh) * (float)SUB_ONE;
-    fvec wz = (cz * iw) * 0.5f + 0.5f;
-    /* the double position setup's value planes and clipper use (common.h vertex_clip64) */
+    fvec xs = WIN_X_SUB(cx, iw, hw), ys = WIN_Y_SUB(cy, iw, hh), wz = WIN_Z(cz, iw);
+    /* The double clip position setup's value planes and clipper use, from the instance's
+     * float64 matrix (FrameDraws.mvps64: VP · model before it is rounded to float32 for
+     * coverage, so the value planes do not inherit that rounding, ~1e-7 relative, which
+     * put barycentrics of 1-px triangles off by up to 2.6e-5), and its depth numerator r
+     * (setup.cl ClipIn): z, or with `reversed` the depth row (FrameDraws.zrows, w row −
+     * z row formed in float64) times the position. The twin: reference/setup.py
+     * object_clip, the same sums. */
     dvec xd = __builtin_convertvector(x, dvec), yd = __builtin_convertvector(y, dvec);
     dvec zd = __builtin_convertvector(z, dvec);
     __global const double *m64 = mvps64 + 16 * dr.instance;
-    dvec dx = ((m64[0] * xd + m64[1] * yd) + m64[2] * zd) + m64[3];
-    dvec dy = ((m64[4] * xd + m64[5] * yd) + m64[6] * zd) + m64[7];
-    dvec dz = ((m64[8] * xd + m64[9] * yd) + m64[10] * zd) + m64[11];
-    dvec dw = ((m64[12] * xd + m64[13] * yd) + m64[14] * zd) + m64[15];
-    dvec r = dz;
-    if (reversed) {
-        __global const double *q = zrows + 4 * dr.instance;
-        r = ((q[0] * xd + q[1] * yd) + q[2] * zd) + q[3];
-    }
+    dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
+    dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
+    dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
     float acx[VERTEX_LANES] __attribute__((aligned(32)));
     float acy[VERTEX_LANES] __attribute__((aligned(32)));
     float acz[VERTEX_LANES] __attribute__((aligned(32)));
@@ -121,7 +117,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
         }
         WinVert v = {0, 0, 0.0f, 0.0f};
         if (!(o & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP))) {
-            /* round half to even (common.h viewport_vertex) */
+            /* round half to even, as common.h viewport_vertex */
             v.x = (int)RINTF(axs[l]);
             v.y = (int)RINTF(ays[l]);
             v.z = awz[l];

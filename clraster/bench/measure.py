@@ -279,7 +279,7 @@ class PeerRunner:
                 self._live = (key, p, time.perf_counter() - t0)
             _, p, t_up = self._live
             vp = np.asarray(cam.view_projection(cfg.width, cfg.height), np.float64)
-            p.render(vp, cull=a.cull, repeat=1, warmup=1)   # the shader JIT, untimed
+            p.render(vp, cull=a.cull, repeat=1, warmup=0)   # the shader JIT: not kept
             return PeerSession(self, p, vp, a.cull, t_up)
         except Exception as exc:
             self.close()

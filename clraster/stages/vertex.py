@@ -25,7 +25,7 @@ class ClipBuffers:
     win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
     ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
     clip64: float64 (N, 4) clip positions from the float64 matrices and rnum: float64 (N,)
-    depth numerators (kernels/common.h vertex_clip64): setup's value planes and clipper.
+    depth numerators (kernels/vertex.cl): setup's value planes and clipper.
     n_verts: N of the last run.
     """
 
