@@ -20,6 +20,7 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pyopencl as cl
 
 log = logging.getLogger(__name__)
@@ -204,6 +205,9 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
     long as the context object lives."""
     check_process()
     mark_opencl_use()
+    # argument info: `kernel` declares the scalar arguments' dtypes from it (PoCL gives
+    # none for these programs without the option)
+    options = (*options, "-cl-kernel-arg-info")
     if "portable computing language" not in ctx.devices[0].platform.name.lower():
         # kernels/common.h: Clang builtins only where PoCL compiles them (not Oclgrind)
         options = (*options, "-DCLRASTER_PORTABLE")
@@ -218,6 +222,45 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
             prg = cl.Program(ctx, kernel_source(stage)).build(options=list(options))
             per_ctx[key] = prg
         return prg
+
+
+#: OpenCL scalar type names (clGetKernelArgInfo) → the NumPy dtype pyopencl packs them as.
+_SCALAR_DTYPES = {
+    "char": np.int8, "uchar": np.uint8, "unsigned char": np.uint8,
+    "short": np.int16, "ushort": np.uint16, "unsigned short": np.uint16,
+    "int": np.int32, "uint": np.uint32, "unsigned int": np.uint32,
+    "long": np.int64, "ulong": np.uint64, "unsigned long": np.uint64,
+    "float": np.float32, "double": np.float64,
+}
+
+
+def kernel(prg: cl.Program, name: str) -> cl.Kernel:
+    """Kernel ``name`` of ``prg``, with its scalar arguments' dtypes declared.
+
+    pyopencl sets an undeclared scalar argument (a NumPy scalar) through a generic path that
+    took ~9 µs per argument on this machine, against ~0.5 µs for a buffer: a launch of the
+    setup kernel (11 scalars among 24 arguments) cost ~0.1 ms of host time, and a frame
+    launches 7 or more. With the dtypes declared (``set_scalar_arg_dtypes``, read here from
+    the kernel's argument info so they cannot drift from the source) pyopencl packs them
+    in one generated call: ~14 µs for 22 arguments (bench/README.md, performance log).
+    Where the platform gives no argument info, the kernel is returned undeclared (slower,
+    same results). Callers pass scalars as NumPy scalars of the kernel's types, as before.
+    """
+    k = cl.Kernel(prg, name)
+    try:
+        dtypes = []
+        for i in range(k.num_args):
+            type_name = k.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME).strip()
+            pointer = type_name.endswith("*") or (
+                k.get_arg_info(i, cl.kernel_arg_info.ADDRESS_QUALIFIER)
+                != cl.kernel_arg_address_qualifier.PRIVATE)
+            # a pointer, or a by-value type not listed (a vector or struct): pyopencl's
+            # generic path, as for an undeclared kernel
+            dtypes.append(None if pointer else _SCALAR_DTYPES.get(type_name))
+    except cl.Error:   # no argument info (e.g. a program built from a binary)
+        return k
+    k.set_scalar_arg_dtypes(dtypes)
+    return k
 
 
 def clear_program_cache(ctx: cl.Context) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import PIECE_DTYPE, RasterConfig
-from ..device import program, wait
+from ..device import kernel, program, wait
 from ..params import FrameParams
 from ..streaming import BinBudgetExceeded
 from ._buffers import GrowBuffer
@@ -52,7 +52,7 @@ class BinStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "bin", config.build_options())
         self.k_count, self.k_offsets, self.k_scan, self.k_scatter = (
-            cl.Kernel(prg, name)
+            kernel(prg, name)
             for name in ("bin_count", "bin_offsets", "bin_scan_tiles", "bin_scatter"))
         self.config = config
         self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field

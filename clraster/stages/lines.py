@@ -14,7 +14,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import RasterConfig
-from ..device import program
+from ..device import kernel, program
 from ..layout import LINE_DTYPE, ZMIN_CLEAR
 from ._buffers import GrowBuffer
 
@@ -47,9 +47,9 @@ class LineBuffers:
 class LineStage:
     def __init__(self, ctx: cl.Context) -> None:
         prg = program(ctx, "lines", RasterConfig().build_options())
-        self.k_setup = cl.Kernel(prg, "line_setup")
-        self.k_depth = cl.Kernel(prg, "line_depth")
-        self.k_id = cl.Kernel(prg, "line_id")
+        self.k_setup = kernel(prg, "line_setup")
+        self.k_depth = kernel(prg, "line_depth")
+        self.k_id = kernel(prg, "line_id")
         ro = cl.mem_flags.READ_ONLY
         self.buffers = LineBuffers(GrowBuffer(ctx, ro), GrowBuffer(ctx, ro), GrowBuffer(ctx),
                                    GrowBuffer(ctx), GrowBuffer(ctx, ro), GrowBuffer(ctx),

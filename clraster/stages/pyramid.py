@@ -15,7 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import RasterConfig
-from ..device import program
+from ..device import kernel, program
 from ..inputs import check_boxes
 from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
@@ -104,8 +104,8 @@ class PyramidStage:
 
     def __init__(self, ctx: cl.Context, config: RasterConfig | None = None) -> None:
         prg = program(ctx, "pyramid", (config or RasterConfig()).build_options())
-        self.k_reduce = cl.Kernel(prg, "pyramid_reduce")
-        self.k_test = cl.Kernel(prg, "hiz_test_boxes")
+        self.k_reduce = kernel(prg, "pyramid_reduce")
+        self.k_test = kernel(prg, "hiz_test_boxes")
         self.buffers = PyramidBuffers(*(GrowBuffer(ctx) for _ in range(5)))
         self._table_key: tuple[int, int] | None = None
         self._table_buf: cl.Buffer | None = None

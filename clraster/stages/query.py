@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..boxes import BoxGeometry
 from ..config import RasterConfig
-from ..device import program
+from ..device import kernel, program
 from ..drawlist import FrameDraws
 from ..params import FrameParams, FrameTotals
 from ._buffers import GrowBuffer
@@ -38,7 +38,7 @@ class QueryStage:
 
     def __init__(self, ctx: cl.Context, config: RasterConfig | None = None) -> None:
         self.config = config or RasterConfig()
-        self.kernel = cl.Kernel(program(ctx, "query", self.config.build_options()),
+        self.kernel = kernel(program(ctx, "query", self.config.build_options()),
                                 "query_tiles")
         self.chain = StageChain(ctx, self.config, raster=False)
         self.buffers = QueryBuffers(GrowBuffer(ctx), GrowBuffer(ctx))

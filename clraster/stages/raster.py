@@ -12,7 +12,7 @@ import pyopencl as cl
 
 from ..arraypool import ArrayPool
 from ..config import RasterConfig
-from ..device import program, wait
+from ..device import kernel, program, wait
 from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .bin import BinBuffers
@@ -59,7 +59,7 @@ class FrameBuffers:
 
 class RasterStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
-        self.kernel = cl.Kernel(program(ctx, "raster", config.build_options()), "raster_tiles")
+        self.kernel = kernel(program(ctx, "raster", config.build_options()), "raster_tiles")
         self.config = config
         self.buffers = FrameBuffers(GrowBuffer(ctx), GrowBuffer(ctx))
         self._window_src: np.ndarray | None = None

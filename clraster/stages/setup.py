@@ -10,7 +10,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
-from ..device import program, wait
+from ..device import kernel, program, wait
 from ..params import FrameParams
 from ..streaming import BinBudgetExceeded
 from ._buffers import GrowBuffer
@@ -54,11 +54,11 @@ SCAN_CHUNKS = 64
 class SetupStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "setup", config.build_options())
-        self.k_setup = cl.Kernel(prg, "setup_triangles")
-        self.k_clipped = cl.Kernel(prg, "setup_clipped")
-        self.k_count = cl.Kernel(prg, "setup_count_clipped")
-        self.k_partials = cl.Kernel(prg, "scan_partials")
-        self.k_offsets = cl.Kernel(prg, "scan_offsets")
+        self.k_setup = kernel(prg, "setup_triangles")
+        self.k_clipped = kernel(prg, "setup_clipped")
+        self.k_count = kernel(prg, "setup_count_clipped")
+        self.k_partials = kernel(prg, "scan_partials")
+        self.k_offsets = kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.partial = GrowBuffer(ctx)
         self.flag = GrowBuffer(ctx)   # any triangle ST_CLIPPED (setup_triangles)

@@ -9,7 +9,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import CLUSTER_MAX, RasterConfig
-from ..device import program
+from ..device import kernel, program
 from ..layout import VERTEX_LANES
 from ..params import FrameParams
 from ._buffers import GrowBuffer
@@ -40,7 +40,7 @@ class ClipBuffers:
 
 class VertexStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
-        self.kernel = cl.Kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
+        self.kernel = kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
         self.buffers = ClipBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
