@@ -250,7 +250,7 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
     try:
         dtypes = []
         for i in range(k.num_args):
-            type_name = k.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME).strip()
+            type_name = str(k.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME)).strip()
             pointer = type_name.endswith("*") or (
                 k.get_arg_info(i, cl.kernel_arg_info.ADDRESS_QUALIFIER)
                 != cl.kernel_arg_address_qualifier.PRIVATE)
