@@ -247,6 +247,17 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
     same results). Callers pass scalars as NumPy scalars of the kernel's types, as before.
     """
     k = cl.Kernel(prg, name)
+    dtypes = scalar_arg_dtypes(k)
+    if dtypes is not None:
+        k.set_scalar_arg_dtypes(dtypes)
+    return k
+
+
+def scalar_arg_dtypes(k: cl.Kernel) -> list | None:
+    """Per argument of ``k``: the NumPy dtype of a scalar argument, None for a pointer or a
+    by-value type not listed in _SCALAR_DTYPES (pyopencl's generic path, as undeclared);
+    None altogether when the platform gives no argument info (e.g. a program built from a
+    binary)."""
     try:
         dtypes = []
         for i in range(k.num_args):
@@ -254,13 +265,10 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
             pointer = type_name.endswith("*") or (
                 k.get_arg_info(i, cl.kernel_arg_info.ADDRESS_QUALIFIER)
                 != cl.kernel_arg_address_qualifier.PRIVATE)
-            # a pointer, or a by-value type not listed (a vector or struct): pyopencl's
-            # generic path, as for an undeclared kernel
             dtypes.append(None if pointer else _SCALAR_DTYPES.get(type_name))
-    except cl.Error:   # no argument info (e.g. a program built from a binary)
-        return k
-    k.set_scalar_arg_dtypes(dtypes)
-    return k
+    except cl.Error:
+        return None
+    return dtypes
 
 
 def clear_program_cache(ctx: cl.Context) -> None:
