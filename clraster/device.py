@@ -249,8 +249,26 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
     k = cl.Kernel(prg, name)
     dtypes = scalar_arg_dtypes(k)
     if dtypes is not None:
-        k.set_scalar_arg_dtypes(dtypes)
+        try:
+            # what set_scalar_arg_dtypes does, with the generated functions kept per
+            # signature in this process: pyopencl looks them up in its on-disk cache for
+            # every kernel object (no in-memory cache), and a process making a renderer
+            # with its own context 40 times grew by 46 MB (tests/test_processes.py)
+            k._set_enqueue_and_set_args(  # type: ignore[attr-defined]  # pyopencl's, private
+                *_invoker(k.function_name, k.num_args, tuple(dtypes)))
+        except (AttributeError, ImportError, TypeError):   # another pyopencl's internals
+            k.set_scalar_arg_dtypes(dtypes)
     return k
+
+
+@functools.cache
+def _invoker(function_name: str, num_args: int, dtypes: tuple) -> tuple:
+    """pyopencl's generated (enqueue, set_args) pair for a kernel signature (`kernel`)."""
+    from pyopencl.invoker import generate_enqueue_and_set_args
+
+    return generate_enqueue_and_set_args(function_name, num_args, num_args, dtypes,
+                                         work_around_arg_count_bug=False,
+                                         warn_about_arg_count_bug=False, devs=())
 
 
 def scalar_arg_dtypes(k: cl.Kernel) -> list | None:
@@ -292,6 +310,10 @@ def device_busy() -> bool:
     return bool(_in_flight)
 
 
+#: Sleeps (s) between the first status polls of `wait`, before it switches to a callback.
+_SHORT_POLLS = (2e-5, 4e-5, 4e-5)
+
+
 def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     """Block until everything enqueued on ``queue`` has run, interruptibly.
 
@@ -300,28 +322,36 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
 
     ``queue.finish()`` waits inside one C call: the GIL is released, but Python runs its
     signal handlers only when the call returns, so Ctrl-C during a long frame took effect
-    only at the frame's end (16 s late in a 19 s frame). Polling a marker's status with
-    short sleeps (20 µs doubling to 250 µs) keeps the GIL free for other threads and lets
-    KeyboardInterrupt through within a millisecond; its cost is a few status reads per
-    wait and at most ~250 µs of latency after the device finishes. (Tried instead: the main
+    only at the frame's end (16 s late in a 19 s frame). Instead a marker's completion
+    callback sets a `threading.Event` that this thread waits on in 50 ms slices: the wait
+    sleeps on a lock (the GIL free, no core taken from PoCL's threads) and a lock wait is
+    interrupted by signals, so KeyboardInterrupt gets through at once. Measured from a
+    kernel's end to the host's next command (a scratch script, medians of 60): ~70-90 µs
+    where polling the marker's status with sleeps of 20 µs doubling to 250 µs (the method
+    before) took ~130-270 µs; spot at 1080p waits twice a frame. (Tried too: the main
     thread blocking on a lock while a helper thread sat in ``Event.wait``: spot frames at
     1080p 1.07x slower, its raster too — that wait competes with PoCL's threads for the
     cores.)
     """
     ev = cl.enqueue_marker(queue)
     queue.flush()
-    delay = 2e-5
     complete = cl.command_execution_status.COMPLETE
     try:
-        while True:
-            status = ev.command_execution_status
-            if status == complete:
-                return
-            if status < 0:   # the command failed: let pyopencl raise its error
-                ev.wait()
+        for delay in _SHORT_POLLS:   # a short wait is cheaper polled than called back
+            if ev.command_execution_status == complete:
                 return
             time.sleep(delay)
-            delay = min(2.0 * delay, 2.5e-4)
+    except BaseException:
+        _in_flight.append((ev, keep))
+        raise
+    done = threading.Event()
+    # called on completion or abnormal termination (a negative status), from another thread
+    ev.set_callback(cl.command_execution_status.COMPLETE, lambda status: done.set())
+    try:
+        while not done.wait(0.05):
+            pass
+        if ev.command_execution_status < 0:   # the command failed: let pyopencl raise
+            ev.wait()
     except BaseException:   # KeyboardInterrupt: the device goes on regardless
         _in_flight.append((ev, keep))
         raise
