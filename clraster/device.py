@@ -322,16 +322,18 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
 
     ``queue.finish()`` waits inside one C call: the GIL is released, but Python runs its
     signal handlers only when the call returns, so Ctrl-C during a long frame took effect
-    only at the frame's end (16 s late in a 19 s frame). Instead a marker's completion
-    callback sets a `threading.Event` that this thread waits on in 50 ms slices: the wait
-    sleeps on a lock (the GIL free, no core taken from PoCL's threads) and a lock wait is
-    interrupted by signals, so KeyboardInterrupt gets through at once. Measured from a
-    kernel's end to the host's next command (a scratch script, medians of 60): ~70-90 µs
-    where polling the marker's status with sleeps of 20 µs doubling to 250 µs (the method
-    before) took ~130-270 µs; spot at 1080p waits twice a frame. (Tried too: the main
-    thread blocking on a lock while a helper thread sat in ``Event.wait``: spot frames at
-    1080p 1.07x slower, its raster too — that wait competes with PoCL's threads for the
-    cores.)
+    only at the frame's end (16 s late in a 19 s frame). Instead: a few status polls
+    over the first ~100 µs (`_SHORT_POLLS`; a short wait is over before a callback would
+    fire), then a marker's completion callback sets a `threading.Event` that this thread
+    waits on in 50 ms slices: a lock wait sleeps with the GIL free, takes no core from
+    PoCL's threads and is interrupted by signals, so KeyboardInterrupt gets through at
+    once. Before, the status was polled for the whole wait with sleeps of 20 µs doubling
+    to 250 µs: up to 250 µs late and a wake-up every 250 µs on the cores the kernels run
+    on. bench/proc_ab.py, 31 rounds: spot 0.974x, bunny 0.975x, dragon 0.973x, an empty
+    frame (one wait of ~0.9 ms, ~70 µs later than polled) 1.04x, 1.80 ms. (Tried too: the
+    main thread blocking on a lock while a helper thread sat in ``Event.wait``: spot
+    frames at 1080p 1.07x slower, its raster too — that wait competes with PoCL's threads
+    for the cores.)
     """
     ev = cl.enqueue_marker(queue)
     queue.flush()
