@@ -351,7 +351,9 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     ev.set_callback(cl.command_execution_status.COMPLETE, lambda status: done.set())
     try:
         while not done.wait(0.05):
-            pass
+            # a safety net: a platform that never calls back is still polled every 50 ms
+            if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)
+                break
         if ev.command_execution_status < 0:   # the command failed: let pyopencl raise
             ev.wait()
     except BaseException:   # KeyboardInterrupt: the device goes on regardless
