@@ -343,13 +343,10 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
             if ev.command_execution_status == complete:
                 return
             time.sleep(delay)
-    except BaseException:
-        _in_flight.append((ev, keep))
-        raise
-    done = threading.Event()
-    # called on completion or abnormal termination (a negative status), from another thread
-    ev.set_callback(cl.command_execution_status.COMPLETE, lambda status: done.set())
-    try:
+        done = threading.Event()
+        # called on completion or abnormal termination (a negative status), from another
+        # thread
+        ev.set_callback(complete, lambda status: done.set())
         while not done.wait(0.05):
             # a safety net: a platform that never calls back is still polled every 50 ms
             if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)

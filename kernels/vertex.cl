@@ -24,6 +24,9 @@
  * (8, clraster/layout.py) must match the vector types below. */
 typedef float8 fvec;
 typedef double8 dvec;
+/* one value per lane in private memory, aligned for the vector loads and stores above */
+typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
+typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 
 __kernel void vertex_transform(__global const float *restrict pos,
                                __global const int *restrict vert_ids,
@@ -50,9 +53,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
     int lv0 = (int)get_local_id(0) * VERTEX_LANES;
     if (lv0 >= ci.w) return;
     int n = imin(VERTEX_LANES, ci.w - lv0);
-    float px[VERTEX_LANES] __attribute__((aligned(32)));
-    float py[VERTEX_LANES] __attribute__((aligned(32)));
-    float pz[VERTEX_LANES] __attribute__((aligned(32)));
+    flanes px, py, pz;
     for (int l = 0; l < VERTEX_LANES; ++l) {
         int vi = vert_ids[ci.z + lv0 + (l < n ? l : 0)];   /* spare lanes: a real vertex */
         px[l] = pos[3 * vi]; py[l] = pos[3 * vi + 1]; pz[l] = pos[3 * vi + 2];
@@ -80,19 +81,8 @@ __kernel void vertex_transform(__global const float *restrict pos,
     dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
     dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
     dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
-    float acx[VERTEX_LANES] __attribute__((aligned(32)));
-    float acy[VERTEX_LANES] __attribute__((aligned(32)));
-    float acz[VERTEX_LANES] __attribute__((aligned(32)));
-    float acw[VERTEX_LANES] __attribute__((aligned(32)));
-    float axs[VERTEX_LANES] __attribute__((aligned(32)));
-    float ays[VERTEX_LANES] __attribute__((aligned(32)));
-    float awz[VERTEX_LANES] __attribute__((aligned(32)));
-    float aiw[VERTEX_LANES] __attribute__((aligned(32)));
-    double adx[VERTEX_LANES] __attribute__((aligned(64)));
-    double ady[VERTEX_LANES] __attribute__((aligned(64)));
-    double adz[VERTEX_LANES] __attribute__((aligned(64)));
-    double adw[VERTEX_LANES] __attribute__((aligned(64)));
-    double ar[VERTEX_LANES] __attribute__((aligned(64)));
+    flanes acx, acy, acz, acw, axs, ays, awz, aiw;
+    dlanes adx, ady, adz, adw, ar;
     *(fvec *)acx = cx; *(fvec *)acy = cy; *(fvec *)acz = cz; *(fvec *)acw = cw;
     *(fvec *)axs = xs; *(fvec *)ays = ys; *(fvec *)awz = wz; *(fvec *)aiw = iw;
     *(dvec *)adx = dx; *(dvec *)ady = dy; *(dvec *)adz = dz; *(dvec *)adw = dw;

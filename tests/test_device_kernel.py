@@ -37,9 +37,9 @@ def test_every_stage_kernel_is_declared(ctx):
     for stage in ("vertex", "setup", "bin", "raster", "pyramid", "query", "lines"):
         prg = device.program(ctx, stage, opts)
         for name in prg.kernel_names.split(";"):
-            dtypes = device.scalar_arg_dtypes(cl.Kernel(prg, name))
-            assert dtypes is not None, f"{stage}.cl {name}: no argument info"
             k = cl.Kernel(prg, name)
+            dtypes = device.scalar_arg_dtypes(k)
+            assert dtypes is not None, f"{stage}.cl {name}: no argument info"
             for i, dt in enumerate(dtypes):
                 type_name = str(k.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME))
                 if not type_name.endswith("*"):
