@@ -242,7 +242,7 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
     setup kernel (11 scalars among 24 arguments) cost ~0.1 ms of host time, and a frame
     launches 7 or more. With the dtypes declared (``set_scalar_arg_dtypes``, read here from
     the kernel's argument info so they cannot drift from the source) pyopencl packs them
-    in one generated call: ~14 µs for 22 arguments (bench/README.md, performance log).
+    in one generated call: 92 → 8 µs for 22 arguments (bench/host_overhead.py).
     Where the platform gives no argument info, the kernel is returned undeclared (slower,
     same results). Callers pass scalars as NumPy scalars of the kernel's types, as before.
     """
@@ -329,8 +329,9 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     PoCL's threads and is interrupted by signals, so KeyboardInterrupt gets through at
     once. Before, the status was polled for the whole wait with sleeps of 20 µs doubling
     to 250 µs: up to 250 µs late and a wake-up every 250 µs on the cores the kernels run
-    on. bench/proc_ab.py, 31 rounds: spot 0.974x, bunny 0.975x, dragon 0.973x, an empty
-    frame (one wait of ~0.9 ms, ~70 µs later than polled) 1.04x, 1.80 ms. (Tried too: the
+    on. bench/host_overhead.py: ~85 µs late after kernels of 0.9, 8 and 80 ms (polled:
+    274, 133, 232 µs); bench/proc_ab.py, 31 rounds: spot 0.974x, bunny 0.975x, dragon
+    0.973x, an empty frame 1.04x (1.73 -> 1.80 ms, not explained). (Tried too: the
     main thread blocking on a lock while a helper thread sat in ``Event.wait``: spot
     frames at 1080p 1.07x slower, its raster too — that wait competes with PoCL's threads
     for the cores.)
