@@ -117,12 +117,21 @@ class RasterConfig:
             triangle batch needs ~2**19 and this never binds there (2**20..2**22 measured
             alike); it splits only frames of huge overlapping triangles, whose passes are
             raster work anyway. 2**22 would double the bound for no measured gain.
+        tile_hiz: the raster skips a piece whose nearest depth is behind the farthest
+            depth its tile holds at that moment (kernels/raster.cl): it could pass nowhere
+            there. Never changes the image; it lowers ``fragments_tested`` and the overdraw
+            map, which then count the fragments that reached the depth test (without it,
+            every covered fragment, the scene's depth complexity). The twin takes the same
+            decisions. 10M plant first person with occlusion culling: 12.2M fragments
+            tested → 7.2M, raster 0.74×; no gain where back-face culling leaves little
+            overdraw (dragon, bunny, spot framed: tested ≈ passed), dragon raster ~1.02×.
     """
 
     tile_log2: int = 4
     bin_chunks: int = 64
     batch_triangles: int = 1 << 20
     batch_entries: int = 1 << 21
+    tile_hiz: bool = True
 
     def __post_init__(self) -> None:
         if not 3 <= self.tile_log2 <= 6:
@@ -134,6 +143,8 @@ class RasterConfig:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) \
                     or not lo <= v < 2**31:
                 raise ValueError(f"{name} must be an integer in {lo}..2**31 - 1, got {v!r}")
+        if not isinstance(self.tile_hiz, (bool, np.bool_)):
+            raise ValueError(f"tile_hiz must be True or False, got {self.tile_hiz!r}")
 
     @property
     def tile_size(self) -> int:

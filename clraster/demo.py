@@ -8,8 +8,8 @@ history; the later ones reuse it), and writes into ``--out``:
 * ``shaded.png``: flat Lambert shading (`clraster.shade.shade`);
 * ``depth.png``: eye distance on a log scale over the covered pixels, with a colour bar
   in metres;
-* ``overdraw.png``: fragments tested per pixel (depth complexity) as a heat map, with a
-  colour bar;
+* ``overdraw.png``: fragments tested per pixel (the depth-test work, after the tile Hi-Z)
+  as a heat map, with a colour bar;
 * ``inspector.png``: the same ground floor from a third-person camera above and behind,
   everything above a horizontal user clip plane `INSPECTOR_CUT` over the floor cut away
   (``render(..., clip_planes=...)``: instances crossing the plane are cut open, not

@@ -71,7 +71,10 @@ class FrameStats:
         clip_pieces: triangles the clipper produced that survived.
         rasterized: pieces sent to binning (unclipped survivors + clip_pieces).
         binned_entries: (piece, tile) pairs in the tile lists.
-        fragments_tested: covered pixel centres that reached the depth test.
+        fragments_tested: covered pixel centres that reached the depth test. With the
+            tile Hi-Z (`RasterConfig.tile_hiz`, on by default) a piece behind everything
+            its tile already holds is skipped untested; off, this counts every covered
+            pixel centre.
         fragments_passed: depth-test passes (each one a depth/id write).
         timings_ms: stage → milliseconds (device stages from OpenCL profiling events).
     """
@@ -172,8 +175,10 @@ class Frame:
             uses the 1/256-px snapped ones), so at a covered pixel centre just outside the
             unsnapped triangle (at most sqrt(2)/512 px) a weight can be slightly negative.
         stats: counts per stage (`FrameStats`).
-        overdraw: (H, W) int32 fragments tested per pixel (depth complexity), when asked for
-            (``render(..., overdraw=True)``); else None.
+        overdraw: (H, W) int32 fragments tested per pixel, when asked for
+            (``render(..., overdraw=True)``); else None. It sums to fragments_tested: the
+            depth-test work done; with ``RasterConfig(tile_hiz=False)`` it is the scene's
+            depth complexity (every covered fragment).
         fates: the fate of every cluster of the scene (`clraster.fates.ClusterFates`),
             when asked for (``render(..., fates=True)``); else None.
         reversed_z: whether ``depth`` is reversed-Z (see depth).

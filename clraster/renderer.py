@@ -115,7 +115,8 @@ class Renderer:
                 same scene (on a first frame: the nearest ones), build the pyramid, test
                 every other cluster's box against it, draw those not occluded, and keep
                 the visible set for the next frame. Conservative: same image.
-            overdraw: also return ``frame.overdraw``, fragments tested per pixel.
+            overdraw: also return ``frame.overdraw``, fragments tested per pixel (after
+                the tile Hi-Z: `FrameStats.fragments_tested`).
             fates: also return ``frame.fates``, a `clraster.fates.ClusterFates`: the fate
                 of every cluster of every instance (drawn, frustum-, cone- or
                 occlusion-culled); its counts equal the stats' culling funnel.

@@ -129,17 +129,18 @@ def pixel_centres(width: int, height: int):
     return xc, yc
 
 
-_RENDERERS: dict[tuple[int, int, int], object] = {}
+_RENDERERS: dict[tuple[int, int, int, bool], object] = {}
 
 
-def get_renderer(width: int, height: int, tile_log2: int = 4):
-    """The session's Renderer for this size and tile size (built on first use)."""
+def get_renderer(width: int, height: int, tile_log2: int = 4, hiz: bool = True):
+    """The session's Renderer for this size, tile size and tile Hi-Z setting (built on
+    first use)."""
     from clraster import Renderer
 
-    key = (width, height, tile_log2)
+    key = (width, height, tile_log2, hiz)
     r = _RENDERERS.get(key)
     if r is None:
-        r = Renderer(width, height, config=RasterConfig(tile_log2=tile_log2))
+        r = Renderer(width, height, config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz))
         _RENDERERS[key] = r
     return r
 
@@ -152,22 +153,26 @@ def renderer_for():
 
 # The core-pipeline tests pin per-triangle counts (every face reaches setup), so they render
 # with object culling off; tests/test_culling*.py cover it being on.
-def render_cl(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
-    return get_renderer(width, height, tile_log2).render(mesh, camera, cull=cull,
+def render_cl(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+              hiz=True):
+    return get_renderer(width, height, tile_log2, hiz).render(mesh, camera, cull=cull,
                                                          frustum=culling, cones=culling)
 
 
-def render_ref(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
+def render_ref(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+               hiz=True):
     from clraster import reference
 
     return reference.render(mesh, camera, width, height, cull=cull, frustum=culling,
-                            cones=culling, config=RasterConfig(tile_log2=tile_log2))
+                            cones=culling,
+                            config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz))
 
 
-def render_both(mesh, camera, width, height, cull="none", tile_log2=4, culling=False):
+def render_both(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+                hiz=True):
     """(OpenCL frame, NumPy-twin frame) for the same input and config."""
-    return (render_cl(mesh, camera, width, height, cull, tile_log2, culling),
-            render_ref(mesh, camera, width, height, cull, tile_log2, culling))
+    return (render_cl(mesh, camera, width, height, cull, tile_log2, culling, hiz),
+            render_ref(mesh, camera, width, height, cull, tile_log2, culling, hiz))
 
 
 def assert_frames_equal(a, b, context: str = "", bary_atol: float = 1e-5,

@@ -20,7 +20,7 @@ from conftest import (
 )
 from random_scenes import Lens, random_soup
 
-from clraster import Camera, Mesh
+from clraster import Camera, Mesh, RasterConfig
 
 TRIANGLE_COUNTS = ("invalid", "trivially_rejected", "backface_culled", "degenerate",
                    "no_sample", "clipped")
@@ -28,9 +28,9 @@ TRIANGLE_COUNTS = ("invalid", "trivially_rejected", "backface_culled", "degenera
 CCW_NDC = [[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.0, 0.5, 0.0]]  # counter-clockwise in NDC
 
 
-def counts_of(mesh, camera=NDC_CAMERA, w=32, h=32, cull="none", tile_log2=4):
+def counts_of(mesh, camera=NDC_CAMERA, w=32, h=32, cull="none", tile_log2=4, hiz=True):
     """Counts of the OpenCL frame, after checking the twin agrees on everything."""
-    a, b = render_both(mesh, camera, w, h, cull=cull, tile_log2=tile_log2)
+    a, b = render_both(mesh, camera, w, h, cull=cull, tile_log2=tile_log2, hiz=hiz)
     assert_frames_equal(a, b, f"cull={cull}")
     check_partition(a.stats)
     return a, a.stats.counts()
@@ -235,9 +235,27 @@ def test_overdraw_counts():
     fr, c = counts_of(far_to_near, cam, w, h)
     assert c["fragments_tested"] == 3 * w * h and c["fragments_passed"] == 3 * w * h
     assert (fr.triangle_id == 2).all()
-    fr, c = counts_of(near_to_far, cam, w, h)
+    fr, c = counts_of(near_to_far, cam, w, h, hiz=False)
     assert c["fragments_tested"] == 3 * w * h and c["fragments_passed"] == w * h
     assert (fr.triangle_id == 0).all()
+    # the tile Hi-Z (default): once the near layer fills the one 16-px tile, the two
+    # behind it are skipped untested; far to near, every layer is nearer than the tile's
+    # farthest depth and is tested
+    fr, c = counts_of(near_to_far, cam, w, h)
+    assert c["fragments_tested"] == w * h and c["fragments_passed"] == w * h
+    assert (fr.triangle_id == 0).all()
+    fr, c = counts_of(far_to_near, cam, w, h)
+    assert c["fragments_tested"] == 3 * w * h and c["fragments_passed"] == 3 * w * h
+    # 8-px tiles: the same, tile by tile
+    fr, c = counts_of(near_to_far, cam, w, h, tile_log2=3)
+    assert c["fragments_tested"] == w * h and (fr.triangle_id == 0).all()
+
+
+
+@pytest.mark.parametrize("v", [1, 0, "yes", None])
+def test_tile_hiz_validated(v):
+    with pytest.raises(ValueError, match="tile_hiz"):
+        RasterConfig(tile_hiz=v)
 
 
 # --- cull modes and counts on random soups -----------------------------------------------
@@ -251,9 +269,10 @@ def test_cull_modes_partition_random_soup(seed, size, tile_log2):
     v, f, _ = random_soup(np.random.default_rng(seed), 3000, w, h, lens)
     mesh = Mesh(v, f)
     cam = MatrixCamera(lens.projection(w / h))
-    fn, cn = counts_of(mesh, cam, w, h, "none", tile_log2)
-    fb, cb = counts_of(mesh, cam, w, h, "back", tile_log2)
-    ff, cf = counts_of(mesh, cam, w, h, "front", tile_log2)
+    # without the tile Hi-Z, so that fragments_tested counts every covered fragment
+    fn, cn = counts_of(mesh, cam, w, h, "none", tile_log2, hiz=False)
+    fb, cb = counts_of(mesh, cam, w, h, "back", tile_log2, hiz=False)
+    ff, cf = counts_of(mesh, cam, w, h, "front", tile_log2, hiz=False)
     np.testing.assert_array_equal(fn.depth, np.minimum(fb.depth, ff.depth))
     exp = np.where(fb.depth < ff.depth, fb.triangle_id,
                    np.where(ff.depth < fb.depth, ff.triangle_id,

@@ -64,7 +64,8 @@ def _scene(seed: int, size, lens: Lens, extras, bad, world_view: bool):
     return Mesh(to_world(v, view), f), cam, kinds
 
 
-_counted = {"triangles": 0, "examples": 0, "clipped": 0, "pieces": 0, "fragments": 0}
+_counted = {"triangles": 0, "examples": 0, "clipped": 0, "pieces": 0, "fragments": 0,
+            "hiz_skipped": 0}
 
 
 # No shrinking: a seed drives the whole soup, so shrinking cannot simplify it much and takes
@@ -82,15 +83,24 @@ def _differential(seed, size, tile_log2, cull, lens, extras, bad, world_view):
                               f"lens={lens} world_view={world_view}")
     s = a.stats
     assert s.triangles_in == mesh.n_faces
+    # the tile Hi-Z (on above, on both sides) never changes the image; without it every
+    # covered fragment is tested
+    c = render_cl(mesh, cam, *size, cull=cull, tile_log2=tile_log2, hiz=False)
+    assert_frames_equal(a, c, "tile Hi-Z on/off", bary_atol=0.0, check_counts=False)
+    ca, cc = s.counts(), c.stats.counts()
+    assert ca.pop("fragments_tested") <= cc.pop("fragments_tested")
+    assert ca == cc
     _counted["triangles"] += mesh.n_faces
     _counted["examples"] += 1
     _counted["clipped"] += s.clipped
     _counted["pieces"] += s.clip_pieces
-    _counted["fragments"] += s.fragments_tested
+    _counted["fragments"] += c.stats.fragments_tested
+    _counted["hiz_skipped"] += c.stats.fragments_tested - s.fragments_tested
 
 
 def test_random_soups_match_twin():
-    """≥ 100,000 random triangles, OpenCL vs twin, exact ids/depth/counts."""
+    """≥ 100,000 random triangles, OpenCL vs twin, exact ids/depth/counts (the fragments
+    the tile Hi-Z skips included)."""
     for k in _counted:
         _counted[k] = 0
     _differential()
@@ -98,6 +108,8 @@ def test_random_soups_match_twin():
     assert _counted["triangles"] >= MIN_TRIANGLES, _counted
     assert _counted["clipped"] > 1000 and _counted["pieces"] > 1000, _counted
     assert _counted["fragments"] > 1_000_000, _counted
+    # ... and the tile Hi-Z skipped a good share of them, the twin agreeing on each count
+    assert _counted["hiz_skipped"] > 100_000, _counted
     print(f"differential: {_counted}")
 
 
@@ -121,8 +133,11 @@ def test_soup_has_every_kind():
 
 @pytest.mark.parametrize("size", [(127, 65), (33, 17), (64, 129)])
 def test_tile_size_does_not_change_output(size):
-    """The same scene at tile_log2 3, 4, 5, 6 on the OpenCL side: identical images and
-    identical counts except binned_entries (which depends on the tile size by design)."""
+    """The same scene at tile_log2 3, 4, 5, 6 on the OpenCL side: identical images and,
+    without the tile Hi-Z, identical counts except binned_entries (which depends on the
+    tile size by design). With it (the default), the same images again; only
+    fragments_tested may change (a tile's farthest depth depends on the tile), and it is
+    never more than without."""
     w, h = size
     rng = np.random.default_rng(w * 1000 + h)
     lens = Lens(75.0, 0.3, 300.0)
@@ -130,7 +145,8 @@ def test_tile_size_does_not_change_output(size):
     mesh = Mesh(v, f)
     cam = MatrixCamera(lens.projection(w / h))
     for cull in ("back", "none"):
-        frames = [render_cl(mesh, cam, w, h, cull=cull, tile_log2=t) for t in TILE_LOG2S]
+        frames = [render_cl(mesh, cam, w, h, cull=cull, tile_log2=t, hiz=False)
+                  for t in TILE_LOG2S]
         base = frames[0]
         assert (base.triangle_id >= 0).sum() > w * h // 4
         for t, fr in zip(TILE_LOG2S[1:], frames[1:], strict=True):
@@ -143,6 +159,14 @@ def test_tile_size_does_not_change_output(size):
         # smaller tiles never bin fewer entries
         entries = [fr.stats.binned_entries for fr in frames]
         assert entries == sorted(entries, reverse=True)
+        for t, off in zip(TILE_LOG2S, frames, strict=True):
+            on = render_cl(mesh, cam, w, h, cull=cull, tile_log2=t)
+            assert_frames_equal(off, on, f"tile Hi-Z tile_log2 {t} cull={cull}",
+                                bary_atol=0.0, check_counts=False)
+            ca, cb = off.stats.counts(), on.stats.counts()
+            assert cb["fragments_tested"] <= ca.pop("fragments_tested")
+            cb.pop("fragments_tested")
+            assert ca == cb
 
 
 def test_repeated_renders_reuse_buffers():

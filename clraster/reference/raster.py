@@ -139,6 +139,9 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         zbuf = np.array(into[0], F32).reshape(npx)
         wid = into[1].reshape(npx).astype(np.int64)
     tested = passed = 0
+    covered = np.zeros(entries.size, np.int64)   # fragments tested per entry, no Hi-Z
+    events: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # depth-test passes
+    zbuf0 = zbuf.copy()
     open_px = shut = None
     if window is not None:
         shut = ~np.asarray(window, bool).reshape(npx)
@@ -154,6 +157,10 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
             keep = open_px[pix]             # tiles the window shuts are not rasterized
             owner, pix, z, pc = owner[keep], pix[keep], z[keep], pc[keep]
         tested += z.size
+        if z.size:
+            lo = int(owner.min())
+            bc = np.bincount(owner - lo)
+            covered[lo:lo + bc.size] += bc
         if shut is not None:                # tested, but never passing (-inf depth)
             keep = ~shut[pix]
             owner, pix, z, pc = owner[keep], pix[keep], z[keep], pc[keep]
@@ -178,11 +185,19 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         ok = rk < prev
         passed += int(ok.sum())
         pix_ok, z_ok, own_ok, id_ok = pix[ok], z[ok], owner[ok], ids[ok]
+        if config.tile_hiz:
+            events.append((pix_ok, own_ok, z_ok))
         last = np.ones(pix_ok.size, bool)
         last[:-1] = pix_ok[1:] != pix_ok[:-1]
         zbuf[pix_ok[last]] = z_ok[last]
         win[pix_ok[last]] = own_ok[last]
         wid[pix_ok[last]] = id_ok[last]
+
+    if config.tile_hiz and entries.size:
+        if shut is not None:
+            zbuf0[shut] = -np.inf      # as raster.cl: shut pixels never count as farthest
+        skip = hiz_skipped(tile_start, entries, width, height, config, zbuf0, events)
+        tested -= int(covered[skip].sum())
 
     if into is None:
         ids = np.full(npx, -1, np.int32)
@@ -216,3 +231,68 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         ids[hit] = pc["id"]
     return (zbuf.reshape(height, width), ids.reshape(height, width),
             bary.reshape(height, width, 3), tested, passed)
+
+
+def hiz_skipped(tile_start: np.ndarray, entries: np.ndarray, width: int, height: int,
+                config: RasterConfig, zbuf0: np.ndarray,
+                events: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> np.ndarray:
+    """The entries raster.cl's tile Hi-Z skips: those whose nearest depth (``zlo``) is
+    farther than the farthest depth of their tile just before them.
+
+    A skipped entry passes nowhere, so the depth history of the run without skipping is
+    the kernel's: each pixel holds its start value until its first depth-test pass, then
+    each pass's depth until the next. A value held until entry b (it is there when b is
+    tested) is a *segment* ending at b. Depths only decrease, so the farthest depth of a
+    tile before entry k is the largest value of its segments that end at k or later (any
+    such segment's pixel holds at least that value before k): a suffix maximum over each
+    tile's entries, taken for all tiles at once with a per-tile offset.
+
+    Args:
+        tile_start: int32 (T + 1,); entries: PIECE_DTYPE (E,), tile-major.
+        zbuf0: float32 (H·W,) depths before the pass (the clear value, an earlier pass's
+            depth, −inf at pixels a window shuts).
+        events: per batch, the passes (pixel int64, entry int64, depth float32), sorted by
+            pixel then entry within the batch; batches in entry order.
+
+    Returns:
+        bool (E,): True for the entries the kernel skips.
+    """
+    s = config.tile_log2
+    tiles_x, _ = config.tiles(width, height)
+    n_tiles = tile_start.size - 1
+    if events:
+        pix = np.concatenate([e[0] for e in events])
+        own = np.concatenate([e[1] for e in events])
+        val = np.concatenate([e[2] for e in events])
+        o = np.lexsort((own, pix))
+        pix, own, val = pix[o], own[o], val[o]
+    else:
+        pix = own = np.zeros(0, np.int64)
+        val = np.zeros(0, F32)
+    npx = zbuf0.size
+    big = np.iinfo(np.int64).max
+    # the entry each value is last held for: the next pass at its pixel, or the end
+    same = np.zeros(pix.size, bool)
+    same[:-1] = pix[1:] == pix[:-1]
+    ev_end = np.where(same, np.append(own[1:], 0), big)
+    first = np.full(npx, big, np.int64)
+    starts = np.ones(pix.size, bool)
+    starts[1:] = ~same[:-1]
+    first[pix[starts]] = own[starts]
+    seg_pix = np.concatenate([np.arange(npx, dtype=np.int64), pix])
+    seg_val = np.concatenate([zbuf0.astype(F32), val])
+    seg_end = np.concatenate([first, ev_end])
+    x, y = seg_pix % width, seg_pix // width
+    tile = (y >> s) * tiles_x + (x >> s)
+    last = tile_start[tile + 1].astype(np.int64) - 1   # the tile's last entry
+    has = last >= tile_start[tile]
+    seg_end = np.minimum(seg_end[has], last[has])
+    # ordered depth keys, offset so that a lower tile's keys exceed every higher tile's
+    # (the suffix maximum restarts at each tile's last entry)
+    off = (np.int64(n_tiles) - tile[has]) << 33
+    acc = np.full(entries.size, np.iinfo(np.int64).min, np.int64)
+    np.maximum.at(acc, seg_end, _ordered(seg_val[has]) + off)
+    acc = np.maximum.accumulate(acc[::-1])[::-1]
+    entry_tile = np.repeat(np.arange(n_tiles, dtype=np.int64), np.diff(tile_start))
+    farthest = acc - ((np.int64(n_tiles) - entry_tile) << 33)
+    return _ordered(entries["zlo"]) > farthest

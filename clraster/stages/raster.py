@@ -91,7 +91,8 @@ class RasterStage:
                     np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
                     self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
-                    self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0))
+                    self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0),
+                    np.int32(0))
         wait(queue, keep=into)
         into.sync(queue)
         return into
@@ -119,7 +120,8 @@ class RasterStage:
             into: outputs of an earlier pass over the same image to continue from (its
                 depth and ids take part in the depth test; pixels nobody beats keep their
                 values) — used by two-phase occlusion culling. None: start from clear.
-            overdraw: also count fragments tested per pixel (depth complexity).
+            overdraw: also count fragments tested per pixel (after the tile Hi-Z,
+                RasterConfig.tile_hiz).
             bary: also compute and write barycentrics (new outputs only; ``into`` has
                 them or not as it was allocated).
 
@@ -168,7 +170,8 @@ class RasterStage:
                            self.buffers.seg_stats.ensure(16 * segments(params)),
                            np.int32(load), np.int32(want),
                            out.bufs[-1] if want else out.bufs[1], np.int32(want_bary),
-                           *self._window(queue, params), bins.summary.buf, np.int32(bins.cap))
+                           *self._window(queue, params), bins.summary.buf, np.int32(bins.cap),
+                           np.int32(self.config.tile_hiz))
 
     def prepare(self, queue: cl.CommandQueue, params: FrameParams) -> None:
         """Upload the frame's window mask, if it has a new one, before the pass's first
