@@ -483,8 +483,10 @@ def render_sort_last(target, camera, client, *, parts: int | None = None, width:
     Returns:
         One `Frame`, gathered to the client, equal bit for bit (depth, triangle_id,
         barycentrics) to ``Renderer(width, height).render(target, camera, **render_kwargs)``;
-        overdraw is the sum of the parts' (equal to one frame's with ``occlusion=False``;
-        with occlusion a part culls less than the whole scene would). Stats: counts added
+        overdraw is the sum of the parts' (with ``occlusion=False``, per pixel at least one
+        frame's: a part's tile Hi-Z skips only behind its own geometry — equal with
+        ``RasterConfig(tile_hiz=False)`` —; with occlusion a part culls less than the whole
+        scene would). Stats: counts added
         over the parts (`clraster.composite.merge_stats`); timings_ms adds "part render
         (wall)" and "composite" (worker milliseconds, summed over the tasks).
     """

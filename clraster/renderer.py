@@ -142,7 +142,7 @@ class Renderer:
                 tile the screen draw every pixel once). The image is the unwindowed image
                 restricted to those pixels; tiles the window does not reach are not
                 rasterized, and fragments at shut pixels of the others are tested but never
-                pass (counted in fragments_tested).
+                pass (counted in fragments_tested, unless the tile Hi-Z skips their piece).
             outputs: which of "depth", "ids", "bary" to make. Without "bary" the
                 barycentrics are neither computed nor stored (``frame.barycentrics`` is
                 None): 8 bytes per pixel instead of 20, for depth, visibility and

@@ -47,7 +47,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     float zbuf[TILE_PIXELS] __attribute__((aligned(32)));
     int win[TILE_PIXELS];   /* winning entry index, -1 = background */
     int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
-    int odc[TILE_PIXELS];   /* fragments tested per pixel (depth complexity) */
+    int odc[TILE_PIXELS];   /* fragments tested per pixel (after the tile Hi-Z) */
     for (int i = 0; i < TILE_PIXELS; ++i) {
         zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; odc[i] = 0;
     }
@@ -76,7 +76,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
      * farthest depth cannot pass anywhere in it (fragment depths are clamped to >= zlo,
      * and ties need equal depths), so it is skipped untested, like cudaraster's per-tile
      * zmax. tzmax is that farthest depth, attained at pixel zarg. Depths only decrease, so
-     * zbuf[zarg] <= farthest <= tzmax at all times: a piece not behind zbuf[zarg] is not
+     * once tzmax is known, zbuf[zarg] <= farthest <= tzmax: a piece not behind zbuf[zarg] is not
      * skipped with no more work, and only one behind it finds the farthest depth again
      * (when zbuf[zarg] has fallen below tzmax). Every decision is thus the exact
      * "zlo > farthest depth now", whatever the order of work, and the twin takes the same

@@ -261,8 +261,12 @@ def check_sort_last(client, renderer, target, camera, parts_list=(2, 3, 4), **kw
         assert np.array_equal(out.barycentrics.view(np.uint32),
                               ref.barycentrics.view(np.uint32)), parts
         assert out.stats.triangles_total == ref.stats.triangles_total
-        if kw.get("overdraw") and not kw.get("occlusion"):
-            assert np.array_equal(out.overdraw, ref.overdraw)
+        if kw.get("overdraw"):
+            # the parts' maps summed; each part's tile Hi-Z skips only behind its own
+            # geometry, so per pixel at least one machine's count (equal without it)
+            assert int(out.overdraw.sum()) == out.stats.fragments_tested, parts
+            if not kw.get("occlusion"):
+                assert (out.overdraw >= ref.overdraw).all(), parts
 
 
 def test_workers_get_their_pocl_threads(client):
