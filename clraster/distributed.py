@@ -484,11 +484,11 @@ def render_sort_last(target, camera, client, *, parts: int | None = None, width:
         One `Frame`, gathered to the client, equal bit for bit (depth, triangle_id,
         barycentrics) to ``Renderer(width, height).render(target, camera, **render_kwargs)``;
         overdraw is the sum of the parts' (with ``occlusion=False``, per pixel at least one
-        frame's: a part's tile Hi-Z skips only behind its own geometry — equal with
-        ``RasterConfig(tile_hiz=False)`` —; with occlusion a part culls less than the whole
-        scene would). Stats: counts added
-        over the parts (`clraster.composite.merge_stats`); timings_ms adds "part render
-        (wall)" and "composite" (worker milliseconds, summed over the tasks).
+        frame's, as a part's tile Hi-Z skips only behind its own geometry, and equal to it
+        with ``RasterConfig(tile_hiz=False)``; with occlusion a part culls less than the
+        whole scene would). Stats: counts added over the parts
+        (`clraster.composite.merge_stats`); timings_ms adds "part render (wall)" and
+        "composite" (worker milliseconds, summed over the tasks).
     """
     futs = submit_sort_last(target, camera, client, parts=parts, width=width, height=height,
                             config=config, **render_kwargs)

@@ -75,10 +75,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     /* Tile Hi-Z (hiz != 0): a piece whose nearest depth (zlo) is farther than the tile's
      * farthest depth cannot pass anywhere in it (fragment depths are clamped to >= zlo,
      * and ties need equal depths), so it is skipped untested, like cudaraster's per-tile
-     * zmax. tzmax is that farthest depth, attained at pixel zarg. Depths only decrease, so
-     * once tzmax is known, zbuf[zarg] <= farthest <= tzmax: a piece not behind zbuf[zarg] is not
-     * skipped with no more work, and only one behind it finds the farthest depth again
-     * (when zbuf[zarg] has fallen below tzmax). Every decision is thus the exact
+     * zmax. tzmax is that farthest depth, attained at pixel zarg. Depths only decrease,
+     * so once tzmax is known, zbuf[zarg] <= farthest <= tzmax: a piece not behind
+     * zbuf[zarg] is not skipped with no more work, and only one behind it finds the
+     * farthest depth again (when zbuf[zarg] has fallen below tzmax). Every decision is thus the exact
      * "zlo > farthest depth now", whatever the order of work, and the twin takes the same
      * decisions from the depth history (clraster/reference/raster.py hiz_skipped). Pixels
      * outside the image hold -inf so they never count as the farthest. */

@@ -139,9 +139,11 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         zbuf = np.array(into[0], F32).reshape(npx)
         wid = into[1].reshape(npx).astype(np.int64)
     tested = passed = 0
-    covered = np.zeros(entries.size, np.int64)   # fragments tested per entry, no Hi-Z
+    hiz = config.tile_hiz and entries.size > 0
+    if hiz:   # what the tile Hi-Z decisions need (hiz_skipped)
+        covered = np.zeros(entries.size, np.int64)   # fragments tested per entry, no Hi-Z
+        zbuf0 = zbuf.copy()
     events: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # depth-test passes
-    zbuf0 = zbuf.copy()
     open_px = shut = None
     if window is not None:
         shut = ~np.asarray(window, bool).reshape(npx)
@@ -157,7 +159,7 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
             keep = open_px[pix]             # tiles the window shuts are not rasterized
             owner, pix, z, pc = owner[keep], pix[keep], z[keep], pc[keep]
         tested += z.size
-        if z.size:
+        if hiz and z.size:
             lo = int(owner.min())
             bc = np.bincount(owner - lo)
             covered[lo:lo + bc.size] += bc
@@ -185,7 +187,7 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         ok = rk < prev
         passed += int(ok.sum())
         pix_ok, z_ok, own_ok, id_ok = pix[ok], z[ok], owner[ok], ids[ok]
-        if config.tile_hiz:
+        if hiz:
             events.append((pix_ok, own_ok, z_ok))
         last = np.ones(pix_ok.size, bool)
         last[:-1] = pix_ok[1:] != pix_ok[:-1]
@@ -193,7 +195,7 @@ def raster(clip_bary: np.ndarray, tile_start: np.ndarray, entries: np.ndarray, w
         win[pix_ok[last]] = own_ok[last]
         wid[pix_ok[last]] = id_ok[last]
 
-    if config.tile_hiz and entries.size:
+    if hiz:
         if shut is not None:
             zbuf0[shut] = -np.inf      # as raster.cl: shut pixels never count as farthest
         skip = hiz_skipped(tile_start, entries, width, height, config, zbuf0, events)
