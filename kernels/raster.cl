@@ -33,6 +33,68 @@ inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
         *hi = (int)floor_div(r - bias, -s);
 }
 
+/* Perspective-correct barycentrics of pixel (x, y) of piece pc, relative to its parent
+ * triangle's vertices: screen-space weights from the unsnapped value planes (setup.cl),
+ * weighted by the perspective ratios, one division (three chained divisions per pixel were
+ * 30% of spot's raster samples, perf; the twin multiplies by the same reciprocal), then
+ * through the clipped piece's parent barycentrics or its vertex swap. */
+ALWAYS_INLINE void resolve1(__global const Piece *pc, int x, int y,
+                            __global const float *clip_bary, float *B0, float *B1, float *B2)
+{
+    float fx = (float)(x - bb_x(pc->bb_min)), fy = (float)(y - bb_y(pc->bb_min));
+    float l1 = (pc->l1 + pc->l1x * fx) + pc->l1y * fy;
+    float l2 = (pc->l2 + pc->l2x * fx) + pc->l2y * fy;
+    float l0 = (1.0f - l1) - l2;
+    float q1 = l1 * pc->r1, q2 = l2 * pc->r2;
+    float s = (l0 + q1) + q2;
+    float inv = 1.0f / s;
+    float c0 = l0 * inv, c1 = q1 * inv, c2 = q2 * inv;
+    if (pc->flags & PF_CLIPPED) {
+        __global const float *pb = clip_bary + 9 * (pc->flags >> PF_INDEX_SHIFT);
+        *B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];
+        *B1 = (c0 * pb[1] + c1 * pb[4]) + c2 * pb[7];
+        *B2 = (c0 * pb[2] + c1 * pb[5]) + c2 * pb[8];
+    } else if (pc->flags & PF_SWAPPED) {
+        *B0 = c0; *B1 = c2; *B2 = c1;
+    } else {
+        *B0 = c0; *B1 = c1; *B2 = c2;
+    }
+}
+
+/* resolve1 for the eight pixels (x .. x + 7, y) of one piece, in float8 lanes with the same
+ * operations in the same order; out: their 24 interleaved barycentrics. */
+ALWAYS_INLINE void resolve8(__global const Piece *pc, int x, int y,
+                            __global const float *clip_bary, float *out)
+{
+    int8 xs = (int8)(x - bb_x(pc->bb_min)) + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    float8 fx = __builtin_convertvector(xs, float8);
+    float fy = (float)(y - bb_y(pc->bb_min));
+    float8 l1 = ((float8)(pc->l1) + (float8)(pc->l1x) * fx) + (float8)(pc->l1y * fy);
+    float8 l2 = ((float8)(pc->l2) + (float8)(pc->l2x) * fx) + (float8)(pc->l2y * fy);
+    float8 l0 = ((float8)(1.0f) - l1) - l2;
+    float8 q1 = l1 * (float8)(pc->r1), q2 = l2 * (float8)(pc->r2);
+    float8 s = (l0 + q1) + q2;
+    float8 inv = (float8)(1.0f) / s;
+    float8 c0 = l0 * inv, c1 = q1 * inv, c2 = q2 * inv;
+    float8 B0, B1, B2;
+    if (pc->flags & PF_CLIPPED) {
+        __global const float *pb = clip_bary + 9 * (pc->flags >> PF_INDEX_SHIFT);
+        B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];
+        B1 = (c0 * pb[1] + c1 * pb[4]) + c2 * pb[7];
+        B2 = (c0 * pb[2] + c1 * pb[5]) + c2 * pb[8];
+    } else if (pc->flags & PF_SWAPPED) {
+        B0 = c0; B1 = c2; B2 = c1;
+    } else {
+        B0 = c0; B1 = c1; B2 = c2;
+    }
+    float b0[8] __attribute__((aligned(32))), b1[8] __attribute__((aligned(32)));
+    float b2[8] __attribute__((aligned(32)));
+    *(float8 *)b0 = B0; *(float8 *)b1 = B1; *(float8 *)b2 = B2;
+    for (int k = 0; k < 8; ++k) {
+        out[3 * k] = b0[k]; out[3 * k + 1] = b1[k]; out[3 * k + 2] = b2[k];
+    }
+}
+
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
 inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
@@ -45,7 +107,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
 {
     int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
     float zbuf[TILE_PIXELS] __attribute__((aligned(32)));
-    int win[TILE_PIXELS];   /* winning entry index, -1 = background */
+    int win[TILE_PIXELS] __attribute__((aligned(32)));   /* winning entry, -1 = none */
     int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
     int odc[TILE_PIXELS];   /* fragments tested per pixel (after the tile Hi-Z) */
     for (int i = 0; i < TILE_PIXELS; ++i) {
@@ -230,40 +292,42 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         int ri[TILE_SIZE] __attribute__((aligned(32)));
         size_t orow = (size_t)y * width + tx0;
         int lrow = (y - ty0) << TILE_LOG2;
-        for (int lx = 0; lx < nx; ++lx) {
-            int i = lrow + lx, x = tx0 + lx;
-            size_t o = orow + lx;
-            if (want_overdraw) overdraw[o] = odc[i];
-            int e = win[i];
-            rd[lx] = e < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
-            ri[lx] = e >= 0 ? entries[e].id : -1;
-            if (!want_bary) continue;
-            float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
-            if (e >= 0) {
-                __global const Piece *pc = &entries[e];
-                /* screen-space weights from the unsnapped value planes (setup.cl) */
-                float fx = (float)(x - bb_x(pc->bb_min)), fy = (float)(y - bb_y(pc->bb_min));
-                float l1 = (pc->l1 + pc->l1x * fx) + pc->l1y * fy;
-                float l2 = (pc->l2 + pc->l2x * fx) + pc->l2y * fy;
-                float l0 = (1.0f - l1) - l2;
-                float q1 = l1 * pc->r1, q2 = l2 * pc->r2;
-                float s = (l0 + q1) + q2;
-                /* one division: three chained divisions per pixel were 30% of spot's
-                 * raster samples (perf); the twin multiplies by the same reciprocal */
-                float inv = 1.0f / s;
-                float c0 = l0 * inv, c1 = q1 * inv, c2 = q2 * inv;
-                if (pc->flags & PF_CLIPPED) {
-                    __global const float *pb = clip_bary + 9 * (pc->flags >> PF_INDEX_SHIFT);
-                    B0 = (c0 * pb[0] + c1 * pb[3]) + c2 * pb[6];
-                    B1 = (c0 * pb[1] + c1 * pb[4]) + c2 * pb[7];
-                    B2 = (c0 * pb[2] + c1 * pb[5]) + c2 * pb[8];
-                } else if (pc->flags & PF_SWAPPED) {
-                    B0 = c0; B1 = c2; B2 = c1;
-                } else {
-                    B0 = c0; B1 = c1; B2 = c2;
+        if (want_overdraw)
+            for (int lx = 0; lx < nx; ++lx) overdraw[orow + lx] = odc[lrow + lx];
+        /* eight columns at a time (tile rows are multiples of 8 wide) */
+        for (int lx0 = 0; lx0 < nx; lx0 += 8) {
+            int e = win[lrow + lx0];
+            if (e >= 0 && lx0 + 8 <= nx) {
+                /* one winner over all eight pixels (a piece wider than a few pixels: most
+                 * pixels of the plant's first-person frame and of a framed spot): its
+                 * record read once and the eight resolved in float8 lanes, the scalar
+                 * loop's operations in the same order (FP_CONTRACT is off), so the same
+                 * bits. The scalar loop's division's latency was the resolve's cost. */
+                int8 d8 = *(int8 *)&win[lrow + lx0] ^ (int8)(e);
+                int4 d4 = d8.lo | d8.hi;
+                int2 d2 = d4.lo | d4.hi;
+                if ((d2.x | d2.y) == 0) {
+                    __global const Piece *pc = &entries[e];
+                    *(float8 *)&rd[lx0] = *(float8 *)&zbuf[lrow + lx0];
+                    *(int8 *)&ri[lx0] = (int8)(pc->id);
+                    if (want_bary)
+                        resolve8(pc, tx0 + lx0, y, clip_bary, &rb[3 * lx0]);
+                    continue;
                 }
             }
-            rb[3 * lx] = B0; rb[3 * lx + 1] = B1; rb[3 * lx + 2] = B2;
+            int lxe = imin(lx0 + 8, nx);
+            for (int lx = lx0; lx < lxe; ++lx) {
+                int i = lrow + lx;
+                size_t o = orow + lx;
+                e = win[i];
+                rd[lx] = e < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
+                ri[lx] = e >= 0 ? entries[e].id : -1;
+                if (!want_bary) continue;
+                float B0 = 0.0f, B1 = 0.0f, B2 = 0.0f;
+                if (e >= 0)
+                    resolve1(&entries[e], tx0 + lx, y, clip_bary, &B0, &B1, &B2);
+                rb[3 * lx] = B0; rb[3 * lx + 1] = B1; rb[3 * lx + 2] = B2;
+            }
         }
 #if TILE_SIZE >= 8
         if (!load && nx == TILE_SIZE && (orow & 7) == 0) {
