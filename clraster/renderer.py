@@ -28,7 +28,7 @@ from .inputs import (
 )
 from .params import FrameParams, FrameTotals, finish_depth
 from .stages.chain import StageChain
-from .stages.pyramid import PyramidStage
+from .stages.pyramid import Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
@@ -92,6 +92,7 @@ class Renderer:
         self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
         self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
+        self._pyramid: Pyramid | None = None   # the last one `_hiz` built (this frame's)
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
@@ -233,6 +234,7 @@ class Renderer:
             if not occlusion:
                 out = draw(fd, None)
             else:
+                self._pyramid = None
                 res = two_phase(plan, self._occlusion, draw,
                                 functools.partial(self._hiz, zoff=params.zoff), totals, counts)
                 out, occluded = res.out, res.occluded_keys
@@ -243,15 +245,22 @@ class Renderer:
                      fates=ClusterFates.from_plan(plan, occluded) if fates else None,
                      reversed_z=reversed_z)
 
-    def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5
-             ) -> tuple[np.ndarray, float]:
+    def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
+             same_depth: bool = False) -> tuple[np.ndarray, float]:
         """Pyramid of ``out``'s depth (key) buffer and the Hi-Z test of boxes ``rows``
         (float32 (6, K)) under ``vp32`` (float32 (16,)): `Occlusion` codes uint8 (K,) and
-        device ms. zoff: the key's offset (`FrameParams.zoff`)."""
+        device ms. zoff: the key's offset (`FrameParams.zoff`). same_depth: the depth
+        buffer is the one of the previous call (nothing drawn since): its pyramid, still in
+        the pyramid stage's buffer, is tested again instead of built again."""
         w, h = self.width, self.height
-        pyr = self.pyramid.build(self.queue, out.bufs[0], w, h)
+        pyr = self._pyramid
+        if not same_depth or pyr is None:
+            pyr = self._pyramid = self.pyramid.build(self.queue, out.bufs[0], w, h)
+            events = list(pyr.events)
+        else:
+            events = []
         verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h, zoff)
-        return verdict, event_ms([*pyr.events, ev] if ev else pyr.events)
+        return verdict, event_ms([*events, ev] if ev else events)
 
 
 def _check_frame_fits(dev: cl.Device, width: int, height: int, config: RasterConfig) -> None:

@@ -115,9 +115,11 @@ class TwoPhaseResult:
 #: draw(draws, into) → frame buffers: run the stage chain over ``draws`` (a subset of the
 #: frame's draws, maybe empty) into ``into`` (None: fresh cleared buffers).
 DrawFn = Callable[[FrameDraws, Any], Any]
-#: hiz(frame buffers, rows float32 (6, K), view_proj float32 (16,)) → (uint8 (K,)
-#: `Occlusion` codes, milliseconds or None): pyramid of the frame's depth + box test.
-HizFn = Callable[[Any, np.ndarray, np.ndarray], tuple[np.ndarray, float | None]]
+#: hiz(frame buffers, rows float32 (6, K), view_proj float32 (16,), same_depth) → (uint8
+#: (K,) `Occlusion` codes, milliseconds or None): pyramid of the frame's depth + box test;
+#: same_depth=True: nothing was drawn since the last call of this frame, so the pyramid
+#: that call built may be tested again.
+HizFn = Callable[..., tuple[np.ndarray, float | None]]
 
 
 def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: HizFn,
@@ -166,7 +168,10 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     drawn = first | second
     vis = np.zeros(d.size, bool)
     if drawn.any():
-        v2, _ = hiz(out, np.compress(drawn, rows, axis=1), vp32)
+        # phase 2 drew nothing (a still camera): the depth buffer, so its pyramid, is the
+        # one phase 2 was tested against
+        v2, _ = hiz(out, np.compress(drawn, rows, axis=1), vp32,
+                    same_depth=not second.any())
         vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
     history.remember(scene, int(pool.instance_key_base[-1]), keys[vis])
     totals.timings_ms["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 \

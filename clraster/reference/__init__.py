@@ -188,13 +188,16 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
 def _hiz(width: int, height: int, zoff: float = 0.5):
     """The twin's Hi-Z step for `clraster.twophase.two_phase`: the NumPy pyramid of the
     images' depth (key) buffer and the NumPy box test (twins of kernels/pyramid.cl); zoff:
-    the key's offset (`FrameParams.zoff`)."""
+    the key's offset (`FrameParams.zoff`). With same_depth, the pyramid of the previous
+    call is tested again (the renderer's `_hiz`)."""
+    last: list = []
 
-    def hiz(images: Images, rows: np.ndarray, vp32: np.ndarray
+    def hiz(images: Images, rows: np.ndarray, vp32: np.ndarray, same_depth: bool = False
             ) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
-        levels = pyramid_.build(images[0])
-        verdict = pyramid_.test_boxes(levels, rows[:3].T, rows[3:].T, vp32.reshape(4, 4),
+        if not same_depth or not last:
+            last[:] = [pyramid_.build(images[0])]
+        verdict = pyramid_.test_boxes(last[0], rows[:3].T, rows[3:].T, vp32.reshape(4, 4),
                                       width, height, zoff)
         return verdict, (time.perf_counter() - t0) * 1e3
 
