@@ -40,7 +40,10 @@ planes for every draw).
 from __future__ import annotations
 
 import math
+import os
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -635,14 +638,11 @@ class _Pairs:
         # The flat path emits pairs in (instance, cluster) order; groups do not.
         self.in_order = True
 
-    def frustum_done(self, cl: np.ndarray, tri: np.ndarray, t0: float) -> float:
-        """Count one path's frustum survivors (clusters `cl`, their triangle counts `tri`),
-        whose test started at perf_counter `t0`; returns the time now."""
+    def frustum_done(self, cl: np.ndarray, tri: np.ndarray) -> None:
+        """Count one path's frustum survivors (clusters `cl`, their triangle counts
+        `tri`)."""
         self.clusters_after_frustum += cl.size
         self.tri_frustum += int(tri.sum())
-        t1 = time.perf_counter()
-        self.t_clusters += t1 - t0
-        return t1
 
     def drop_cone_culled(self, back: np.ndarray, inst: np.ndarray, cl: np.ndarray,
                          ins: np.ndarray, tri: np.ndarray):
@@ -698,6 +698,74 @@ class _Pairs:
         return np.stack([np.concatenate([a for a, _ in self.cone_pairs]),
                          np.concatenate([b for _, b in self.cone_pairs])],
                         axis=1).astype(np.int32)
+
+
+@dataclass
+class _PathResult:
+    """One culling path's output (the flat path, or one mesh's group): the frustum
+    survivors (inst, cl int64, ins bool, tri their triangle counts), the cone verdict per
+    survivor (bool, True = culled; None: no cone test) and the seconds each test took."""
+
+    inst: np.ndarray
+    cl: np.ndarray
+    ins: np.ndarray
+    tri: np.ndarray
+    back: np.ndarray | None
+    t_frustum: float
+    t_cones: float
+
+
+#: Below this many (instance, cluster) pairs to look at, the culling paths run one after
+#: the other in the calling thread; above, on `_pool`'s threads (`_run_tasks`).
+THREAD_PAIRS = 32768
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The culling helper threads (one fewer than the CPUs, 1..3), made on first use and
+    again in a forked child (whose copy of the executor has no threads)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL[0] != os.getpid():
+            n = max(1, min(3, (os.cpu_count() or 1) - 1))
+            _POOL = (os.getpid(), ThreadPoolExecutor(n, thread_name_prefix="clraster-cull"))
+        return _POOL[1]
+
+
+def _run_tasks(tasks: list, work: list[int]) -> list[_PathResult]:
+    """Results of the culling paths ``tasks`` ((function, args) each), in their order;
+    ``work``: the (instance, cluster) pairs each looks at.
+
+    The paths are independent NumPy work (each reads the scene's tables and this view's
+    planes and builds its own arrays), and NumPy releases the GIL in its loops and matrix
+    products over arrays this size, so with more than `THREAD_PAIRS` pairs in all they
+    run on this thread and `_pool`'s, biggest first, each thread taking the next path
+    when done: object culling on one thread left the other core idle (10M plant, first
+    person: the flat path and 8 meshes' groups). The results are combined in task order
+    by the caller, so the draw list and its counts are the same either way."""
+    ncpu = os.cpu_count() or 1
+    if len(tasks) < 2 or sum(work) < THREAD_PAIRS or ncpu < 2:
+        return [f(*a) for f, a in tasks]
+    results: list = [None] * len(tasks)
+    order = iter(sorted(range(len(tasks)), key=lambda k: -work[k]))
+    lock = threading.Lock()
+
+    def drain() -> None:
+        while True:
+            with lock:
+                k = next(order, None)
+            if k is None:
+                return
+            f, a = tasks[k]
+            results[k] = f(*a)
+
+    pool = _pool()
+    helpers = [pool.submit(drain) for _ in range(min(len(tasks), ncpu, 4) - 1)]
+    drain()
+    for h in helpers:
+        h.result()   # waits, and raises what a path raised
+    return results
 
 
 def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = True,
@@ -761,29 +829,43 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
 
     cone_view = _cone_view(prep, vp, cones, cull, cone_margin)
     pairs = _Pairs(keep_cone_culled)
-    if prep.flat_ids.size:  # small meshes: all their (instance, cluster) pairs at once
+
+    def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
         t0 = time.perf_counter()
         inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, view)
-        t1 = pairs.frustum_done(cl, tri, t0)
-        if cone_view is not None and cl.size:
-            back = _flat_cone_cull(prep, inst, g, cone_view)
-            inst, cl, ins = pairs.drop_cone_culled(back, inst, cl, ins, tri)
-            pairs.t_cones += time.perf_counter() - t1
-        pairs.keep(inst, cl, ins)
+        t1 = time.perf_counter()
+        back = (_flat_cone_cull(prep, inst, g, cone_view)
+                if cone_view is not None and cl.size else None)
+        return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
 
-    for mc, members in prep.groups:  # other meshes: one group of instances per mesh
-        t0 = time.perf_counter()
-        vis = inst_state[members] != OUTSIDE
-        if not vis.any():
-            continue
+    def group_task(mc: _MeshCull, members: np.ndarray, vis: np.ndarray) -> _PathResult:
+        t0 = time.perf_counter()   # other meshes: one group of instances per mesh
         inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, view)
-        pairs.in_order = False
         tri = mc.tri_count[cl]
-        t1 = pairs.frustum_done(cl, tri, t0)
-        if cone_view is not None and mc.can_cone and cl.size:
-            back = _cone_cull(mc, inst, cl, members[vis], cone_view)
-            inst, cl, ins = pairs.drop_cone_culled(back, inst, cl, ins, tri)
-            pairs.t_cones += time.perf_counter() - t1
+        t1 = time.perf_counter()
+        back = (_cone_cull(mc, inst, cl, members[vis], cone_view)
+                if cone_view is not None and mc.can_cone and cl.size else None)
+        return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
+
+    tasks: list = []
+    work: list[int] = []   # (instance, cluster) pairs each task looks at (`_run_tasks`)
+    if prep.flat_ids.size:
+        tasks.append((flat_task, ()))
+        work.append(int(prep.flat_count[inst_state[prep.flat_ids] != OUTSIDE].sum()))
+    for mc, members in prep.groups:
+        vis = inst_state[members] != OUTSIDE
+        if vis.any():
+            tasks.append((group_task, (mc, members, vis)))
+            work.append(int(vis.sum()) * mc.cm.n_clusters)
+    for k, res in enumerate(_run_tasks(tasks, work)):
+        if k > 0 or not prep.flat_ids.size:
+            pairs.in_order = False   # groups emit pairs out of draw order
+        pairs.t_clusters += res.t_frustum
+        pairs.frustum_done(res.cl, res.tri)
+        inst, cl, ins = res.inst, res.cl, res.ins
+        if res.back is not None:
+            inst, cl, ins = pairs.drop_cone_culled(res.back, inst, cl, ins, res.tri)
+            pairs.t_cones += res.t_cones
         pairs.keep(inst, cl, ins)
 
     t_order = time.perf_counter()

@@ -654,6 +654,34 @@ def test_draw_order_is_fixed():
         assert 2 in a.instance  # the NaN instance is never culled as a whole
 
 
+@pytest.mark.parametrize("threads", [False, True])
+def test_culling_threads_give_the_same_draw_list(threads, monkeypatch):
+    # The culling paths (flat path, one group per bigger mesh) run on threads above
+    # THREAD_PAIRS pairs (cull._run_tasks). Forced on (threshold 0) and off, over the
+    # procedural plant (many small meshes on the flat path and several bigger ones) seen
+    # from inside, with cones, culled back and front faces and a user clip plane: the same
+    # pairs in the same order, the same inside flags, cone-culled pairs and counts.
+    import clraster.cull as cull_mod
+    from clraster.scenes import plant, plant_inside_camera
+
+    scene = plant(200_000)
+    vp = plant_inside_camera(scene, 640, 480).view_projection(640, 480)
+    cases = ({}, {"cull": "front"}, {"clip_planes": np.array([[0.3, 0.0, 1.0, -2.0]])})
+    lists = {}
+    for on in (threads, not threads):   # the parametrized mode first
+        monkeypatch.setattr(cull_mod, "THREAD_PAIRS", 0 if on else 1 << 62)
+        lists[on] = [build_draw_list(scene, vp, keep_cone_culled=True, **kw) for kw in cases]
+    for a, b in zip(lists[True], lists[False], strict=True):
+        assert len(a) > 0 and a.counts["clusters_frustum_culled"] > 0
+        np.testing.assert_array_equal(a.instance, b.instance)
+        np.testing.assert_array_equal(a.cluster, b.cluster)
+        np.testing.assert_array_equal(a.inside, b.inside)
+        np.testing.assert_array_equal(a.cone_culled, b.cone_culled)
+        assert a.counts == b.counts
+        check_counts(a, scene)
+    assert len(lists[True][0].cone_culled) > 0   # the cone paths ran
+
+
 def test_draw_list_validation_and_timings():
     scene = cube_grid_scene(2)
     with pytest.raises(ValueError, match="view_proj"):
