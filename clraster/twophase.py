@@ -133,11 +133,11 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     """
     pool, fd, scene = plan.pool, plan.frame, plan.scene
     d = fd.draws
-    keys = pool.instance_key_base[d["instance"]] + (
-        d["cluster"] - pool.mesh_cluster_base[pool.instance_mesh[d["instance"]]])
+    # the draws' keys from the draw list's (instance, mesh-local cluster), which the draw
+    # records hold as (instance, pool cluster): the same keys, fewer gathers
+    keys = np.take(pool.instance_key_base, plan.draw_list.instance) + plan.draw_list.cluster
     wlo, whi, wbounded, box_rows = history.boxes(pool, scene)
     bounded = wbounded[keys]
-    rows = np.take(box_rows, keys, axis=1)
     vp32 = plan.view_proj.astype(np.float32).reshape(-1)
     hist = history.last_visible(scene)
     first = hist[keys] if hist is not None else None
@@ -157,7 +157,8 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     t0 = time.perf_counter()
     verdict = np.zeros(d.size, np.uint8)
     if rest.any():
-        verdict[rest], ms = hiz(out, np.compress(rest, rows, axis=1), vp32)
+        # (the boxes gathered for the tested keys only: most of a frame's are tested once)
+        verdict[rest], ms = hiz(out, np.take(box_rows, keys[rest], axis=1), vp32)
         if ms is not None:
             totals.timings_ms["pyramid+test"] = ms
     second = rest & (verdict == Occlusion.VISIBLE)
@@ -170,7 +171,7 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     if drawn.any():
         # phase 2 drew nothing (a still camera): the depth buffer, so its pyramid, is the
         # one phase 2 was tested against
-        v2, _ = hiz(out, np.compress(drawn, rows, axis=1), vp32,
+        v2, _ = hiz(out, np.take(box_rows, keys[drawn], axis=1), vp32,
                     same_depth=not second.any())
         vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
     history.remember(scene, int(pool.instance_key_base[-1]), keys[vis])
