@@ -279,6 +279,10 @@ DENSE_CLUSTERS = 64
 #: ... and so are meshes whose (instances × clusters) grid is at most this large.
 DENSE_PAIRS = 16384
 _DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
+#: Scenes with at most this many bounded instances classify them densely, every instance
+#: box against the planes, not through the instance BVH (whose traversal pays off when
+#: whole subtrees are culled among many more instances).
+DENSE_INSTANCES = 1 << 15
 
 
 def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
@@ -602,6 +606,20 @@ def _classify_instances(prep: _SceneCull, view: _ViewPlanes
                 i = prep.inst_ids[0]
                 inst_state[i] = st[0]
                 inst_mask[i] = mk[0]
+        elif prep.inst_ids.size <= DENSE_INSTANCES:
+            # every instance box on its own (`BVH.cull` equals that by contract): three
+            # matrix products instead of a traversal (10M plant, 5,349 instances: 0.29 ms
+            # instead of 1.49, the same states and masks)
+            k = view.planes.shape[0]
+            start = np.full(1, view.start, np.uint8 if k <= 8 else np.uint16)
+            st, mk = dense_row_states(view.planes[None], view.scales[None], start,
+                                      prep.inst_bvh.dense_rows,
+                                      inside_margin=view.inside_margin,
+                                      outside_margin=view.outside_margin)
+            keep = np.flatnonzero(st[0] != OUTSIDE)
+            ids = prep.inst_ids[keep]
+            inst_state[ids] = st[0, keep]
+            inst_mask[ids] = mk[0, keep]
         else:
             items, st, mk = prep.inst_bvh.cull(view.planes, view.scales, mask=view.start,
                                                inside_margin=view.inside_margin,

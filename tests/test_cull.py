@@ -682,6 +682,31 @@ def test_culling_threads_give_the_same_draw_list(threads, monkeypatch):
     assert len(lists[True][0].cone_culled) > 0   # the cone paths ran
 
 
+def test_instances_classified_densely_or_through_the_bvh_alike(monkeypatch):
+    # Up to DENSE_INSTANCES bounded instances, `_classify_instances` tests every instance
+    # box on its own instead of traversing the instance BVH (`BVH.cull` equals that by
+    # contract). Both ways over the procedural plant from inside, with the frustum off and
+    # on, user clip planes (16-bit masks) and without: the same draw lists and counts.
+    import clraster.cull as cull_mod
+    from clraster.scenes import plant, plant_inside_camera
+
+    scene = plant(200_000)
+    assert 100 < scene.n_instances <= cull_mod.DENSE_INSTANCES
+    vp = plant_inside_camera(scene, 640, 480).view_projection(640, 480)
+    planes = np.array([[0.3, 0.0, 1.0, -2.0], [0.0, -1.0, 0.0, 4.0]])
+    cases = ({}, {"clip_planes": planes}, {"frustum": False, "clip_planes": planes})
+    out = {}
+    for dense in (True, False):
+        monkeypatch.setattr(cull_mod, "DENSE_INSTANCES", 1 << 30 if dense else 0)
+        out[dense] = [build_draw_list(scene, vp, **kw) for kw in cases]
+    for a, b in zip(out[True], out[False], strict=True):
+        assert 0 < a.counts["instances_frustum_culled"] < scene.n_instances
+        np.testing.assert_array_equal(a.instance, b.instance)
+        np.testing.assert_array_equal(a.cluster, b.cluster)
+        np.testing.assert_array_equal(a.inside, b.inside)
+        assert a.counts == b.counts
+
+
 def test_draw_list_validation_and_timings():
     scene = cube_grid_scene(2)
     with pytest.raises(ValueError, match="view_proj"):
