@@ -235,30 +235,18 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
     moved to each instance's object space in float64 (`FrameDraws.uplanes`); the first
     ``n_clipping`` of them (default all) clip, the rest only reject and cull (`uclip`).
     """
-    inst = np.asarray(draw_list.instance, np.int64)
+    frame = instance_matrices(pool, scene, view_proj, clip_planes, n_clipping)
+    return draw_records(pool, scene, frame, draw_list.instance, draw_list.cluster,
+                        draw_list.inside)
+
+
+def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
+                      clip_planes: np.ndarray | None = None, n_clipping: int | None = None
+                      ) -> FrameDraws:
+    """The per-instance part of `frame_draws` (matrices, depth rows, user planes), with no
+    draws: `draw_records` adds them."""
     mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
-    model, mirrored = pool.models(mats)
-    d = np.zeros(inst.size, DRAW_DTYPE)
-    n_verts = n_tris = 0
-    if inst.size:   # (nothing in view: no records to fill, ~12 µs of small NumPy calls)
-        gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(
-            draw_list.cluster, np.int64)
-        # np.take, not pool.clusters[gcl]: NumPy's fancy indexing of rows took ~1 ms for the
-        # 83K draws of the 10M plant (its general mapiter path), take 0.06 ms
-        info = np.take(pool.clusters, gcl, axis=0)
-        d["cluster"] = gcl
-        d["instance"] = inst
-        nv, nt = info[:, 3].astype(np.int64), info[:, 1].astype(np.int64)
-        end_v, end_t = np.cumsum(nv), np.cumsum(nt)
-        d["vert_base"] = end_v - nv
-        d["tri_base"] = end_t - nt
-        d["face_base"] = np.asarray(scene.face_base, np.int64)[inst]
-        d["flags"] = (np.where(np.asarray(draw_list.inside, bool), DRAW_INSIDE, 0)
-                      | np.where(mirrored[inst], DRAW_MIRRORED, 0))
-        # the cumulative sums' last entries are the sums (exact integers)
-        n_verts, n_tris = int(end_v[-1]), int(end_t[-1])
-    if n_verts >= 2**31 or n_tris >= 2**31:
-        raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
+    model, _ = pool.models(mats)
     mvps64 = np.matmul(np.asarray(view_proj, np.float64), model)
     mvps = mvps64.astype(np.float32)
     if not np.isfinite(mvps).all():
@@ -270,8 +258,40 @@ def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
     k = uplanes.shape[1]
     uclip = (1 << (k if n_clipping is None else n_clipping)) - 1
     # (mvps and mvps64 are fresh C-contiguous arrays: their reshapes are contiguous views)
-    return FrameDraws(d, n_verts, n_tris, mvps.reshape(-1, 16), mvps64.reshape(-1, 16),
-                      depth_rows(mvps64), np.ascontiguousarray(uplanes), uclip)
+    return FrameDraws(np.zeros(0, DRAW_DTYPE), 0, 0, mvps.reshape(-1, 16),
+                      mvps64.reshape(-1, 16), depth_rows(mvps64), np.ascontiguousarray(uplanes),
+                      uclip)
+
+
+def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndarray,
+                 cluster: np.ndarray, inside: np.ndarray) -> FrameDraws:
+    """``frame`` (`instance_matrices`) with the draws (instance, mesh-local cluster,
+    inside) (D,) each, in that order, as `Draw` records: their places in the frame's
+    vertex and triangle streams follow the order."""
+    inst = np.asarray(instance, np.int64)
+    d = np.zeros(inst.size, DRAW_DTYPE)
+    n_verts = n_tris = 0
+    if inst.size:   # (nothing in view: no records to fill, ~12 µs of small NumPy calls)
+        _, mirrored = pool.models(scene.transforms())
+        gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(cluster, np.int64)
+        # np.take, not pool.clusters[gcl]: NumPy's fancy indexing of rows took ~1 ms for the
+        # 83K draws of the 10M plant (its general mapiter path), take 0.06 ms
+        info = np.take(pool.clusters, gcl, axis=0)
+        d["cluster"] = gcl
+        d["instance"] = inst
+        nv, nt = info[:, 3].astype(np.int64), info[:, 1].astype(np.int64)
+        end_v, end_t = np.cumsum(nv), np.cumsum(nt)
+        d["vert_base"] = end_v - nv
+        d["tri_base"] = end_t - nt
+        d["face_base"] = np.asarray(scene.face_base, np.int64)[inst]
+        d["flags"] = (np.where(np.asarray(inside, bool), DRAW_INSIDE, 0)
+                      | np.where(mirrored[inst], DRAW_MIRRORED, 0))
+        # the cumulative sums' last entries are the sums (exact integers)
+        n_verts, n_tris = int(end_v[-1]), int(end_t[-1])
+    if n_verts >= 2**31 or n_tris >= 2**31:
+        raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
+    return FrameDraws(d, n_verts, n_tris, frame.mvps, frame.mvps64, frame.zrows,
+                      frame.uplanes, frame.uclip)
 
 
 def depth_rows(m64: np.ndarray) -> np.ndarray:
@@ -280,18 +300,6 @@ def depth_rows(m64: np.ndarray) -> np.ndarray:
     away, where it is a small difference of two rows near 1)."""
     m64 = np.asarray(m64, np.float64).reshape(-1, 4, 4)
     return np.ascontiguousarray(m64[:, 3, :] - m64[:, 2, :])
-
-
-def subset(pool: GeometryPool, fd: FrameDraws, mask: np.ndarray) -> FrameDraws:
-    """The draws of ``fd`` where ``mask`` (bool (D,)) is set, in the same order, with their
-    places in the vertex and triangle streams recomputed."""
-    d = fd.draws[mask].copy()
-    info = np.take(pool.clusters, d["cluster"], axis=0).astype(np.int64)   # see frame_draws
-    nv, nt = info[:, 3], info[:, 1]
-    d["vert_base"] = np.cumsum(nv) - nv
-    d["tri_base"] = np.cumsum(nt) - nt
-    return FrameDraws(d, int(nv.sum()), int(nt.sum()), fd.mvps, fd.mvps64, fd.zrows,
-                      fd.uplanes, fd.uclip)
 
 
 def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -316,16 +324,44 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
     return wlo, whi, pool.bounded[gcl]
 
 
-@dataclass
 class FramePlan:
     """Everything both renderers need before the vertex stage: the scene, its pool, the cull
-    result and the draw records."""
+    result and the view-projection (float64 (4, 4)); the draw records are laid out when
+    asked for: all of them (`frame`), or a subset (`draws_of`: two-phase occlusion culling
+    draws a few of the frame's clusters, and laying out the 83K of the 10M plant's first-
+    person view took ~1.8 ms)."""
 
-    scene: Scene
-    pool: GeometryPool
-    draw_list: DrawList
-    frame: FrameDraws
-    view_proj: np.ndarray
+    def __init__(self, scene: Scene, pool: GeometryPool, draw_list: DrawList,
+                 matrices: FrameDraws, view_proj: np.ndarray) -> None:
+        self.scene = scene
+        self.pool = pool
+        self.draw_list = draw_list
+        self.view_proj = view_proj
+        #: `instance_matrices` of this view (no draws)
+        self.matrices = matrices
+        self._frame: FrameDraws | None = None
+
+    @property
+    def frame(self) -> FrameDraws:
+        """All the draws of the draw list, in its order (`frame_draws`), laid out once."""
+        if self._frame is None:
+            dl = self.draw_list
+            self._frame = draw_records(self.pool, self.scene, self.matrices, dl.instance,
+                                       dl.cluster, dl.inside)
+        return self._frame
+
+    @property
+    def empty(self) -> bool:
+        """Nothing to draw (every cluster has at least one triangle)."""
+        return len(self.draw_list) == 0
+
+    def draws_of(self, mask: np.ndarray) -> FrameDraws:
+        """The draws where ``mask`` (bool (D,), over the draw list) is set, in the list's
+        order, laid out on their own (their places in the vertex and triangle streams
+        follow from the subset), without laying out the rest."""
+        dl = self.draw_list
+        return draw_records(self.pool, self.scene, self.matrices, dl.instance[mask],
+                            dl.cluster[mask], dl.inside[mask])
 
 
 class PlanCache:
@@ -375,5 +411,5 @@ def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: b
                        else np.concatenate([clip_planes, cull_planes]))
     dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
                          keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
-    return FramePlan(scene, pool, dl, frame_draws(pool, scene, dl, vp, clip_planes,
-                                                  n_clipping), vp)
+    return FramePlan(scene, pool, dl, instance_matrices(pool, scene, vp, clip_planes,
+                                                        n_clipping), vp)

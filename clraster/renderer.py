@@ -205,11 +205,13 @@ class Renderer:
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
                           cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes,
                           cull_planes=cull_planes)
+        # the draw records: all of them now, or, with occlusion culling, those of each
+        # phase when it is drawn (two_phase)
+        fd = plan.frame if not occlusion else None
         t_cull = (time.perf_counter() - t0) * 1e3
         counts = dict(plan.draw_list.counts)
-        fd = plan.frame
         params = FrameParams.make(w, h, self.config, cull, reversed_z, window)
-        if fd.n_tris == 0:   # nothing in view: the cleared frame, cleared on the device
+        if plan.empty:   # nothing in view: the cleared frame, cleared on the device
             out = cast(RasterStage, self.chain.raster).clear(self.queue, params, overdraw, bary)
             return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
                          FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
@@ -231,7 +233,7 @@ class Renderer:
                                 one_pass, into)
 
         try:
-            if not occlusion:
+            if fd is not None:
                 out = draw(fd, None)
             else:
                 self._pyramid = None

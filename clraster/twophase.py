@@ -32,7 +32,7 @@ from typing import Any, cast
 import numpy as np
 
 from .boxes import Occlusion
-from .drawlist import FrameDraws, FramePlan, key_boxes, subset
+from .drawlist import FrameDraws, FramePlan, key_boxes
 from .frustum import eye_from_view_proj
 from .params import FrameTotals
 
@@ -131,11 +131,10 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     (clusters_occlusion_culled, triangles_occlusion_culled, clusters_phase1,
     clusters_phase2) to ``counts``, and updates ``history`` for the next frame.
     """
-    pool, fd, scene = plan.pool, plan.frame, plan.scene
-    d = fd.draws
-    # the draws' keys from the draw list's (instance, mesh-local cluster), which the draw
-    # records hold as (instance, pool cluster): the same keys, fewer gathers
-    keys = np.take(pool.instance_key_base, plan.draw_list.instance) + plan.draw_list.cluster
+    pool, scene, dl = plan.pool, plan.scene, plan.draw_list
+    n_draws = len(dl)
+    # the draws' keys, from the draw list's (instance, mesh-local cluster)
+    keys = np.take(pool.instance_key_base, dl.instance) + dl.cluster
     wlo, whi, wbounded, box_rows = history.boxes(pool, scene)
     bounded = wbounded[keys]
     vp32 = plan.view_proj.astype(np.float32).reshape(-1)
@@ -148,14 +147,14 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
         centre = 0.5 * (wlo[keys] + whi[keys])
         dist = np.linalg.norm(centre - vp_inv_eye, axis=1) if vp_inv_eye is not None \
             else centre @ view_direction(plan.view_proj)
-        budget = max(OCCLUSION_FIRST_CLUSTERS, d.size // 8)
-        first = np.zeros(d.size, bool)
+        budget = max(OCCLUSION_FIRST_CLUSTERS, n_draws // 8)
+        first = np.zeros(n_draws, bool)
         first[np.argsort(dist, kind="stable")[:budget]] = True
     first |= ~bounded
-    out = draw(subset(pool, fd, first), None)
+    out = draw(plan.draws_of(first), None)
     rest = ~first
     t0 = time.perf_counter()
-    verdict = np.zeros(d.size, np.uint8)
+    verdict = np.zeros(n_draws, np.uint8)
     if rest.any():
         # (the boxes gathered for the tested keys only: most of a frame's are tested once)
         verdict[rest], ms = hiz(out, np.take(box_rows, keys[rest], axis=1), vp32)
@@ -163,11 +162,11 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
             totals.timings_ms["pyramid+test"] = ms
     second = rest & (verdict == Occlusion.VISIBLE)
     occluded = rest & ~second
-    out = draw(subset(pool, fd, second), out)
+    out = draw(plan.draws_of(second), out)
     # visibility for the next frame: everything drawn whose box is not hidden in the
     # final depth buffer
     drawn = first | second
-    vis = np.zeros(d.size, bool)
+    vis = np.zeros(n_draws, bool)
     if drawn.any():
         # phase 2 drew nothing (a still camera): the depth buffer, so its pyramid, is the
         # one phase 2 was tested against
@@ -179,7 +178,9 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
         - totals.timings_ms.get("pyramid+test", 0.0)
     counts["clusters_occlusion_culled"] = int(occluded.sum())
     counts["triangles_occlusion_culled"] = int(
-        np.take(pool.clusters[:, 1], d["cluster"][occluded]).sum(dtype=np.int64))
+        np.take(pool.clusters[:, 1], pool.mesh_cluster_base[np.take(
+            pool.instance_mesh, dl.instance[occluded])] + dl.cluster[occluded]).sum(
+                dtype=np.int64))
     counts["clusters_phase1"] = int(first.sum())
     counts["clusters_phase2"] = int(second.sum())
     return TwoPhaseResult(out, keys[occluded])

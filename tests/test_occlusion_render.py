@@ -970,3 +970,33 @@ def test_camera_cut_close_ups_of_one_mesh():
         off = r.render(mesh, cam)
         assert on.mask.sum() > 5000
         assert_same_image(on, off, f"frame {k}")
+
+
+def test_phase_draws_are_the_frame_draws_they_select():
+    # FramePlan.draws_of (each occlusion phase's records, laid out without the rest) gives
+    # the selected records of FramePlan.frame in the same order, with their vertex and
+    # triangle stream places counted from the subset's own cluster sizes, and the same
+    # per-instance matrices.
+    from clraster.drawlist import PlanCache, plan_frame
+    from clraster.scenes import plant_inside_camera
+
+    scene = plant(200_000)
+    cam = plant_inside_camera(scene, 320, 240)
+    plan = plan_frame(scene, cam, 320, 240, cull="back", frustum=True, cones=True,
+                      cache=PlanCache())
+    full = plan.frame
+    assert full.draws.size == len(plan.draw_list) > 100 and not plan.empty
+    mask = np.random.default_rng(5).random(full.draws.size) < 0.3
+    part = plan.draws_of(mask)
+    want = full.draws[mask]
+    sizes = plan.pool.clusters[want["cluster"]].astype(np.int64)   # (n_tris, n_verts) at 1, 3
+    for f in ("cluster", "instance", "face_base", "flags"):
+        np.testing.assert_array_equal(part.draws[f], want[f])
+    np.testing.assert_array_equal(part.draws["tri_base"], np.cumsum(sizes[:, 1]) - sizes[:, 1])
+    np.testing.assert_array_equal(part.draws["vert_base"],
+                                  np.cumsum(sizes[:, 3]) - sizes[:, 3])
+    assert (part.n_tris, part.n_verts) == (sizes[:, 1].sum(), sizes[:, 3].sum())
+    for f in ("mvps", "mvps64", "zrows", "uplanes"):
+        np.testing.assert_array_equal(getattr(part, f), getattr(full, f))
+    assert part.uclip == full.uclip
+    assert plan.draws_of(np.zeros(full.draws.size, bool)).n_tris == 0

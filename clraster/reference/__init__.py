@@ -88,10 +88,12 @@ class Renderer:
         t0 = time.perf_counter()
         plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
                           cache=self._plans, clip_planes=planes, cull_planes=cull_planes)
+        # all the draw records now, or each occlusion phase's when it is drawn (two_phase)
+        fd = plan.frame if not occlusion else None
         t_cull = (time.perf_counter() - t0) * 1e3
-        pool, fd = plan.pool, plan.frame
+        pool = plan.pool
         counts = dict(plan.draw_list.counts)
-        if fd.n_tris == 0:
+        if plan.empty:
             return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
                                bary=want_bary, reversed_z=reversed_z)
         params = FrameParams.make(w, h, config, cull, reversed_z, mask)
@@ -100,7 +102,7 @@ class Renderer:
         def draw(draws: FrameDraws, into: Images | None) -> Images:
             return draw_pass(pool, draws, params, config, totals, into)
 
-        if not occlusion:
+        if fd is not None:
             depth, ids, bary = draw(fd, None)
         else:
             res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts)
