@@ -112,6 +112,17 @@ class TwoPhaseResult:
     occluded_keys: np.ndarray
 
 
+def _box_rows(box_rows: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """The boxes of ``keys`` (int64 (K,), K > 0) in the Hi-Z test's layout, float32 (6,
+    K'), K' the next multiple of 8 (the last key repeated; callers keep the first K
+    verdicts): the device's test takes that as it is (PyramidStage.enqueue_test_rows, no
+    copy into a padded array). Only the boxes a frame tests are gathered."""
+    k = keys.size
+    pad = -(-k // 8) * 8
+    idx = keys if pad == k else np.concatenate([keys, np.full(pad - k, keys[-1])])
+    return np.take(box_rows, idx, axis=1)
+
+
 #: draw(draws, into) → frame buffers: run the stage chain over ``draws`` (a subset of the
 #: frame's draws, maybe empty) into ``into`` (None: fresh cleared buffers).
 DrawFn = Callable[[FrameDraws, Any], Any]
@@ -156,8 +167,9 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     t0 = time.perf_counter()
     verdict = np.zeros(n_draws, np.uint8)
     if rest.any():
-        # (the boxes gathered for the tested keys only: most of a frame's are tested once)
-        verdict[rest], ms = hiz(out, np.take(box_rows, keys[rest], axis=1), vp32)
+        tested = keys[rest]
+        codes, ms = hiz(out, _box_rows(box_rows, tested), vp32)
+        verdict[rest] = codes[:tested.size]
         if ms is not None:
             totals.timings_ms["pyramid+test"] = ms
     second = rest & (verdict == Occlusion.VISIBLE)
@@ -170,9 +182,9 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     if drawn.any():
         # phase 2 drew nothing (a still camera): the depth buffer, so its pyramid, is the
         # one phase 2 was tested against
-        v2, _ = hiz(out, np.take(box_rows, keys[drawn], axis=1), vp32,
-                    same_depth=not second.any())
-        vis[drawn] = (v2 == Occlusion.VISIBLE) | ~bounded[drawn]
+        tested = keys[drawn]
+        v2, _ = hiz(out, _box_rows(box_rows, tested), vp32, same_depth=not second.any())
+        vis[drawn] = (v2[:tested.size] == Occlusion.VISIBLE) | ~bounded[drawn]
     history.remember(scene, int(pool.instance_key_base[-1]), keys[vis])
     totals.timings_ms["occlusion (host)"] = (time.perf_counter() - t0) * 1e3 \
         - totals.timings_ms.get("pyramid+test", 0.0)

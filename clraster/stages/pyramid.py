@@ -193,8 +193,11 @@ class PyramidStage:
                              "the list)")
         b = self.buffers
         n_pad = -(-k // 8) * 8
-        soa = np.zeros((6, n_pad), np.float32)   # rows min.xyz, max.xyz (kernel layout)
-        soa[:, :k] = rows
+        if n_pad == k and rows.dtype == np.float32 and rows.flags.c_contiguous:
+            soa = rows   # already the kernel's layout (two_phase pads its gathers)
+        else:
+            soa = np.zeros((6, n_pad), np.float32)   # rows min.xyz, max.xyz
+            soa[:, :k] = rows
         bbox = b.boxes.ensure(soa.nbytes, "box buffer")
         bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
         cl.enqueue_copy(queue, bbox, soa, is_blocking=False)
