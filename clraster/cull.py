@@ -5,8 +5,9 @@ frustum planes of the view-projection matrix (:mod:`clraster.frustum`: planes, m
 eye), and clusters that face away are removed with their normal cones. The result is a
 :class:`DrawList` of (instance, cluster) pairs for the renderer.
 
-Frustum culling has two levels. Top: a BVH over the instances' world boxes; an instance
-OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE with no
+Frustum culling has two levels. Top: the instances' world boxes (every box on its own up to
+`DENSE_INSTANCES` instances, above that through a BVH over them: the same answers); an
+instance OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE with no
 further test, one INTERSECTING passes on the planes it still crosses (its plane mask).
 Below, an intersecting instance's clusters are tested against those planes only, by one of
 three equivalent-in-spirit, all-conservative paths chosen by mesh size:
@@ -119,7 +120,9 @@ class DrawList:
             + clusters_cone_culled + clusters_drawn; the same for triangles_*
             (triangles_total = scene.n_faces), counted exactly by cluster sizes.
         timings_ms: host time per step: "prepare" (clusterizing / BVH builds done by this
-            call; 0 when cached), "instances", "clusters", "cones", "order", "total".
+            call; 0 when cached), "instances", "clusters", "cones", "order", "total". When
+            the culling paths run on threads (`THREAD_PAIRS`), "clusters" and "cones" sum
+            the paths' own times, so together they can exceed "total".
         cone_culled: int32 (P, 2) (instance, cluster) pairs removed by the normal-cone test,
             in no particular order, when asked for (``keep_cone_culled=True``); else None.
             The frustum-culled pairs are the rest: neither drawn nor cone-culled.
@@ -516,7 +519,7 @@ class _ViewPlanes:
     raw: np.ndarray
     rmag: np.ndarray
     #: float64 (I, U, 4): the user planes in each instance's object space (plane · model,
-    #: as `drawlist.frame_draws` gives the vertex stage), and their `bvh.plane_table`
+    #: as `drawlist.instance_matrices` gives the vertex stage), and their `bvh.plane_table`
     #: (11U, I) for per-pair gathers on the flat path.
     user_obj: np.ndarray
     user_table: np.ndarray
@@ -547,7 +550,7 @@ class _ViewPlanes:
         if not n_u:
             return cls(planes, scales, raw, rmag, *prep.no_user, inside_margin,
                        outside_margin, start, frustum)
-        # plane · model in float64, as drawlist.frame_draws moves them for the vertex stage
+        # plane · model in float64, as drawlist.instance_matrices moves them for the vertex stage
         user_obj = np.einsum("kj,ijl->ikl", user, prep.m)
         mu_in = np.concatenate([np.full(6, inside_margin), np.full(n_u, CLIP_PLANE_MARGIN)])
         mu_out = np.concatenate([np.full(6, outside_margin),
@@ -736,9 +739,10 @@ class _PathResult:
 #: Below this many (instance, cluster) pairs to look at, the culling paths run one after
 #: the other in the calling thread; above, on `_pool`'s threads (`_run_tasks`).
 THREAD_PAIRS = 32768
-#: CPUs of this machine (os.cpu_count() took ~15 µs a call, a tenth of an empty frame's
-#: culling)
-_NCPU = os.cpu_count() or 1
+#: CPUs this process may run on (read once: os.cpu_count() took ~15 µs a call, a tenth of
+#: an empty frame's culling)
+_NCPU = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+         else os.cpu_count() or 1)
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 _POOL_LOCK = threading.Lock()
 
@@ -785,7 +789,11 @@ def _run_tasks(tasks: list, work: list[int]) -> list[_PathResult]:
     helpers = [pool.submit(drain) for _ in range(min(len(tasks), _NCPU, 4) - 1)]
     drain()
     for h in helpers:
-        h.result()   # waits, and raises what a path raised
+        # a helper still queued (this thread and the others took every path) is dropped
+        # rather than waited for behind another caller's work; one that ran raises what
+        # a path of it raised
+        if not h.cancel():
+            h.result()
     return results
 
 
@@ -803,9 +811,9 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
             cached (per mesh, and per scene version).
         view_proj: (4, 4) world → clip matrix (OpenGL conventions, see
             `clraster.frustum.frustum_planes`).
-        frustum: cull instances and clusters outside the view frustum (top-level BVH over
-            instance world boxes, then each intersecting instance's clusters against the
-            planes it still crosses; see the module docstring).
+        frustum: cull instances and clusters outside the view frustum (instance world
+            boxes first, then each intersecting instance's clusters against the planes it
+            still crosses; see the module docstring).
         cones: cull clusters that face away, with their normal cones (only when `cull` is
             "back" or "front", and never for a mirroring projection). The test is
             conservative: a culled cluster's non-degenerate triangles are all seen from

@@ -1,9 +1,11 @@
 """From a scene and a cull result to the arrays the vertex and setup stages read.
 
 `GeometryPool` is built once per scene (and cached by the renderer): every unique mesh's
-vertices and clusters concatenated. `frame_draws` turns a `cull.DrawList` into `Draw`
-records with each draw's place in this frame's vertex and triangle streams. The OpenCL
-renderer uploads these arrays; the NumPy twin reads the very same ones.
+vertices and clusters concatenated. `instance_matrices` makes a view's per-instance
+matrices and `draw_records` turns (a subset of) a `cull.DrawList` into `Draw` records with
+each draw's place in this frame's vertex and triangle streams; `FramePlan` holds both for
+one frame. The OpenCL renderer uploads these arrays; the NumPy twin reads the very same
+ones.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ class GeometryPool:
         to its mesh's origin (`mesh_origin`).
     mesh_origin: float64 (number of unique meshes, 3): subtracted from the mesh's vertices
         (exactly: float32 values, see `_mesh_origin`) and folded back into each instance's
-        matrix by `frame_draws`, so that a mesh baked far from the origin (georeferenced,
+        matrix by `instance_matrices`, so that a mesh baked far from the origin (georeferenced,
         ~1e6) is stored as small float32 coordinates and its 1e6 offset cancels against the
         camera's in float64 (camera-relative rendering). Zero for meshes near the origin.
     vert_ids: int32 (V,) pool vertex index of each cluster-local vertex (the identity:
@@ -71,11 +73,11 @@ class GeometryPool:
     def models(self, mats: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(model float64 (I, 4, 4), mirrored bool (I,)) for the scene's transforms
         ``mats`` (I, 4, 4) (`Scene.transforms`): each instance's transform · the translation
-        by its mesh's pool origin (`frame_draws`), and whether its 3×3 part has a negative
+        by its mesh's pool origin (`instance_matrices`), and whether its 3×3 part has a negative
         determinant. Both depend on the scene only, not the view, so they are kept for the
         last ``mats`` seen (by identity: `Scene.transforms` is memoized per scene version,
         a new version is a new array, and the one kept here stays alive, so its id cannot
-        be reused): `frame_draws` remade them every frame (np.linalg.det, the origin
+        be reused): the draw layout remade them every frame (np.linalg.det, the origin
         matrices, two matmuls); with this and its skip of empty draw records, an empty
         frame of spot takes ~13 µs there instead of ~68 µs, spot framed ~42 µs instead of
         ~70-100 µs (timeit medians, interleaved with the old code)."""
@@ -220,31 +222,19 @@ class FrameDraws:
         return int(self.uplanes.shape[1])
 
 
-def frame_draws(pool: GeometryPool, scene, draw_list, view_proj: np.ndarray,
-                clip_planes: np.ndarray | None = None, n_clipping: int | None = None
-                ) -> FrameDraws:
-    """Lay out ``draw_list`` (instance, cluster, inside) as `Draw` records.
+def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
+                      clip_planes: np.ndarray | None = None, n_clipping: int | None = None
+                      ) -> FrameDraws:
+    """This view's per-instance arrays, with no draws yet (`draw_records` adds them).
 
     view_proj: float64 (4, 4). Each instance's matrix (view-projection · model · the
     translation by its mesh's pool origin) is formed in float64 and rounded to float32 once,
     for both the device and the twin: a camera and an instance both ~1e6 from the world
     origin cancel there, in float64, before anything becomes float32 (camera-relative
-    rendering). Draws of instances whose transform has a negative determinant get
-    DRAW_MIRRORED: their faces keep their outward side (the Scene rule, as glTF).
-    clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`),
-    moved to each instance's object space in float64 (`FrameDraws.uplanes`); the first
-    ``n_clipping`` of them (default all) clip, the rest only reject and cull (`uclip`).
-    """
-    frame = instance_matrices(pool, scene, view_proj, clip_planes, n_clipping)
-    return draw_records(pool, scene, frame, draw_list.instance, draw_list.cluster,
-                        draw_list.inside)
-
-
-def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
-                      clip_planes: np.ndarray | None = None, n_clipping: int | None = None
-                      ) -> FrameDraws:
-    """The per-instance part of `frame_draws` (matrices, depth rows, user planes), with no
-    draws: `draw_records` adds them."""
+    rendering). clip_planes: float64 (K, 4) world-space user clip planes
+    (`inputs.check_clip_planes`), moved to each instance's object space in float64
+    (`FrameDraws.uplanes`); the first ``n_clipping`` of them (default all) clip, the rest
+    only reject and cull (`uclip`)."""
     mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
     model, _ = pool.models(mats)
     mvps64 = np.matmul(np.asarray(view_proj, np.float64), model)
@@ -267,7 +257,9 @@ def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndar
                  cluster: np.ndarray, inside: np.ndarray) -> FrameDraws:
     """``frame`` (`instance_matrices`) with the draws (instance, mesh-local cluster,
     inside) (D,) each, in that order, as `Draw` records: their places in the frame's
-    vertex and triangle streams follow the order."""
+    vertex and triangle streams follow the order. Draws of instances whose transform has a
+    negative determinant get DRAW_MIRRORED: their faces keep their outward side (the Scene
+    rule, as glTF)."""
     inst = np.asarray(instance, np.int64)
     d = np.zeros(inst.size, DRAW_DTYPE)
     n_verts = n_tris = 0
@@ -343,7 +335,7 @@ class FramePlan:
 
     @property
     def frame(self) -> FrameDraws:
-        """All the draws of the draw list, in its order (`frame_draws`), laid out once."""
+        """All the draws of the draw list, in its order, laid out once."""
         if self._frame is None:
             dl = self.draw_list
             self._frame = draw_records(self.pool, self.scene, self.matrices, dl.instance,

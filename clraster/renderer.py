@@ -92,7 +92,7 @@ class Renderer:
         self.pyramid = PyramidStage(self.context, self.config)
         self._plans = PlanCache()
         self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
-        self._pyramid: Pyramid | None = None   # the last one `_hiz` built (this frame's)
+        self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,

@@ -1,6 +1,7 @@
 """Two-phase occlusion culling: the schedule, shared by the OpenCL renderer and the NumPy twin.
 
-One frame (after frustum/cone culling has laid out the frame's draws, `drawlist.FramePlan`):
+One frame (after frustum/cone culling has made the frame's draw list, `drawlist.FramePlan`;
+each phase's draw records are laid out when it is drawn, `FramePlan.draws_of`):
 
 1. **Phase 1** draws the clusters that were visible in the previous frame of the same
    target (`OcclusionHistory`); on a first frame — or after a camera cut, when none of last
@@ -27,7 +28,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, Protocol, cast
 
 import numpy as np
 
@@ -126,11 +127,14 @@ def _box_rows(box_rows: np.ndarray, keys: np.ndarray) -> np.ndarray:
 #: draw(draws, into) → frame buffers: run the stage chain over ``draws`` (a subset of the
 #: frame's draws, maybe empty) into ``into`` (None: fresh cleared buffers).
 DrawFn = Callable[[FrameDraws, Any], Any]
-#: hiz(frame buffers, rows float32 (6, K), view_proj float32 (16,), same_depth) → (uint8
-#: (K,) `Occlusion` codes, milliseconds or None): pyramid of the frame's depth + box test;
-#: same_depth=True: nothing was drawn since the last call of this frame, so the pyramid
-#: that call built may be tested again.
-HizFn = Callable[..., tuple[np.ndarray, float | None]]
+class HizFn(Protocol):
+    """hiz(frame buffers, rows float32 (6, K), view_proj float32 (16,), same_depth) →
+    (uint8 (K,) `Occlusion` codes, milliseconds or None): the pyramid of the frame's depth
+    and the box test; same_depth=True: nothing was drawn since the last call of this
+    frame, so the pyramid that call built may be tested again."""
+
+    def __call__(self, out: Any, rows: np.ndarray, vp32: np.ndarray,
+                 same_depth: bool = False) -> tuple[np.ndarray, float | None]: ...
 
 
 def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: HizFn,

@@ -668,6 +668,7 @@ def test_culling_threads_give_the_same_draw_list(threads, monkeypatch):
     vp = plant_inside_camera(scene, 640, 480).view_projection(640, 480)
     cases = ({}, {"cull": "front"}, {"clip_planes": np.array([[0.3, 0.0, 1.0, -2.0]])})
     lists = {}
+    monkeypatch.setattr(cull_mod, "_NCPU", max(2, cull_mod._NCPU))   # threads on 1 CPU too
     for on in (threads, not threads):   # the parametrized mode first
         monkeypatch.setattr(cull_mod, "THREAD_PAIRS", 0 if on else 1 << 62)
         lists[on] = [build_draw_list(scene, vp, keep_cone_culled=True, **kw) for kw in cases]

@@ -79,8 +79,12 @@ _counted = {"triangles": 0, "examples": 0, "clipped": 0, "pieces": 0, "fragments
 def _differential(seed, size, tile_log2, cull, lens, extras, bad, world_view):
     mesh, cam, _ = _scene(seed, size, lens, extras, bad, world_view)
     a, b = render_both(mesh, cam, *size, cull=cull, tile_log2=tile_log2)
-    assert_frames_equal(a, b, f"seed={seed} size={size} tile_log2={tile_log2} cull={cull} "
-                              f"lens={lens} world_view={world_view}")
+    ctx = f"seed={seed} size={size} tile_log2={tile_log2} cull={cull} lens={lens}"
+    assert_frames_equal(a, b, ctx + f" world_view={world_view}")
+    # barycentrics bit for bit: the raster's scalar and 8-lane resolves (raster.cl
+    # resolve1 / resolve8) do the twin's float32 operations in its order
+    np.testing.assert_array_equal(a.barycentrics.view(np.uint32),
+                                  b.barycentrics.view(np.uint32), err_msg=ctx)
     s = a.stats
     assert s.triangles_in == mesh.n_faces
     # the tile Hi-Z (on above, on both sides) never changes the image; without it every

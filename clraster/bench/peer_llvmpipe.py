@@ -9,7 +9,7 @@ clraster's conventions, so frames compare pixel for pixel:
 * window depth ``d = (z/w + 1) / 2`` in [0, 1] (default glDepthRange 0..1, clip control
   NEGATIVE_ONE_TO_ONE), 1.0 for background;
 * clip = ``M @ [x, y, z, 1]`` with ``M = view_proj @ model`` formed per instance in float64
-  on the host and rounded to float32 once, exactly as clraster does (drawlist.frame_draws),
+  on the host and rounded to float32 once, exactly as clraster does (drawlist.instance_matrices),
   then passed to GL column-major (numpy is row-major: the matrix is transposed on upload).
 
 Depth attachment: ``GL_DEPTH_COMPONENT32F``. moderngl (5.8..5.13) only makes 24-bit depth

@@ -193,7 +193,8 @@ class PyramidStage:
                              "the list)")
         b = self.buffers
         n_pad = -(-k // 8) * 8
-        if n_pad == k and rows.dtype == np.float32 and rows.flags.c_contiguous:
+        if (n_pad == k and rows.shape[0] == 6 and rows.dtype == np.float32
+                and rows.flags.c_contiguous):
             soa = rows   # already the kernel's layout (two_phase pads its gathers)
         else:
             soa = np.zeros((6, n_pad), np.float32)   # rows min.xyz, max.xyz
