@@ -154,7 +154,8 @@ class FrameStats:
         def fmt(v):
             return f"{v:,}" if isinstance(v, int) else str(v)
 
-        return "\n".join(f"{a:<22}{fmt(b):>12}{fmt(c):>12}{fmt(d):>14}" for a, b, c, d in rows)
+        w = max(22, max(len(r[0]) for r in rows) + 1)   # (long stage names: still aligned)
+        return "\n".join(f"{a:<{w}}{fmt(b):>12}{fmt(c):>12}{fmt(d):>14}" for a, b, c, d in rows)
 
 
 @dataclass
