@@ -7,8 +7,9 @@ eye), and clusters that face away are removed with their normal cones. The resul
 
 Frustum culling has two levels. Top: the instances' world boxes (every box on its own up to
 `DENSE_INSTANCES` instances, above that through a BVH over them: the same answers); an
-instance OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE with no
-further test, one INTERSECTING passes on the planes it still crosses (its plane mask).
+instance OUTSIDE is dropped with all its clusters, one INSIDE makes all its clusters INSIDE
+with no further test, one INTERSECTING passes on the planes it still crosses (its plane
+mask).
 Below, an intersecting instance's clusters are tested against those planes only, by one of
 three equivalent-in-spirit, all-conservative paths chosen by mesh size:
 

@@ -315,7 +315,7 @@ def partition(target: Mesh | Scene, parts: int) -> list[Part]:
     n_keys = np.diff(pool.instance_key_base)
     inst_of_key = np.repeat(np.arange(n_keys.size), n_keys)
     local_of_key = np.arange(inst_of_key.size) - np.repeat(pool.instance_key_base[:-1], n_keys)
-    gcl = pool.mesh_cluster_base[pool.instance_mesh[inst_of_key]] + local_of_key
+    gcl = pool.pool_clusters(inst_of_key, local_of_key)
     weights = pool.clusters[gcl, 1].astype(np.float64)
     centres = np.where(bounded[:, None], 0.5 * (lo + hi), 0.0)
     labels = np.zeros(inst_of_key.size, np.int64)

@@ -70,6 +70,12 @@ class GeometryPool:
     if TYPE_CHECKING:   # set by `models`, not a dataclass field
         _models: ClassVar[tuple[np.ndarray, np.ndarray, np.ndarray]]
 
+    def pool_clusters(self, instance: np.ndarray, cluster: np.ndarray) -> np.ndarray:
+        """int64 (D,): the pool cluster (row of `clusters`) of each (instance, cluster of
+        its mesh) pair, int arrays (D,) each."""
+        return (self.mesh_cluster_base[np.take(self.instance_mesh, instance)]
+                + np.asarray(cluster, np.int64))
+
     def models(self, mats: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(model float64 (I, 4, 4), mirrored bool (I,)) for the scene's transforms
         ``mats`` (I, 4, 4) (`Scene.transforms`): each instance's transform · the translation
@@ -265,7 +271,7 @@ def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndar
     n_verts = n_tris = 0
     if inst.size:   # (nothing in view: no records to fill, ~12 µs of small NumPy calls)
         _, mirrored = pool.models(scene.transforms())
-        gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + np.asarray(cluster, np.int64)
+        gcl = pool.pool_clusters(inst, cluster)
         # np.take, not pool.clusters[gcl]: NumPy's fancy indexing of rows took ~1 ms for the
         # 83K draws of the 10M plant (its general mapiter path), take 0.06 ms
         info = np.take(pool.clusters, gcl, axis=0)
@@ -302,7 +308,7 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
     n_keys = np.diff(pool.instance_key_base)
     inst = np.repeat(np.arange(n_keys.size), n_keys)
     local = np.arange(inst.size) - np.repeat(pool.instance_key_base[:-1], n_keys)
-    gcl = pool.mesh_cluster_base[pool.instance_mesh[inst]] + local
+    gcl = pool.pool_clusters(inst, local)
     lo, hi = pool.aabb_min[gcl], pool.aabb_max[gcl]
     mats = scene.transforms()
     wlo = np.full(lo.shape, np.inf)

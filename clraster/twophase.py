@@ -194,9 +194,9 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
         - totals.timings_ms.get("pyramid+test", 0.0)
     counts["clusters_occlusion_culled"] = int(occluded.sum())
     counts["triangles_occlusion_culled"] = int(
-        np.take(pool.clusters[:, 1], pool.mesh_cluster_base[np.take(
-            pool.instance_mesh, dl.instance[occluded])] + dl.cluster[occluded]).sum(
-                dtype=np.int64))
+        np.take(pool.clusters[:, 1], pool.pool_clusters(dl.instance[occluded],
+                                                        dl.cluster[occluded])).sum(
+            dtype=np.int64))
     counts["clusters_phase1"] = int(first.sum())
     counts["clusters_phase2"] = int(second.sum())
     return TwoPhaseResult(out, keys[occluded])
