@@ -1,0 +1,78 @@
+"""Device time per kernel of one scene's warm frames, from each launch's profiling event.
+
+    PYTHONPATH=. python bench/kernel_times.py plant10m      # 10M plant, first person, occlusion
+    PYTHONPATH=. python bench/kernel_times.py dragon --frames 20
+
+Scenes: spot, bunny, dragon (framed as the harness does), plant10m (first person, two-phase
+occlusion culling). Per kernel: the median over the frames of its summed device time in a
+frame, and its launches per frame; then the frame's wall-time median and the kernels' sum
+(the rest is host time). 1920x1080 unless --size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import statistics
+import time
+from pathlib import Path
+
+import pyopencl as cl
+
+MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+FILES = {"spot": "spot.ply", "bunny": "stanford_bunny.ply",
+         "dragon": "stanford_dragon_vrip.ply"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scene", choices=[*FILES, "plant10m"])
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--size", default="1920x1080")
+    a = ap.parse_args(argv)
+    w, h = (int(v) for v in a.size.lower().split("x"))
+    launches: list[tuple[str, cl.Event]] = []
+    call = cl.Kernel.__call__
+
+    def recording_call(self, *args, **kw):   # every launch of the frame, with its event
+        ev = call(self, *args, **kw)
+        launches.append((self.function_name, ev))
+        return ev
+
+    cl.Kernel.__call__ = recording_call
+    from clraster import Camera, Mesh, Renderer
+    kw = {}
+    if a.scene == "plant10m":
+        from clraster.scenes import plant, plant_inside_camera
+        target = plant(10_100_000)
+        cam = plant_inside_camera(target, w, h)
+        kw = {"occlusion": True}
+    else:
+        target = Mesh.load(MESHES / FILES[a.scene])
+        cam = Camera.framing(*target.bounds(), aspect=w / h)
+    r = Renderer(w, h)
+    for _ in range(4):   # kernel builds, buffer growth, the occlusion history
+        r.render(target, cam, **kw)
+    per: dict[str, list[tuple[float, int]]] = collections.defaultdict(list)
+    walls = []
+    for _ in range(a.frames):
+        launches.clear()
+        t0 = time.perf_counter()
+        r.render(target, cam, **kw)
+        walls.append((time.perf_counter() - t0) * 1e3)
+        ms: dict[str, float] = collections.defaultdict(float)
+        n: collections.Counter = collections.Counter()
+        for name, ev in launches:
+            ms[name] += (ev.profile.end - ev.profile.start) * 1e-6
+            n[name] += 1
+        for name in ms:
+            per[name].append((ms[name], n[name]))
+    med = {k: statistics.median(x[0] for x in v) for k, v in per.items()}
+    for k in sorted(med, key=lambda k: -med[k]):
+        print(f"  {k:28s} {med[k]:7.2f} ms  x{per[k][0][1]}")
+    print(f"frame median {statistics.median(walls):.2f} ms, kernels {sum(med.values()):.2f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
