@@ -19,7 +19,10 @@ draw list: the only ones occlusion culling can still remove):
   rebuilt from the algorithm: the draws whose world box (`clraster.drawlist.key_boxes`) the
   Hi-Z test (the `hiz` verdicts of the same query) does not call VISIBLE against the final
   depth. `check` verifies that the rebuilt set has exactly the renderer's count and lies
-  inside the truly invisible set.
+  inside the truly invisible set. The rebuild is the flat two-phase schedule's, so the
+  renderer runs it (``RasterConfig(occlusion_groups=0)``); the hierarchical one decides
+  hidden groups' clusters without their frustum and cone tests, so its counts are not
+  over this draw list.
 
 Prints efficiency = culled / truly invisible (and culled ∩ box-invisible / box-invisible).
 """
@@ -32,7 +35,7 @@ import time
 
 import numpy as np
 
-from clraster import Renderer
+from clraster import RasterConfig, Renderer
 from clraster.clusters import clusters_of
 from clraster.drawlist import PlanCache, key_boxes, plan_frame
 from clraster.occlusion import Occlusion, query
@@ -55,7 +58,7 @@ def measure(scene, camera, width: int, height: int, *, cull: str = "back",
     """Render ``scene`` without occlusion culling and twice with it (one renderer, same
     camera), and classify the draw list's clusters. Returns a dict of counts, the boolean
     per-draw sets (keys ``invisible``, ``box_invisible``, ``culled``) and the frames."""
-    occ = renderer or Renderer(width, height)
+    occ = renderer or Renderer(width, height, config=RasterConfig(occlusion_groups=0))
     ref = reference or Renderer(width, height)
     ref.render(scene, camera, cull=cull)   # warm-up: uploads, buffer growth
     t0 = time.perf_counter()

@@ -125,6 +125,16 @@ class RasterConfig:
             decisions. 10M plant first person with occlusion culling: 12.2M fragments
             tested → 7.2M, raster 0.74×; no gain where back-face culling leaves little
             overdraw (dragon, bunny, spot framed: tested ≈ passed), dragon raster ~1.02×.
+        occlusion_groups: hierarchical occlusion culling (`clraster.twophase`): after the
+            first frame, each instance's clusters are taken in groups of at most this many
+            (neighbours in its mesh's cluster BVH; a small mesh's instance is one group),
+            the groups' world boxes are Hi-Z tested first, and only the clusters of the
+            groups not proved hidden are frustum-, cone- and Hi-Z tested one by one. Never
+            changes the image; the counts then say "occlusion culled" for clusters whose
+            group was hidden, where the flat scheme (0: every cluster that survives the
+            frustum and cone tests is Hi-Z tested) would have counted some of them
+            frustum- or cone-culled first. Default 32 (10M plant first person: 11.5K of
+            106K clusters left to test one by one; bench/README.md).
     """
 
     tile_log2: int = 4
@@ -132,6 +142,7 @@ class RasterConfig:
     batch_triangles: int = 1 << 20
     batch_entries: int = 1 << 21
     tile_hiz: bool = True
+    occlusion_groups: int = 32
 
     def __post_init__(self) -> None:
         if not 3 <= self.tile_log2 <= 6:
@@ -145,6 +156,10 @@ class RasterConfig:
                 raise ValueError(f"{name} must be an integer in {lo}..2**31 - 1, got {v!r}")
         if not isinstance(self.tile_hiz, (bool, np.bool_)):
             raise ValueError(f"tile_hiz must be True or False, got {self.tile_hiz!r}")
+        g = self.occlusion_groups
+        if isinstance(g, bool) or not isinstance(g, (int, np.integer)) or not 0 <= g <= 1 << 20:
+            raise ValueError(f"occlusion_groups must be an integer in 0..2**20 (0: no "
+                             f"groups), got {g!r}")
 
     @property
     def tile_size(self) -> int:

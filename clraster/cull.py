@@ -74,7 +74,7 @@ from .frustum import check_view_proj, eye_and_flip, normalize_planes, raw_planes
 from .mesh import Mesh
 from .scene import Scene
 
-__all__ = ["CLIP_PLANE_MARGIN", "COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList",
+__all__ = ["CLIP_PLANE_MARGIN", "COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList", "ViewCull",
            "build_draw_list"]
 
 #: Cone-culling margin in radians: a culled cluster's triangles are all seen at least this
@@ -257,6 +257,20 @@ class _SceneCull:
         for i in np.flatnonzero(self.nonempty & ~flat).tolist():
             groups.setdefault(id(meshes[i]), []).append(i)
         self.groups = [(meshes[v[0]], np.array(v, np.int64)) for v in groups.values()]
+        self._umesh = umesh
+        self._pair_tables: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def pair_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(bool bounded, int64 triangles) per global cluster and int64 triangles per
+        instance (0 for empty ones): `ViewCull.pairs`' tables, made on first use."""
+        if self._pair_tables is None:
+            bounded = (np.concatenate([mc.cm.bounded for mc in self._umesh]) if self._umesh
+                       else np.zeros(0, bool))
+            per_mesh = np.array([int(mc.tri_count.sum()) for mc in self._umesh], np.int64)
+            inst_tri = np.where(self.nonempty, per_mesh[self.inst_umesh], 0) if self.n \
+                else np.zeros(0, np.int64)
+            self._pair_tables = (bounded, self.g_tri, inst_tri)
+        return self._pair_tables
 
 
 def _prepare(scene: Scene, max_triangles: int, max_vertices: int) -> _SceneCull:
@@ -843,68 +857,166 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
     Raises:
         ValueError: bad matrix, cull mode or margins.
     """
-    t_start = time.perf_counter()
-    vp = _check_draw_args(scene, view_proj, cull, inside_margin, outside_margin, cone_margin)
-    prep = _prepare(scene, max_triangles, max_vertices)
-    t_prep = time.perf_counter()
-    timings = {"prepare": (t_prep - t_start) * 1e3}
+    return ViewCull(scene, view_proj, frustum=frustum, cones=cones, cull=cull,
+                    max_triangles=max_triangles, max_vertices=max_vertices,
+                    inside_margin=inside_margin, outside_margin=outside_margin,
+                    cone_margin=cone_margin, keep_cone_culled=keep_cone_culled,
+                    clip_planes=clip_planes).all()
 
-    # Top level: instances.
-    raw, rmag = raw_planes(vp)
-    view = _ViewPlanes.make(prep, raw, rmag, frustum, clip_planes, inside_margin,
-                            outside_margin)
-    inst_state, inst_mask = _classify_instances(prep, view)
-    t_inst = time.perf_counter()
-    timings["instances"] = (t_inst - t_prep) * 1e3
 
-    cone_view = _cone_view(prep, vp, cones, cull, cone_margin)
-    pairs = _Pairs(keep_cone_culled)
+class ViewCull:
+    """One view's object culling of a scene, in steps: the instances are classified when
+    it is made; then `all` gives the draw list of every (instance, cluster) pair
+    (`build_draw_list`), `pairs` that of given pairs only (hierarchical occlusion culling,
+    `clraster.twophase`, tests just the clusters of the groups it could not prove hidden).
+    Arguments as `build_draw_list`."""
 
-    def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
+    def __init__(self, scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = True,
+                 cones: bool = True, cull: str = "back", max_triangles: int = 128,
+                 max_vertices: int = 128, inside_margin: float = DEFAULT_MARGIN,
+                 outside_margin: float = DEFAULT_MARGIN,
+                 cone_margin: float = DEFAULT_CONE_MARGIN, keep_cone_culled: bool = False,
+                 clip_planes: np.ndarray | None = None) -> None:
+        t_start = time.perf_counter()
+        vp = _check_draw_args(scene, view_proj, cull, inside_margin, outside_margin,
+                              cone_margin)
+        self.prep = prep = _prepare(scene, max_triangles, max_vertices)
+        t_prep = time.perf_counter()
+        self.keep_cone_culled = keep_cone_culled
+        raw, rmag = raw_planes(vp)
+        self.view = _ViewPlanes.make(prep, raw, rmag, frustum, clip_planes, inside_margin,
+                                     outside_margin)
+        #: uint8 (I,) `Visibility` per instance (empty ones OUTSIDE), uint16 (I,) the
+        #: planes each still crosses (`_classify_instances`)
+        self.inst_state, self.inst_mask = _classify_instances(prep, self.view)
+        self.cone_view = _cone_view(prep, vp, cones, cull, cone_margin)
+        t_inst = time.perf_counter()
+        self.timings_ms = {"prepare": (t_prep - t_start) * 1e3,
+                           "instances": (t_inst - t_prep) * 1e3}
+
+    def outside_totals(self) -> tuple[int, int]:
+        """(clusters, triangles) of the non-empty instances culled whole (OUTSIDE)."""
+        prep = self.prep
+        out = (self.inst_state == OUTSIDE) & prep.nonempty
+        return int(prep.n_clusters[out].sum()), int(prep.pair_tables()[2][out].sum())
+
+    def pairs(self, inst: np.ndarray, cl: np.ndarray) -> DrawList:
+        """The draw list of the pairs (``inst``, ``cl``) only: int64 (P,) each, distinct,
+        in draw order (by instance, then cluster). Each pair is decided on its own: culled
+        with its instance when that is OUTSIDE; else, while its instance still crosses
+        planes, its object-space cluster box against them in the instance's object space
+        (exact under any affine transform, as `_group_frustum`'s tests; the flat path's
+        world boxes can keep a few more pairs, never fewer); then the cone test. Counts:
+        the cluster and triangle rows over these pairs (clusters_total = P), no instance
+        rows; timings "clusters", "cones" and "total"."""
         t0 = time.perf_counter()
-        inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, view)
+        prep, view = self.prep, self.view
+        g_bounded, g_tri, _ = prep.pair_tables()
+        st = self.inst_state[inst]
+        mk = self.inst_mask[inst]
+        g = prep.mesh_base[prep.inst_umesh[inst]] + cl
+        alive = st != OUTSIDE
+        ins = st == INSIDE
+        # pairs of an INTERSECTING instance with planes left, and a finite box: tested
+        # (clusters with NaN/Inf vertices are never culled, as on the other paths)
+        test = np.flatnonzero((st == INTERSECTING) & (mk != 0) & g_bounded[g])
+        if test.size:
+            uniq, row = np.unique(inst[test], return_inverse=True)
+            oplanes, oscales = view.object_space(prep, uniq)
+            table = np.take(plane_table(oplanes, oscales), row, axis=1)
+            gt = g[test]
+            cst, cmask = classify_extremes(
+                *box_extremes_table(table, prep.g_lo[gt].T, prep.g_hi[gt].T,
+                                    prep.g_mag[gt].T),
+                mk[test], view.inside_margin, view.outside_margin)
+            alive[test] = cst != OUTSIDE
+            ins[test] = view.inside(cmask)
+        tri = g_tri[g]
+        n_frustum = int(alive.sum())
+        tri_frustum = int(tri[alive].sum())
         t1 = time.perf_counter()
-        back = (_flat_cone_cull(prep, inst, g, cone_view)
-                if cone_view is not None and cl.size else None)
-        return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
+        keep = np.flatnonzero(alive)
+        inst, cl, ins, g = inst[keep], cl[keep], ins[keep], g[keep]
+        n_cone = tri_cone = 0
+        cone_pairs = np.zeros((0, 2), np.int32) if self.keep_cone_culled else None
+        if self.cone_view is not None and keep.size:
+            back = _flat_cone_cull(prep, inst, g, self.cone_view)
+            if back.any():
+                n_cone = int(back.sum())
+                tri_cone = int(g_tri[g[back]].sum())
+                if cone_pairs is not None:
+                    cone_pairs = np.stack([inst[back], cl[back]], axis=1).astype(np.int32)
+                front = ~back
+                inst, cl, ins = inst[front], cl[front], ins[front]
+        t2 = time.perf_counter()
+        counts = {"clusters_total": int(alive.size),
+                  "clusters_frustum_culled": int(alive.size - n_frustum),
+                  "clusters_cone_culled": n_cone, "clusters_drawn": int(inst.size),
+                  "triangles_total": int(tri.sum()),
+                  "triangles_frustum_culled": int(tri.sum()) - tri_frustum,
+                  "triangles_cone_culled": tri_cone,
+                  "triangles_drawn": tri_frustum - tri_cone}
+        return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
+                        inside=ins.astype(bool), counts=counts,
+                        timings_ms={"clusters": (t1 - t0) * 1e3, "cones": (t2 - t1) * 1e3,
+                                    "total": (t2 - t0) * 1e3},
+                        cone_culled=cone_pairs)
 
-    def group_task(mc: _MeshCull, members: np.ndarray, vis: np.ndarray) -> _PathResult:
-        t0 = time.perf_counter()   # other meshes: one group of instances per mesh
-        inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, view)
-        tri = mc.tri_count[cl]
-        t1 = time.perf_counter()
-        back = (_cone_cull(mc, inst, cl, members[vis], cone_view)
-                if cone_view is not None and mc.can_cone and cl.size else None)
-        return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
+    def all(self) -> DrawList:
+        """The draw list of every (instance, cluster) pair of the scene."""
+        t_inst = time.perf_counter()
+        prep, view, cone_view = self.prep, self.view, self.cone_view
+        inst_state, inst_mask = self.inst_state, self.inst_mask
+        timings = dict(self.timings_ms)
+        pairs = _Pairs(self.keep_cone_culled)
 
-    tasks: list = []
-    work: list[int] = []   # bounds on the pairs each task looks at (`_run_tasks`)
-    if prep.flat_ids.size:
-        tasks.append((flat_task, ()))
-        work.append(int(prep.flat_count.sum()))   # (a bound: it is only compared)
-    for mc, members in prep.groups:
-        vis = inst_state[members] != OUTSIDE
-        if vis.any():
-            tasks.append((group_task, (mc, members, vis)))
-            work.append(members.size * mc.cm.n_clusters)
-    for k, res in enumerate(_run_tasks(tasks, work)):
-        if k > 0 or not prep.flat_ids.size:
-            pairs.in_order = False   # groups emit pairs out of draw order
-        pairs.t_clusters += res.t_frustum
-        pairs.frustum_done(res.cl, res.tri)
-        inst, cl, ins = res.inst, res.cl, res.ins
-        if res.back is not None:
-            inst, cl, ins = pairs.drop_cone_culled(res.back, inst, cl, ins, res.tri)
-            pairs.t_cones += res.t_cones
-        pairs.keep(inst, cl, ins)
+        def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
+            t0 = time.perf_counter()
+            inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, view)
+            t1 = time.perf_counter()
+            back = (_flat_cone_cull(prep, inst, g, cone_view)
+                    if cone_view is not None and cl.size else None)
+            return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
 
-    t_order = time.perf_counter()
-    inst, cl, ins = pairs.in_draw_order(prep)
-    counts = pairs.counts(prep, inst_state, int(cl.size))
-    t_end = time.perf_counter()
-    timings.update(clusters=pairs.t_clusters * 1e3, cones=pairs.t_cones * 1e3,
-                   order=(t_end - t_order) * 1e3, total=(t_end - t_start) * 1e3)
-    return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
-                    inside=ins.astype(bool), counts=counts,
-                    timings_ms=timings, cone_culled=pairs.cone_culled())
+        def group_task(mc: _MeshCull, members: np.ndarray, vis: np.ndarray) -> _PathResult:
+            t0 = time.perf_counter()   # other meshes: one group of instances per mesh
+            inst, cl, ins = _group_frustum(prep, mc, members, inst_state, inst_mask, view)
+            tri = mc.tri_count[cl]
+            t1 = time.perf_counter()
+            back = (_cone_cull(mc, inst, cl, members[vis], cone_view)
+                    if cone_view is not None and mc.can_cone and cl.size else None)
+            return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
+
+        tasks: list = []
+        work: list[int] = []   # bounds on the pairs each task looks at (`_run_tasks`)
+        if prep.flat_ids.size:
+            tasks.append((flat_task, ()))
+            work.append(int(prep.flat_count.sum()))   # (a bound: it is only compared)
+        for mc, members in prep.groups:
+            vis = inst_state[members] != OUTSIDE
+            if vis.any():
+                tasks.append((group_task, (mc, members, vis)))
+                work.append(members.size * mc.cm.n_clusters)
+        for k, res in enumerate(_run_tasks(tasks, work)):
+            if k > 0 or not prep.flat_ids.size:
+                pairs.in_order = False   # groups emit pairs out of draw order
+            pairs.t_clusters += res.t_frustum
+            pairs.frustum_done(res.cl, res.tri)
+            inst, cl, ins = res.inst, res.cl, res.ins
+            if res.back is not None:
+                inst, cl, ins = pairs.drop_cone_culled(res.back, inst, cl, ins, res.tri)
+                pairs.t_cones += res.t_cones
+            pairs.keep(inst, cl, ins)
+
+        t_order = time.perf_counter()
+        inst, cl, ins = pairs.in_draw_order(prep)
+        counts = pairs.counts(prep, inst_state, int(cl.size))
+        t_end = time.perf_counter()
+        timings.update(clusters=pairs.t_clusters * 1e3, cones=pairs.t_cones * 1e3,
+                       order=(t_end - t_order) * 1e3,
+                       total=timings["prepare"] + timings["instances"]
+                       + (t_end - t_inst) * 1e3)
+        return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
+                        inside=ins.astype(bool), counts=counts,
+                        timings_ms=timings, cone_culled=pairs.cone_culled())
 

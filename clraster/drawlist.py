@@ -17,7 +17,7 @@ import numpy as np
 
 from .clusters import clusters_of
 from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
-from .cull import build_draw_list
+from .cull import ViewCull
 from .inputs import as_target, view_projection
 from .layout import DRAW_MIRRORED
 from .mesh import Mesh
@@ -323,29 +323,43 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 class FramePlan:
-    """Everything both renderers need before the vertex stage: the scene, its pool, the cull
-    result and the view-projection (float64 (4, 4)); the draw records are laid out when
-    asked for: all of them (`frame`), or a subset (`draws_of`: two-phase occlusion culling
-    draws a few of the frame's clusters, and laying out the 83K of the 10M plant's first-
-    person view took ~1.8 ms)."""
+    """Everything both renderers need before the vertex stage: the scene, its pool, the
+    view's culling (`cull.ViewCull`: instances classified, pairs culled on demand) and the
+    view-projection (float64 (4, 4)). The draw list (every pair culled) is made when first
+    asked for; hierarchical occlusion culling (`twophase`) culls only the pairs it needs
+    and sets the frame's draw list itself. The draw records are laid out when asked for:
+    all of them (`frame`), or a subset (`draws_of`, `draws_for`: two-phase occlusion
+    culling draws a few of the frame's clusters, and laying out the 83K of the 10M
+    plant's first-person view took ~1.8 ms)."""
 
-    def __init__(self, scene: Scene, pool: GeometryPool, draw_list: DrawList,
+    def __init__(self, scene: Scene, pool: GeometryPool, culler: ViewCull,
                  matrices: FrameDraws, view_proj: np.ndarray) -> None:
         self.scene = scene
         self.pool = pool
-        self.draw_list = draw_list
+        self.culler = culler
         self.view_proj = view_proj
         #: `instance_matrices` of this view (no draws)
         self.matrices = matrices
+        self._draw_list: DrawList | None = None
         self._frame: FrameDraws | None = None
+
+    @property
+    def draw_list(self) -> DrawList:
+        """The frame's draw list: every pair culled (`ViewCull.all`), unless set."""
+        if self._draw_list is None:
+            self._draw_list = self.culler.all()
+        return self._draw_list
+
+    @draw_list.setter
+    def draw_list(self, dl: DrawList) -> None:
+        self._draw_list = dl
+        self._frame = None
 
     @property
     def frame(self) -> FrameDraws:
         """All the draws of the draw list, in its order, laid out once."""
         if self._frame is None:
-            dl = self.draw_list
-            self._frame = draw_records(self.pool, self.scene, self.matrices, dl.instance,
-                                       dl.cluster, dl.inside)
+            self._frame = self.draws_for(self.draw_list)
         return self._frame
 
     @property
@@ -360,6 +374,11 @@ class FramePlan:
         dl = self.draw_list
         return draw_records(self.pool, self.scene, self.matrices, dl.instance[mask],
                             dl.cluster[mask], dl.inside[mask])
+
+    def draws_for(self, dl: DrawList) -> FrameDraws:
+        """The draws of ``dl`` (a draw list of this view), laid out on their own."""
+        return draw_records(self.pool, self.scene, self.matrices, dl.instance, dl.cluster,
+                            dl.inside)
 
 
 class PlanCache:
@@ -407,7 +426,7 @@ def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: b
         n_clipping = n_clipping or 0
         clip_planes = (cull_planes if clip_planes is None
                        else np.concatenate([clip_planes, cull_planes]))
-    dl = build_draw_list(scene, vp, frustum=frustum, cones=cones, cull=cull,
-                         keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
-    return FramePlan(scene, pool, dl, instance_matrices(pool, scene, vp, clip_planes,
+    culler = ViewCull(scene, vp, frustum=frustum, cones=cones, cull=cull,
+                      keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
+    return FramePlan(scene, pool, culler, instance_matrices(pool, scene, vp, clip_planes,
                                                         n_clipping), vp)

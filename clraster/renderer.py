@@ -206,12 +206,14 @@ class Renderer:
                           cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes,
                           cull_planes=cull_planes)
         # the draw records: all of them now, or, with occlusion culling, those of each
-        # phase when it is drawn (two_phase)
+        # phase when it is drawn (two_phase, which also culls the clusters: it may test
+        # only some of them, hierarchically)
         fd = plan.frame if not occlusion else None
         t_cull = (time.perf_counter() - t0) * 1e3
-        counts = dict(plan.draw_list.counts)
+        counts = dict(plan.draw_list.counts) if not occlusion else {}
         params = FrameParams.make(w, h, self.config, cull, reversed_z, window)
-        if plan.empty:   # nothing in view: the cleared frame, cleared on the device
+        if not occlusion and plan.empty:
+            # nothing in view: the cleared frame, cleared on the device
             out = cast(RasterStage, self.chain.raster).clear(self.queue, params, overdraw, bary)
             return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
                          FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
@@ -238,7 +240,8 @@ class Renderer:
             else:
                 self._pyramid = None
                 res = two_phase(plan, self._occlusion, draw,
-                                functools.partial(self._hiz, zoff=params.zoff), totals, counts)
+                                functools.partial(self._hiz, zoff=params.zoff), totals, counts,
+                                group_clusters=config.occlusion_groups)
                 out, occluded = res.out, res.occluded_keys
         finally:
             self.chain.trim()   # an outsized pass's buffers go back to the budget's bound

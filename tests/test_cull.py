@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from clraster.bvh import BVH
 from clraster.camera import Camera
 from clraster.clusters import clusters_of
-from clraster.cull import COUNT_NAMES, build_draw_list
+from clraster.cull import COUNT_NAMES, ViewCull, build_draw_list
 from clraster.frustum import (
     Visibility,
     classify_aabbs,
@@ -722,3 +722,56 @@ def test_draw_list_validation_and_timings():
     assert {"prepare", "instances", "clusters", "cones", "order", "total"} <= set(dl.timings_ms)
     empty = build_draw_list(Scene(), P90)
     assert len(empty) == 0 and empty.counts["instances_total"] == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_view_cull_pairs_decide_each_pair_alone(seed):
+    """`ViewCull.pairs` (hierarchical occlusion culling's cluster tests) decides every pair
+    on its own: a random half of a scene's pairs gets exactly the verdicts (kept, inside,
+    cone-culled) those pairs get among all of them, and the counts partition the pairs.
+    Against `all` on the same view: the instance test is shared, so the pairs of culled
+    instances are culled by both, and INSIDE instances keep all their pairs, inside."""
+    from clraster.scenes import random_scene
+    scene = random_scene(seed, 48, extent=4.0, mirrors=bool(seed % 2))
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=3)
+    cam = Camera.look_at(d / np.linalg.norm(d) * rng.uniform(1.0, 8.0),
+                         rng.uniform(-1.5, 1.5, 3), (0.0, 1.0, 0.0), fov_y=60.0, near=0.05,
+                         far=60.0)
+    vp = cam.view_projection(96, 64)
+    vc = ViewCull(scene, vp, keep_cone_culled=True)
+    n = np.array([clusters_of(i.mesh).n_clusters if i.mesh.n_faces else 0
+                  for i in scene.instances])
+    inst = np.repeat(np.arange(n.size), n)
+    cl = np.concatenate([np.arange(k) for k in n]) if n.size else np.zeros(0, np.int64)
+    full = vc.pairs(inst, cl)
+    half = np.sort(rng.choice(inst.size, inst.size // 2, replace=False))
+    part = vc.pairs(inst[half], cl[half])
+
+    def decided(dl):
+        kept = {(int(a), int(b)): bool(c) for a, b, c in
+                zip(dl.instance, dl.cluster, dl.inside, strict=True)}
+        cone = {(int(a), int(b)) for a, b in dl.cone_culled}
+        return kept, cone
+
+    kept_all, cone_all = decided(full)
+    kept, cone = decided(part)
+    chosen = {(int(a), int(b)) for a, b in zip(inst[half], cl[half], strict=True)}
+    assert kept == {k: v for k, v in kept_all.items() if k in chosen}
+    assert cone == cone_all & chosen
+    for dl, size in ((full, inst.size), (part, half.size)):
+        c = dl.counts
+        assert c["clusters_total"] == size == (c["clusters_frustum_culled"]
+                                               + c["clusters_cone_culled"]
+                                               + c["clusters_drawn"]) and len(dl) == \
+            c["clusters_drawn"], c
+        assert c["triangles_total"] == (c["triangles_frustum_culled"]
+                                        + c["triangles_cone_culled"] + c["triangles_drawn"])
+    ref = vc.all()
+    st = vc.inst_state
+    for (i, c), ins in kept_all.items():
+        assert st[i] != 2, (i, c)   # OUTSIDE instances keep nothing
+        if st[i] == 0:              # INSIDE instances: every pair kept, inside
+            assert ins
+    assert {(int(a), int(b)) for a, b in zip(ref.instance, ref.cluster, strict=True)
+            if st[a] == 0} <= set(kept_all) | cone_all

@@ -64,6 +64,8 @@ from conftest import (
 
 from clraster import Camera, Mesh, RasterConfig, Renderer
 from clraster import reference as twin
+from clraster.clusters import clusters_of
+from clraster.fates import Fate
 from clraster.scene import Scene
 from clraster.scenes import (
     instance_grid,
@@ -85,10 +87,13 @@ PRE_OCCLUSION = ("instances_total", "instances_frustum_culled", "instances_empty
 
 # -- helpers ------------------------------------------------------------------------------
 
-def occ_renderer(size=SIZE, tile_log2: int = 4, hiz: bool = True) -> Renderer:
+def occ_renderer(size=SIZE, tile_log2: int = 4, hiz: bool = True,
+                 groups: int | None = None) -> Renderer:
     """A renderer of its own for occlusion frames (its history is the test's business; the
-    programs are cached per context, so this is cheap)."""
-    return Renderer(*size, config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz))
+    programs are cached per context, so this is cheap). groups: `occlusion_groups` (None:
+    the default, hierarchical; 0: flat two-phase)."""
+    kw = {} if groups is None else {"occlusion_groups": groups}
+    return Renderer(*size, config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz, **kw))
 
 
 def reference(target, camera, size=SIZE, cull="back", overdraw=False, hiz=True, **kw):
@@ -98,18 +103,29 @@ def reference(target, camera, size=SIZE, cull="back", overdraw=False, hiz=True, 
                                                **kw)
 
 
-def check_stats(on, off, context: str) -> None:
-    """The occlusion rows partition the draw list; culling before them is unchanged."""
+#: Counts equal with and without hierarchical occlusion culling, which decides some
+#: clusters by their group (occlusion-culled untested) and tests the others on their own.
+PRE_OCCLUSION_GROUPED = ("instances_total", "instances_frustum_culled", "instances_empty",
+                         "clusters_total", "triangles_total")
+
+
+def check_stats(on, off, context: str, flat: bool = False) -> None:
+    """The occlusion rows partition the draw list; culling before them is unchanged (flat
+    two-phase, ``flat``), or, hierarchically, at least the instance test and the totals."""
     s, o = on.stats, off.stats
-    for k in PRE_OCCLUSION:
+    for k in PRE_OCCLUSION if flat else PRE_OCCLUSION_GROUPED:
         assert getattr(s, k) == getattr(o, k), f"{context}: {k} {getattr(s, k)} vs " \
                                                f"{getattr(o, k)}"
+    assert s.clusters_total == (s.clusters_frustum_culled + s.clusters_cone_culled
+                                + s.clusters_drawn), f"{context}: {s.counts()}"
     assert min(s.clusters_phase1, s.clusters_phase2, s.clusters_occlusion_culled,
                s.triangles_occlusion_culled) >= 0, f"{context}: {s.counts()}"
     assert s.clusters_drawn == (s.clusters_phase1 + s.clusters_phase2
                                 + s.clusters_occlusion_culled), f"{context}: {s.counts()}"
-    assert s.triangles_in + s.triangles_occlusion_culled == o.triangles_in, \
-        f"{context}: {s.triangles_in} + {s.triangles_occlusion_culled} != {o.triangles_in}"
+    if flat:
+        assert s.triangles_in + s.triangles_occlusion_culled == o.triangles_in, \
+            f"{context}: {s.triangles_in} + {s.triangles_occlusion_culled} != " \
+            f"{o.triangles_in}"
     assert s.triangles_total == (s.triangles_frustum_culled + s.triangles_cone_culled
                                  + s.triangles_occlusion_culled + s.triangles_in), \
         f"{context}: {s.counts()}"
@@ -132,7 +148,7 @@ def check_path(target, cameras, *, size=SIZE, cull="back", renderer=None, contex
         off = reference(target, cam, size, cull, **kw)
         ctx = f"{context} frame {k}"
         assert_same_image(on, off, ctx)
-        check_stats(on, off, ctx)
+        check_stats(on, off, ctx, flat=r.config.occlusion_groups == 0)
         out.append((on, off))
     return out
 
@@ -245,6 +261,19 @@ def test_random_scene_single_frames(seed, mirrors, cull):
         frames = check_path(scene, [cam, cam], cull=cull, context=f"seed {seed} camera {j}")
         culled += frames[1][0].stats.clusters_occlusion_culled
     assert culled > 0   # the second frames did cull something
+
+
+@pytest.mark.parametrize("mirrors", [False, True])
+@pytest.mark.parametrize("seed", range(3))
+def test_flat_schedule_camera_path(seed, mirrors):
+    """The flat two-phase schedule (`occlusion_groups=0`) along a camera path: besides the
+    images, the culling before occlusion is exactly the frame's without it (every cluster
+    that survives the frustum and cone tests is Hi-Z tested, none decided by a group)."""
+    scene = random_scene(seed, 96, extent=4.0, mirrors=mirrors)
+    rng = np.random.default_rng(2500 + seed)
+    frames = check_path(scene, random_path(rng, 6, 4.0), renderer=occ_renderer(groups=0),
+                        context=f"flat seed {seed} path")
+    assert sum(on.stats.clusters_occlusion_culled for on, _ in frames) > 0
 
 
 @pytest.mark.parametrize("cull", ["back", "none"])
@@ -713,6 +742,66 @@ def test_box_in_front_of_the_wall_is_kept():
             s.triangles_occlusion_culled) == (3, 0, 3, 36), s.counts()
 
 
+def merged_boxes(centres, size: float) -> Mesh:
+    """One mesh of boxes of edge ``size`` at ``centres`` (12 faces each, in order)."""
+    vs, fs = [], []
+    for k, c in enumerate(centres):
+        b = box_mesh(np.asarray(c) - size / 2, np.asarray(c) + size / 2)
+        vs.append(b.vertices)
+        fs.append(b.faces + 8 * k)
+    return Mesh(np.concatenate(vs), np.concatenate(fs))
+
+
+def recording_hiz(r: Renderer) -> list[int]:
+    """Boxes each Hi-Z test of ``r`` gets, appended per call (wraps its `_hiz`)."""
+    sizes: list[int] = []
+    inner = r._hiz
+
+    def hiz(out, rows, vp32, zoff=0.5, same_depth=False):
+        sizes.append(int(rows.shape[1]))
+        return inner(out, rows, vp32, zoff=zoff, same_depth=same_depth)
+
+    r._hiz = hiz
+    return sizes
+
+
+@pytest.mark.parametrize("groups", [8, 32])
+def test_hidden_groups_are_culled_without_their_clusters_tests(groups):
+    """A wall and, behind it, one mesh of 900 small boxes (~85 clusters of at most 128
+    faces). Second frame, hierarchical: the big mesh's groups are Hi-Z tested and found
+    hidden, so its clusters are occlusion-culled without being tested one by one — the Hi-Z
+    tests of the frame get about clusters / groups boxes plus the wall's, where the flat
+    schedule tests every cluster — and the counts and fates say so. Images as without
+    occlusion culling (check_path)."""
+    g = np.stack(np.meshgrid(np.arange(30), np.arange(30), indexing="ij"), -1).reshape(-1, 2)
+    centres = np.column_stack([g * 0.2 - 2.9, np.full(len(g), -2.0)])
+    big = merged_boxes(centres, 0.1)
+    scene = Scene([(box_mesh((-10, -10, -0.1), (10, 10, 0.0)), None), (big, None)])
+    n_big = clusters_of(big).n_clusters
+    cam = Camera.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0), fov_y=60.0, near=0.1, far=50.0)
+    flat, grouped = occ_renderer(groups=0), occ_renderer(groups=groups)
+    tested = {}
+    frames = {}
+    for name, r in (("flat", flat), ("grouped", grouped)):
+        check_path(scene, [cam], renderer=r, context=name)
+        sizes = recording_hiz(r)
+        (on, off), = check_path(scene, [cam], renderer=r, context=name)
+        tested[name] = sum(sizes)
+        frames[name] = r.render(scene, cam, occlusion=True, fates=True)
+        assert_same_image(frames[name], off, name)
+    assert n_big > 2 * groups
+    for name, f in frames.items():
+        s = f.stats
+        assert (s.clusters_phase1, s.clusters_phase2, s.clusters_occlusion_culled) \
+            == (1, 0, n_big), (name, s.counts())
+        fc = f.fates.counts()
+        assert fc[Fate.OCCLUSION_CULLED] == n_big and fc[Fate.DRAWN] == 1, (name, fc)
+    # flat: every big-mesh cluster (padded to 8) and the wall twice; grouped: its groups
+    n_groups = -(-n_big // groups)
+    assert tested["flat"] >= n_big, tested
+    assert tested["grouped"] <= 3 * 8 + -(-n_groups // 8) * 8, (tested, n_groups)
+
+
 # -- 3. overdraw --------------------------------------------------------------------------
 
 def test_overdraw_three_full_screen_layers():
@@ -800,7 +889,7 @@ def test_occlusion_efficiency_plant_100k():
     size = (320, 240)
     scene = plant(100_000)
     cam = plant_inside_camera(scene, *size)
-    m = bench.measure(scene, cam, *size, renderer=occ_renderer(size),
+    m = bench.measure(scene, cam, *size, renderer=occ_renderer(size, groups=0),
                       reference=get_renderer(*size))
     bench.check(m)
     s = m["sets"]

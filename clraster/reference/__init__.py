@@ -92,8 +92,8 @@ class Renderer:
         fd = plan.frame if not occlusion else None
         t_cull = (time.perf_counter() - t0) * 1e3
         pool = plan.pool
-        counts = dict(plan.draw_list.counts)
-        if plan.empty:
+        counts = dict(plan.draw_list.counts) if not occlusion else {}
+        if not occlusion and plan.empty:
             return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
                                bary=want_bary, reversed_z=reversed_z)
         params = FrameParams.make(w, h, config, cull, reversed_z, mask)
@@ -105,7 +105,8 @@ class Renderer:
         if fd is not None:
             depth, ids, bary = draw(fd, None)
         else:
-            res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts)
+            res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts,
+                            group_clusters=config.occlusion_groups)
             depth, ids, bary = res.out
         return Frame(finish_depth(depth, ids, reversed_z), ids, bary if want_bary else None,
                      totals.stats(counts), reversed_z=reversed_z)
