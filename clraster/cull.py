@@ -297,6 +297,9 @@ DENSE_CLUSTERS = 64
 #: ... and so are meshes whose (instances × clusters) grid is at most this large.
 DENSE_PAIRS = 16384
 _DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
+#: `ViewCull.pairs`: an instance with at least this many pairs to test tests them against
+#: its planes broadcast rather than gathered per pair.
+PAIR_RUN = 64
 #: Scenes with at most this many bounded instances classify them densely, every instance
 #: box against the planes, not through the instance BVH (whose traversal pays off when
 #: whole subtrees are culled among many more instances).
@@ -921,14 +924,31 @@ class ViewCull:
         # (clusters with NaN/Inf vertices are never culled, as on the other paths)
         test = np.flatnonzero((st == INTERSECTING) & (mk != 0) & g_bounded[g])
         if test.size:
-            uniq, row = np.unique(inst[test], return_inverse=True)
+            # the pairs come by instance: a long run of one instance's pairs (a big mesh)
+            # is tested against its plane set broadcast, the others with their sets
+            # gathered per pair (~7 MB of table for the 10M plant's ~13K pairs); both do
+            # the same operations, so a pair's verdict does not depend on the others
+            uniq, first, run = np.unique(inst[test], return_index=True, return_counts=True)
             oplanes, oscales = view.object_space(prep, uniq)
-            table = np.take(plane_table(oplanes, oscales), row, axis=1)
+            table = plane_table(oplanes, oscales)
             gt = g[test]
-            cst, cmask = classify_extremes(
-                *box_extremes_table(table, prep.g_lo[gt].T, prep.g_hi[gt].T,
-                                    prep.g_mag[gt].T),
-                mk[test], view.inside_margin, view.outside_margin)
+            lo, hi, mag = prep.g_lo[gt].T, prep.g_hi[gt].T, prep.g_mag[gt].T
+            dmin = np.empty((table.shape[0] // 11, test.size))
+            dmax, mterm = np.empty_like(dmin), np.empty_like(dmin)
+            long_runs = np.flatnonzero(run >= PAIR_RUN)
+            short = np.ones(test.size, bool)
+            for q in long_runs.tolist():
+                sl = slice(int(first[q]), int(first[q] + run[q]))
+                dmin[:, sl], dmax[:, sl], mterm[:, sl] = box_extremes_table(
+                    table[:, q:q + 1], lo[:, sl], hi[:, sl], mag[:, sl])
+                short[sl] = False
+            if short.any():
+                s_idx = np.flatnonzero(short)
+                row = np.repeat(np.arange(uniq.size), run)[s_idx]
+                dmin[:, s_idx], dmax[:, s_idx], mterm[:, s_idx] = box_extremes_table(
+                    np.take(table, row, axis=1), lo[:, s_idx], hi[:, s_idx], mag[:, s_idx])
+            cst, cmask = classify_extremes(dmin, dmax, mterm, mk[test], view.inside_margin,
+                                           view.outside_margin)
             alive[test] = cst != OUTSIDE
             ins[test] = view.inside(cmask)
         tri = g_tri[g]

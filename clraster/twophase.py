@@ -43,7 +43,7 @@ from typing import Any, Protocol, cast
 import numpy as np
 
 from .boxes import Occlusion
-from .bvh import OUTSIDE
+from .bvh import OUTSIDE, concat_ranges
 from .cull import DrawList
 from .drawlist import FrameDraws, FramePlan, key_boxes
 from .frustum import eye_from_view_proj
@@ -89,16 +89,30 @@ class KeyGroups:
     #: float32 (6, G): the groups' world boxes (min xyz, max xyz: the union of their keys'
     #: boxes; non-finite when one of them is), the Hi-Z test's layout
     rows: np.ndarray
+    #: int64 (K,): the keys by group (group j's are order[start[j]:start[j] + size[j]]);
+    #: int64 (G,) each: start, size (keys), triangles and instance of every group
+    order: np.ndarray
+    start: np.ndarray
+    size: np.ndarray
+    group_tris: np.ndarray
+    group_inst: np.ndarray
+    #: int64: the keys without a finite box
+    unbounded: np.ndarray
 
     @property
     def n_groups(self) -> int:
         return int(self.rows.shape[1])
 
+    def keys_of(self, groups: np.ndarray) -> np.ndarray:
+        """int64: the keys of ``groups`` (int64), group by group."""
+        return self.order[concat_ranges(self.start[groups], self.size[groups])]
+
     @classmethod
-    def build(cls, pool, prep, wlo: np.ndarray, whi: np.ndarray, size: int) -> KeyGroups:
+    def build(cls, pool, prep, wlo: np.ndarray, whi: np.ndarray, wbounded: np.ndarray,
+              size: int) -> KeyGroups:
         """Groups of at most ``size`` clusters; ``prep``: the scene's culling data
-        (`cull._prepare`: each instance's mesh with its cluster BVH), wlo, whi: the keys'
-        world boxes (float64 (K, 3))."""
+        (`cull._prepare`: each instance's mesh with its cluster BVH), wlo, whi, wbounded:
+        the keys' world boxes (float64 (K, 3)) and whether they are finite."""
         base = np.asarray(pool.instance_key_base, np.int64)
         n_keys = np.diff(base)
         inst = np.repeat(np.arange(n_keys.size, dtype=np.int64), n_keys)
@@ -132,7 +146,11 @@ class KeyGroups:
             glo = ghi = np.zeros((0, 3))
         rows = np.ascontiguousarray(np.vstack([glo.T, ghi.T]).astype(np.float32))
         tris = np.take(pool.clusters[:, 1], pool.pool_clusters(inst, cluster)).astype(np.int64)
-        return cls(inst, cluster, tris, group, rows)
+        gsize = np.diff(np.append(starts, sg.size)).astype(np.int64)
+        gtris = np.add.reduceat(tris[order], starts) if sg.size else np.zeros(0, np.int64)
+        return cls(inst, cluster, tris, group, rows, order, starts.astype(np.int64), gsize,
+                   gtris.astype(np.int64), inst[order[starts]] if sg.size
+                   else np.zeros(0, np.int64), np.flatnonzero(~wbounded))
 
 
 class OcclusionHistory:
@@ -150,6 +168,7 @@ class OcclusionHistory:
 
     def __init__(self) -> None:
         self._visible: np.ndarray | None = None
+        self._visible_keys = np.zeros(0, np.int64)
         self._visible_key: tuple | None = None
         # world boxes of every key (float64 (K, 3) mins and maxs, bool (K,) bounded) + the
         # boxes in the Hi-Z test's layout, float32 (6, K), gathered per frame
@@ -165,8 +184,8 @@ class OcclusionHistory:
         key = self._groups_key
         if key is None or not (key[0] is scene and key[1] == version and key[2] == size
                                and key[3] is prep):
-            wlo, whi, _, _ = self.boxes(pool, scene)
-            self._groups = KeyGroups.build(pool, prep, wlo, whi, size)
+            wlo, whi, wbounded, _ = self.boxes(pool, scene)
+            self._groups = KeyGroups.build(pool, prep, wlo, whi, wbounded, size)
             self._groups_key = (scene, version, size, prep)
         return cast(KeyGroups, self._groups)
 
@@ -188,21 +207,36 @@ class OcclusionHistory:
             return self._visible
         return None
 
+    def last_visible_keys(self, scene) -> np.ndarray:
+        """int64 (V,) sorted: the keys `last_visible` sets (empty without a history)."""
+        key = self._visible_key
+        if key is not None and key[0] is scene and key[1] == getattr(scene, "version", 0):
+            return self._visible_keys
+        return np.zeros(0, np.int64)
+
     def remember(self, scene, n_keys: int, visible_keys: np.ndarray) -> None:
         """Store ``visible_keys`` (int (V,) keys) as the visible set of ``scene``."""
         self._visible = np.zeros(n_keys, bool)
         self._visible[visible_keys] = True
+        self._visible_keys = np.flatnonzero(self._visible)
         self._visible_key = (scene, getattr(scene, "version", 0))
 
 
-@dataclass
 class TwoPhaseResult:
     """What `two_phase` returns. out: the frame buffers ``draw`` made (opaque here).
     occluded_keys: int64 (O,) keys of the clusters the Hi-Z test removed (for
-    `fates.ClusterFates`)."""
+    `fates.ClusterFates`; listed when asked for: the hierarchical schedule counts a hidden
+    group's keys without listing them)."""
 
-    out: Any
-    occluded_keys: np.ndarray
+    def __init__(self, out: Any, occluded: np.ndarray | Callable[[], np.ndarray]) -> None:
+        self.out = out
+        self._occluded = occluded
+
+    @property
+    def occluded_keys(self) -> np.ndarray:
+        if callable(self._occluded):
+            self._occluded = self._occluded()
+        return self._occluded
 
 
 def _box_rows(box_rows: np.ndarray, keys: np.ndarray) -> np.ndarray:
@@ -348,13 +382,14 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         return None
     t0 = time.perf_counter()
     base = np.asarray(pool.instance_key_base, np.int64)
+    n_keys = int(base[-1])
     _, _, wbounded, box_rows = history.boxes(pool, scene)
     grp = history.groups(pool, scene, vc.prep, size)
-    # keys of the instances not culled whole by the frustum
-    alive = np.take(vc.inst_state != OUTSIDE, grp.inst)
-    # phase 1: last frame's visible clusters, and those that cannot be tested (no box)
-    cand = (hist | ~wbounded) & alive
-    k1 = np.flatnonzero(cand)
+    inst_alive = vc.inst_state != OUTSIDE   # instances not culled whole by the frustum
+    # phase 1: last frame's visible clusters, and those that cannot be tested (no box), of
+    # the instances in view
+    k1 = np.union1d(history.last_visible_keys(scene), grp.unbounded)
+    k1 = k1[inst_alive[grp.inst[k1]]]
     dl1 = vc.pairs(grp.inst[k1], grp.cluster[k1])
     keys1 = base[dl1.instance] + dl1.cluster
     if not hist[keys1].any():
@@ -365,22 +400,19 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     out = draw(plan.draws_for(dl1), None)
     draw_ms = (time.perf_counter() - t_draw) * 1e3
     hiz_ms = 0.0
-    # the groups holding the other clusters of the instances in view, against phase 1's
-    # pyramid
-    rest = np.flatnonzero(alive & ~cand)
-    g_rest = grp.group[rest]
-    tested = np.zeros(grp.n_groups, bool)
-    tested[g_rest] = True
-    tested_g = np.flatnonzero(tested)
-    g_code = np.full(grp.n_groups, Occlusion.VISIBLE, np.uint8)
+    # the groups of the instances in view against phase 1's pyramid (their phase-1 keys
+    # aside: decided above)
+    tested_g = np.flatnonzero(inst_alive[grp.group_inst])
+    hidden = np.zeros(grp.n_groups, bool)
     if tested_g.size:
         codes, ms = hiz(out, _box_rows(grp.rows, tested_g), vp32)
-        g_code[tested_g] = codes[:tested_g.size]
+        hidden[tested_g] = codes[:tested_g.size] != Occlusion.VISIBLE
         hiz_ms += ms or 0.0
-    in_view = g_code[g_rest] == Occlusion.VISIBLE
-    k2 = rest[in_view]
-    hidden_groups = rest[~in_view]   # keys of hidden groups: occlusion-culled untested
-    # their clusters one by one: culled, then Hi-Z tested
+    in_phase1 = np.zeros(n_keys, bool)
+    in_phase1[k1] = True
+    k2 = grp.keys_of(tested_g[~hidden[tested_g]])
+    k2 = np.sort(k2[~in_phase1[k2]])
+    # the clusters of the groups in view, one by one: culled, then Hi-Z tested
     dl2 = vc.pairs(grp.inst[k2], grp.cluster[k2])
     t_cull += dl2.timings_ms["total"]
     keys2 = base[dl2.instance] + dl2.cluster
@@ -401,14 +433,24 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         visible = drawn[vis]
     else:
         visible = drawn
-    history.remember(scene, int(base[-1]), visible)
-    occluded = np.concatenate([hidden_groups, keys2[~second]])
+    history.remember(scene, n_keys, visible)
+    # occlusion-culled: the hidden groups' keys (but their phase-1 ones) untested, and the
+    # clusters the one-by-one test hid
+    hid_g = np.flatnonzero(hidden)
+    k1_hidden = k1[hidden[grp.group[k1]]]
+    n_hidden = int(grp.size[hid_g].sum()) - int(k1_hidden.size)
+    tri_hidden = int(grp.group_tris[hid_g].sum()) - int(grp.tris[k1_hidden].sum())
+    occ2 = keys2[~second]
+
+    def occluded_keys() -> np.ndarray:
+        keys = grp.keys_of(hid_g)
+        return np.concatenate([keys[~in_phase1[keys]], occ2])
+
     # the frame's counts: instances from the instance test, clusters and triangles from
     # the instances culled whole, the two pair lists and the hidden groups
     c1, c2 = dl1.counts, dl2.counts
     out_cl, out_tri = vc.outside_totals()
     prep = vc.prep
-    n_occ_tri = int(grp.tris[occluded].sum())
     frame_counts = {
         "instances_total": prep.n,
         "instances_frustum_culled": int(((vc.inst_state == OUTSIDE) & prep.nonempty).sum()),
@@ -417,17 +459,17 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         "clusters_frustum_culled": out_cl + c1["clusters_frustum_culled"]
         + c2["clusters_frustum_culled"],
         "clusters_cone_culled": c1["clusters_cone_culled"] + c2["clusters_cone_culled"],
-        "clusters_drawn": len(dl1) + len(dl2) + int(hidden_groups.size),
+        "clusters_drawn": len(dl1) + len(dl2) + n_hidden,
         "triangles_total": prep.tri_total,
         "triangles_frustum_culled": out_tri + c1["triangles_frustum_culled"]
         + c2["triangles_frustum_culled"],
         "triangles_cone_culled": c1["triangles_cone_culled"] + c2["triangles_cone_culled"],
-        "triangles_drawn": c1["triangles_drawn"] + c2["triangles_drawn"]
-        + int(grp.tris[hidden_groups].sum()),
+        "triangles_drawn": c1["triangles_drawn"] + c2["triangles_drawn"] + tri_hidden,
     }
     counts.update(frame_counts)
-    counts["clusters_occlusion_culled"] = int(occluded.size)
-    counts["triangles_occlusion_culled"] = n_occ_tri
+    counts["clusters_occlusion_culled"] = n_hidden + int(occ2.size)
+    counts["triangles_occlusion_culled"] = tri_hidden + int(
+        np.take(grp.tris, occ2).sum())
     counts["clusters_phase1"] = len(dl1)
     counts["clusters_phase2"] = int(second.sum())
     plan.draw_list = _merge(dl1, dl2, base, frame_counts)
@@ -437,4 +479,4 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     # the schedule's own host time: all of this but the culling, the draws and the tests
     totals.timings_ms["occlusion (host)"] = ((time.perf_counter() - t0) * 1e3 - t_cull
                                              - draw_ms - hiz_ms)
-    return TwoPhaseResult(out, occluded)
+    return TwoPhaseResult(out, occluded_keys)
