@@ -59,6 +59,11 @@ class FrameStats:
         instances_total, instances_frustum_culled, instances_empty (no faces)
         clusters_total, clusters_frustum_culled, clusters_cone_culled, clusters_drawn
         triangles_total, triangles_frustum_culled, triangles_cone_culled
+        clusters_occlusion_culled, triangles_occlusion_culled: removed by two-phase
+            occlusion culling (part of clusters_drawn, which counts what the frustum and
+            cone tests let through). Hierarchically (`RasterConfig.occlusion_groups`), a
+            cluster whose group was hidden counts here without frustum and cone tests.
+        clusters_phase1, clusters_phase2: clusters drawn in each occlusion phase.
         triangles_in: sent to setup.
         invalid: dropped because a vertex (or its clip position) is NaN/Inf.
         trivially_rejected: all three vertices outside one frustum plane (outcode AND ≠ 0) or
