@@ -133,8 +133,10 @@ class RasterConfig:
             changes the image; the counts then say "occlusion culled" for clusters whose
             group was hidden, where the flat scheme (0: every cluster that survives the
             frustum and cone tests is Hi-Z tested) would have counted some of them
-            frustum- or cone-culled first. Default 32 (10M plant first person: 11.5K of
-            106K clusters left to test one by one; bench/README.md).
+            frustum- or cone-culled first. Default 16 (10M plant first person: 8.2K of
+            106K clusters left to test one by one; frame medians with groups of 16 / 32 /
+            64: 44.5 / 45.2 / 46.2 ms in one run, of 8 / 12 / 16 / 24: 45.1 / 44.9 / 44.8 /
+            45.3 in another, ~52 flat; bench/README.md).
     """
 
     tile_log2: int = 4
@@ -142,7 +144,7 @@ class RasterConfig:
     batch_triangles: int = 1 << 20
     batch_entries: int = 1 << 21
     tile_hiz: bool = True
-    occlusion_groups: int = 32
+    occlusion_groups: int = 16
 
     def __post_init__(self) -> None:
         if not 3 <= self.tile_log2 <= 6:
