@@ -206,9 +206,8 @@ def box_extremes(planes: np.ndarray, scales: np.ndarray, lo: np.ndarray, hi: np.
 def box_extremes_table(table: np.ndarray, lo: np.ndarray, hi: np.ndarray, mag: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`box_extremes` with one plane set per box: table (11K, F) from `plane_table`
-    (gathered per box), or (11K, 1): one plane set for all F boxes (the same operations,
-    broadcast: the same bits per box as with its set gathered); lo, hi, mag (3, F)."""
-    f = table.shape[1]
+    (gathered per box), lo, hi, mag (3, F)."""
+    f = lo.shape[1]
     k = table.shape[0] // 11
     npos = table[0:3 * k].reshape(3, k, f)
     nneg = table[3 * k:6 * k].reshape(3, k, f)

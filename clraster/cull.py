@@ -160,6 +160,18 @@ class _MeshCull:
         self.can_cone = bool((cm.cone_cutoff <= 1.0).any())
 
 
+@dataclass(frozen=True)
+class _PairTables:
+    """Per global cluster (C) and instance (I) tables of `ViewCull.pairs`."""
+
+    bounded: np.ndarray   #: bool (C,): finite box
+    tri: np.ndarray       #: int64 (C,): triangles
+    inst_tri: np.ndarray  #: int64 (I,): triangles of each instance (0 for empty ones)
+    centre: np.ndarray    #: float64 (3, C): object-space box centre
+    half: np.ndarray      #: float64 (3, C): its half extents
+    mag: np.ndarray       #: float64 (3, C): its margin magnitudes (`box_magnitudes`)
+
+
 class _SceneCull:
     """Per-scene culling data (rebuilt when the scene changes)."""
 
@@ -258,18 +270,26 @@ class _SceneCull:
             groups.setdefault(id(meshes[i]), []).append(i)
         self.groups = [(meshes[v[0]], np.array(v, np.int64)) for v in groups.values()]
         self._umesh = umesh
-        self._pair_tables: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._pair_tables: _PairTables | None = None
 
-    def pair_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(bool bounded, int64 triangles) per global cluster and int64 triangles per
-        instance (0 for empty ones): `ViewCull.pairs`' tables, made on first use."""
+    def pair_tables(self) -> _PairTables:
+        """`ViewCull.pairs`' tables, made on first use."""
         if self._pair_tables is None:
             bounded = (np.concatenate([mc.cm.bounded for mc in self._umesh]) if self._umesh
                        else np.zeros(0, bool))
             per_mesh = np.array([int(mc.tri_count.sum()) for mc in self._umesh], np.int64)
             inst_tri = np.where(self.nonempty, per_mesh[self.inst_umesh], 0) if self.n \
                 else np.zeros(0, np.int64)
-            self._pair_tables = (bounded, self.g_tri, inst_tri)
+            # (clusters with NaN/Inf vertices are never tested: 0 for them)
+            fin = bounded[:, None]
+            centre = np.where(fin, 0.5 * (np.where(fin, self.g_lo, 0.0)
+                                          + np.where(fin, self.g_hi, 0.0)), 0.0)
+            half = np.where(fin, 0.5 * (np.where(fin, self.g_hi, 0.0)
+                                        - np.where(fin, self.g_lo, 0.0)), 0.0)
+            self._pair_tables = _PairTables(bounded, self.g_tri, inst_tri,
+                                            np.ascontiguousarray(centre.T),
+                                            np.ascontiguousarray(half.T),
+                                            np.ascontiguousarray(self.g_mag.T))
         return self._pair_tables
 
 
@@ -297,9 +317,6 @@ DENSE_CLUSTERS = 64
 #: ... and so are meshes whose (instances × clusters) grid is at most this large.
 DENSE_PAIRS = 16384
 _DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
-#: `ViewCull.pairs`: an instance with at least this many pairs to test tests them against
-#: its planes broadcast rather than gathered per pair.
-PAIR_RUN = 64
 #: Scenes with at most this many bounded instances classify them densely, every instance
 #: box against the planes, not through the instance BVH (whose traversal pays off when
 #: whole subtrees are culled among many more instances).
@@ -326,6 +343,28 @@ def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np
         out_i.append(item)
         out_m.append(mk[q, item])
     return np.concatenate(out_q), np.concatenate(out_i), np.concatenate(out_m)
+
+
+def _pair_extremes(planes: np.ndarray, scales: np.ndarray, row: np.ndarray, g: np.ndarray,
+                   prep: _SceneCull) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`box_extremes` of object-space cluster boxes against their own instance's planes:
+    planes, scales float64 (Q, K, 4) per instance, row int64 (N,) each pair's instance
+    row, g (N,) its global cluster. From the box's centre and half extents (min = n·c + d
+    − |n|·e, max = n·c + d + |n|·e), each pair's values by the same elementwise operations
+    whatever the other pairs (`ViewCull.pairs` decides every pair on its own). float64
+    (K, N) each."""
+    tables = prep.pair_tables()
+    # coordinate-major (3, N) boxes and (4, K, N) plane rows: every operation below runs
+    # on contiguous (K, N) rows (strided (N, K) views cost 4x, with classify_extremes)
+    c, e = np.take(tables.centre, g, axis=1), np.take(tables.half, g, axis=1)
+    mag = np.take(tables.mag, g, axis=1)
+    p = np.take(np.ascontiguousarray(planes.transpose(2, 1, 0)), row, axis=2)
+    s = np.take(np.ascontiguousarray(scales.transpose(2, 1, 0)), row, axis=2)
+    a = np.abs(p[:3])
+    dist = ((p[0] * c[0] + p[1] * c[1]) + p[2] * c[2]) + p[3]
+    reach = (a[0] * e[0] + a[1] * e[1]) + a[2] * e[2]
+    mterm = ((s[0] * mag[0] + s[1] * mag[1]) + s[2] * mag[2]) + s[3]
+    return dist - reach, dist + reach, mterm
 
 
 def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarray,
@@ -901,7 +940,7 @@ class ViewCull:
         """(clusters, triangles) of the non-empty instances culled whole (OUTSIDE)."""
         prep = self.prep
         out = (self.inst_state == OUTSIDE) & prep.nonempty
-        return int(prep.n_clusters[out].sum()), int(prep.pair_tables()[2][out].sum())
+        return int(prep.n_clusters[out].sum()), int(prep.pair_tables().inst_tri[out].sum())
 
     def pairs(self, inst: np.ndarray, cl: np.ndarray) -> DrawList:
         """The draw list of the pairs (``inst``, ``cl``) only: int64 (P,) each, distinct,
@@ -914,7 +953,8 @@ class ViewCull:
         rows; timings "clusters", "cones" and "total"."""
         t0 = time.perf_counter()
         prep, view = self.prep, self.view
-        g_bounded, g_tri, _ = prep.pair_tables()
+        tables = prep.pair_tables()
+        g_bounded, g_tri = tables.bounded, tables.tri
         st = self.inst_state[inst]
         mk = self.inst_mask[inst]
         g = prep.mesh_base[prep.inst_umesh[inst]] + cl
@@ -924,29 +964,9 @@ class ViewCull:
         # (clusters with NaN/Inf vertices are never culled, as on the other paths)
         test = np.flatnonzero((st == INTERSECTING) & (mk != 0) & g_bounded[g])
         if test.size:
-            # the pairs come by instance: a long run of one instance's pairs (a big mesh)
-            # is tested against its plane set broadcast, the others with their sets
-            # gathered per pair (~7 MB of table for the 10M plant's ~13K pairs); both do
-            # the same operations, so a pair's verdict does not depend on the others
-            uniq, first, run = np.unique(inst[test], return_index=True, return_counts=True)
+            uniq, row = np.unique(inst[test], return_inverse=True)
             oplanes, oscales = view.object_space(prep, uniq)
-            table = plane_table(oplanes, oscales)
-            gt = g[test]
-            lo, hi, mag = prep.g_lo[gt].T, prep.g_hi[gt].T, prep.g_mag[gt].T
-            dmin = np.empty((table.shape[0] // 11, test.size))
-            dmax, mterm = np.empty_like(dmin), np.empty_like(dmin)
-            long_runs = np.flatnonzero(run >= PAIR_RUN)
-            short = np.ones(test.size, bool)
-            for q in long_runs.tolist():
-                sl = slice(int(first[q]), int(first[q] + run[q]))
-                dmin[:, sl], dmax[:, sl], mterm[:, sl] = box_extremes_table(
-                    table[:, q:q + 1], lo[:, sl], hi[:, sl], mag[:, sl])
-                short[sl] = False
-            if short.any():
-                s_idx = np.flatnonzero(short)
-                row = np.repeat(np.arange(uniq.size), run)[s_idx]
-                dmin[:, s_idx], dmax[:, s_idx], mterm[:, s_idx] = box_extremes_table(
-                    np.take(table, row, axis=1), lo[:, s_idx], hi[:, s_idx], mag[:, s_idx])
+            dmin, dmax, mterm = _pair_extremes(oplanes, oscales, row, g[test], prep)
             cst, cmask = classify_extremes(dmin, dmax, mterm, mk[test], view.inside_margin,
                                            view.outside_margin)
             alive[test] = cst != OUTSIDE
