@@ -467,7 +467,9 @@ def _cone_view(prep: _SceneCull, vp: np.ndarray, cones: bool, cull: str,
     if not cullable:
         return None
     ortho = bool(eye[3] == 0.0)
-    eye_obj = (prep.minv @ eye)[:, :3]
+    # one (4I, 4) @ (4,) product: a stack of I (4, 4) @ (4,) ones took ~0.3 ms for the
+    # 10M plant's 5,349 instances
+    eye_obj = (prep.minv.reshape(-1, 4) @ eye).reshape(-1, 4)[:, :3]
     if ortho:
         eye_obj /= np.linalg.norm(eye_obj, axis=1)[:, None]
     return _ConeView(eye_obj, side, sin_m, ortho)

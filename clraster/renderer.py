@@ -242,7 +242,10 @@ class Renderer:
                 res = two_phase(plan, self._occlusion, draw,
                                 functools.partial(self._hiz, zoff=params.zoff), totals, counts,
                                 group_clusters=config.occlusion_groups)
-                out, occluded = res.out, res.occluded_keys
+                out = res.out
+                # (listed only for fates: the hierarchical schedule counts hidden groups
+                # without listing their clusters)
+                occluded = res.occluded_keys if fates else None
         finally:
             self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
         return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
