@@ -752,6 +752,26 @@ def merged_boxes(centres, size: float) -> Mesh:
     return Mesh(np.concatenate(vs), np.concatenate(fs))
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_grouped_fates_match_the_counts(seed):
+    """Hierarchical frames along a camera path with fates: every cluster's fate agrees with
+    the counts (drawn = phase 1 + phase 2, frustum-culled — instances, clusters tested
+    alone and groups wholly outside a plane —, cone-culled, occlusion-culled — hidden
+    groups untested and clusters hidden alone), and the images are the frames without
+    occlusion culling."""
+    scene = random_scene(seed, 96, extent=4.0)
+    rng = np.random.default_rng(3000 + seed)
+    r = occ_renderer(groups=4)
+    for k, cam in enumerate(random_path(rng, 6, 4.0)):
+        f = r.render(scene, cam, occlusion=True, fates=True)
+        assert_same_image(f, reference(scene, cam), f"seed {seed} frame {k}")
+        s, fc = f.stats, f.fates.counts()
+        assert (fc[Fate.DRAWN], fc[Fate.FRUSTUM_CULLED], fc[Fate.BACKFACE_CULLED],
+                fc[Fate.OCCLUSION_CULLED]) == (
+            s.clusters_phase1 + s.clusters_phase2, s.clusters_frustum_culled,
+            s.clusters_cone_culled, s.clusters_occlusion_culled), (k, fc, s.counts())
+
+
 def recording_hiz(r: Renderer) -> list[int]:
     """Boxes each Hi-Z test of ``r`` gets, appended per call (wraps its `_hiz`)."""
     sizes: list[int] = []
@@ -796,6 +816,7 @@ def test_hidden_groups_are_culled_without_their_clusters_tests(groups):
             == (1, 0, n_big), (name, s.counts())
         fc = f.fates.counts()
         assert fc[Fate.OCCLUSION_CULLED] == n_big and fc[Fate.DRAWN] == 1, (name, fc)
+        assert fc[Fate.FRUSTUM_CULLED] == s.clusters_frustum_culled == 0, (name, fc)
     # flat: every big-mesh cluster (padded to 8) and the wall twice; grouped: its groups
     n_groups = -(-n_big // groups)
     assert tested["flat"] >= n_big, tested
