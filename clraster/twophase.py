@@ -295,9 +295,16 @@ def two_phase(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, hiz: Hiz
     wlo, whi, wbounded, box_rows = history.boxes(pool, scene)
     bounded = wbounded[keys]
     vp32 = plan.view_proj.astype(np.float32).reshape(-1)
+    if n_draws == 0:
+        # nothing in view: the cleared frame; the history stays for the frames after
+        counts.update(clusters_occlusion_culled=0, triangles_occlusion_culled=0,
+                      clusters_phase1=0, clusters_phase2=0)
+        return TwoPhaseResult(draw(plan.draws_of(np.zeros(0, bool)), None),
+                              np.zeros(0, np.int64))
     hist = history.last_visible(scene)
     first = hist[keys] if hist is not None else None
-    if first is None or not first.any():
+    # (clusters without a box are in every visible set: they do not tell a camera cut)
+    if first is None or not (first & bounded).any():
         # first frame, or a camera cut (none of last frame's visible clusters is in
         # view): the nearest clusters, front to back, up to a budget
         vp_inv_eye = eye_position(plan.view_proj)
@@ -393,9 +400,12 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     k1 = k1[inst_alive[grp.inst[k1]]]
     dl1 = vc.pairs(grp.inst[k1], grp.cluster[k1])
     keys1 = base[dl1.instance] + dl1.cluster
-    if not hist[keys1].any():
-        return None   # a camera cut: start over as on a first frame
     t_cull = dl1.timings_ms["total"]
+    if not (hist[keys1] & wbounded[keys1]).any():
+        # a camera cut (clusters without a box are in every visible set: they do not
+        # count): start over as on a first frame
+        _add_ms(totals, "cull (host)", t_cull)
+        return None
     vp32 = plan.view_proj.astype(np.float32).reshape(-1)
     t_draw = time.perf_counter()
     out = draw(plan.draws_for(dl1), None)
@@ -409,8 +419,10 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         codes, ms = hiz(out, _box_rows(grp.rows, tested_g), vp32)
         g_code[tested_g] = codes[:tested_g.size]
         hiz_ms += ms or 0.0
-    hidden = g_code == Occlusion.OCCLUDED
-    outside = g_code == Occlusion.VIEW_CULLED   # wholly outside a frustum plane
+    # wholly outside a frustum plane: frustum-culled, when frustum culling is on (else,
+    # as in the flat schedule, occlusion-culled)
+    outside = (g_code == Occlusion.VIEW_CULLED) & vc.view.frustum
+    hidden = (g_code == Occlusion.OCCLUDED) | ((g_code == Occlusion.VIEW_CULLED) & ~outside)
     in_phase1 = np.zeros(n_keys, bool)
     in_phase1[k1] = True
     k2 = grp.keys_of(tested_g[g_code[tested_g] == Occlusion.VISIBLE])

@@ -342,8 +342,33 @@ def test_occlusion_without_frustum_or_cone_culling(frustum, cones):
     frames = check_path(scene, random_path(rng, 7, 4.0), frustum=frustum, cones=cones,
                         context=f"frustum={frustum} cones={cones}")
     if not frustum:
-        assert all(off.stats.clusters_frustum_culled == 0 for _, off in frames)
+        # with the frustum test off nothing counts as frustum-culled, hierarchically
+        # either (a group the Hi-Z test finds outside the view is occlusion-culled)
+        assert all(off.stats.clusters_frustum_culled == 0
+                   and on.stats.clusters_frustum_culled == 0 for on, off in frames)
     assert sum(f.stats.clusters_occlusion_culled for f, _ in frames) > 0
+
+
+@pytest.mark.parametrize("groups", [0, 16])
+def test_a_frame_with_nothing_in_view_keeps_the_history(groups):
+    """Looking away for one frame (nothing in view) and back: the frame after draws last
+    visible set in phase 1 (not a first frame's nearest-clusters budget) and nothing in
+    phase 2, as before looking away."""
+    rng = np.random.default_rng(7)
+    scene = Scene([(box_mesh((-3, -3, 7.9), (3, 3, 8.0)), None)])   # a wall, boxes behind
+    for _ in range(12):
+        scene.add(UNIT_BOX, placed(rng.uniform((-3, -3, -3), (3, 3, 5)),
+                                   rng.uniform(0.2, 1.0, 3)))
+    cam = Camera.look_at((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), fov_y=60.0, near=0.1, far=50.0)
+    away = Camera.look_at((0.0, 0.0, 10.0), (0.0, 0.0, 20.0), fov_y=60.0, near=0.1,
+                          far=50.0)   # turned round: nothing in view
+    r = occ_renderer(groups=groups)
+    (_, _), (f2, _), (f_away, off_away), (f3, _) = check_path(
+        scene, [cam, cam, away, cam], renderer=r, context=f"groups {groups}")
+    assert off_away.stats.clusters_drawn == 0 and f_away.stats.clusters_phase1 == 0
+    assert (f2.stats.clusters_phase1, f2.stats.clusters_occlusion_culled) == (1, 12)
+    assert (f3.stats.clusters_phase1, f3.stats.clusters_phase2,
+            f3.stats.clusters_occlusion_culled) == (1, 0, 12), f3.stats.counts()
 
 
 # -- 1. conservative: the plant -----------------------------------------------------------
