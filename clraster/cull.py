@@ -949,8 +949,9 @@ class ViewCull:
         in draw order (by instance, then cluster). Each pair is decided on its own: culled
         with its instance when that is OUTSIDE; else, while its instance still crosses
         planes, its object-space cluster box against them in the instance's object space
-        (exact under any affine transform, as `_group_frustum`'s tests; the flat path's
-        world boxes can keep a few more pairs, never fewer); then the cone test. Counts:
+        (exact under any affine transform, as `_group_frustum`'s tests; `all`'s flat path
+        tests looser world boxes, so the two can differ on pairs near a plane — both
+        conservative); then the cone test. Counts:
         the cluster and triangle rows over these pairs (clusters_total = P), no instance
         rows; timings "clusters", "cones" and "total"."""
         t0 = time.perf_counter()
