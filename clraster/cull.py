@@ -165,7 +165,6 @@ class _PairTables:
     """Per global cluster (C) and instance (I) tables of `ViewCull.pairs`."""
 
     bounded: np.ndarray   #: bool (C,): finite box
-    tri: np.ndarray       #: int64 (C,): triangles
     inst_tri: np.ndarray  #: int64 (I,): triangles of each instance (0 for empty ones)
     centre: np.ndarray    #: float64 (3, C): object-space box centre
     half: np.ndarray      #: float64 (3, C): its half extents
@@ -281,14 +280,11 @@ class _SceneCull:
             inst_tri = np.where(self.nonempty, per_mesh[self.inst_umesh], 0) if self.n \
                 else np.zeros(0, np.int64)
             # (clusters with NaN/Inf vertices are never tested: 0 for them)
-            fin = bounded[:, None]
-            centre = np.where(fin, 0.5 * (np.where(fin, self.g_lo, 0.0)
-                                          + np.where(fin, self.g_hi, 0.0)), 0.0)
-            half = np.where(fin, 0.5 * (np.where(fin, self.g_hi, 0.0)
-                                        - np.where(fin, self.g_lo, 0.0)), 0.0)
-            self._pair_tables = _PairTables(bounded, self.g_tri, inst_tri,
-                                            np.ascontiguousarray(centre.T),
-                                            np.ascontiguousarray(half.T),
+            lo = np.where(bounded[:, None], self.g_lo, 0.0)
+            hi = np.where(bounded[:, None], self.g_hi, 0.0)
+            self._pair_tables = _PairTables(bounded, inst_tri,
+                                            np.ascontiguousarray((0.5 * (lo + hi)).T),
+                                            np.ascontiguousarray((0.5 * (hi - lo)).T),
                                             np.ascontiguousarray(self.g_mag.T))
         return self._pair_tables
 
@@ -951,13 +947,12 @@ class ViewCull:
         planes, its object-space cluster box against them in the instance's object space
         (exact under any affine transform, as `_group_frustum`'s tests; `all`'s flat path
         tests looser world boxes, so the two can differ on pairs near a plane — both
-        conservative); then the cone test. Counts:
-        the cluster and triangle rows over these pairs (clusters_total = P), no instance
-        rows; timings "clusters", "cones" and "total"."""
+        conservative); then the cone test. Counts: the cluster and triangle rows over these
+        pairs (clusters_total = P), no instance rows; timings "clusters", "cones" and
+        "total"."""
         t0 = time.perf_counter()
         prep, view = self.prep, self.view
-        tables = prep.pair_tables()
-        g_bounded, g_tri = tables.bounded, tables.tri
+        g_bounded, g_tri = prep.pair_tables().bounded, prep.g_tri
         st = self.inst_state[inst]
         mk = self.inst_mask[inst]
         g = prep.mesh_base[prep.inst_umesh[inst]] + cl
@@ -974,36 +969,28 @@ class ViewCull:
                                            view.outside_margin)
             alive[test] = cst != OUTSIDE
             ins[test] = view.inside(cmask)
-        tri = g_tri[g]
-        n_frustum = int(alive.sum())
-        tri_frustum = int(tri[alive].sum())
-        t1 = time.perf_counter()
+        tri_total = int(g_tri[g].sum())
         keep = np.flatnonzero(alive)
         inst, cl, ins, g = inst[keep], cl[keep], ins[keep], g[keep]
-        n_cone = tri_cone = 0
-        cone_pairs = np.zeros((0, 2), np.int32) if self.keep_cone_culled else None
+        pairs = _Pairs(self.keep_cone_culled)
+        pairs.frustum_done(cl, g_tri[g])
+        t1 = time.perf_counter()
         if self.cone_view is not None and keep.size:
-            back = _flat_cone_cull(prep, inst, g, self.cone_view)
-            if back.any():
-                n_cone = int(back.sum())
-                tri_cone = int(g_tri[g[back]].sum())
-                if cone_pairs is not None:
-                    cone_pairs = np.stack([inst[back], cl[back]], axis=1).astype(np.int32)
-                front = ~back
-                inst, cl, ins = inst[front], cl[front], ins[front]
+            inst, cl, ins = pairs.drop_cone_culled(
+                _flat_cone_cull(prep, inst, g, self.cone_view), inst, cl, ins, g_tri[g])
         t2 = time.perf_counter()
         counts = {"clusters_total": int(alive.size),
-                  "clusters_frustum_culled": int(alive.size - n_frustum),
-                  "clusters_cone_culled": n_cone, "clusters_drawn": int(inst.size),
-                  "triangles_total": int(tri.sum()),
-                  "triangles_frustum_culled": int(tri.sum()) - tri_frustum,
-                  "triangles_cone_culled": tri_cone,
-                  "triangles_drawn": tri_frustum - tri_cone}
+                  "clusters_frustum_culled": int(alive.size) - pairs.clusters_after_frustum,
+                  "clusters_cone_culled": pairs.n_cone_cl, "clusters_drawn": int(inst.size),
+                  "triangles_total": tri_total,
+                  "triangles_frustum_culled": tri_total - pairs.tri_frustum,
+                  "triangles_cone_culled": pairs.n_cone_tri,
+                  "triangles_drawn": pairs.tri_frustum - pairs.n_cone_tri}
         return DrawList(instance=inst.astype(np.int32), cluster=cl.astype(np.int32),
                         inside=ins.astype(bool), counts=counts,
                         timings_ms={"clusters": (t1 - t0) * 1e3, "cones": (t2 - t1) * 1e3,
                                     "total": (t2 - t0) * 1e3},
-                        cone_culled=cone_pairs)
+                        cone_culled=pairs.cone_culled())
 
     def all(self) -> DrawList:
         """The draw list of every (instance, cluster) pair of the scene."""

@@ -368,17 +368,20 @@ class FramePlan:
         return len(self.draw_list) == 0
 
     def draws_of(self, mask: np.ndarray) -> FrameDraws:
-        """The draws where ``mask`` (bool (D,), over the draw list) is set, in the list's
-        order, laid out on their own (their places in the vertex and triangle streams
-        follow from the subset), without laying out the rest."""
-        dl = self.draw_list
+        """The draws where ``mask`` (bool (D,), over the draw list) is set: `draws_for`
+        of the draw list."""
+        return self.draws_for(self.draw_list, mask)
+
+    def draws_for(self, dl: DrawList, mask: np.ndarray | None = None) -> FrameDraws:
+        """The draws of ``dl`` (a draw list of this view), or those where ``mask`` (bool
+        (D,)) is set, in the list's order, laid out on their own (their places in the
+        vertex and triangle streams follow from the subset), without laying out the
+        rest."""
+        if mask is None:
+            return draw_records(self.pool, self.scene, self.matrices, dl.instance,
+                                dl.cluster, dl.inside)
         return draw_records(self.pool, self.scene, self.matrices, dl.instance[mask],
                             dl.cluster[mask], dl.inside[mask])
-
-    def draws_for(self, dl: DrawList) -> FrameDraws:
-        """The draws of ``dl`` (a draw list of this view), laid out on their own."""
-        return draw_records(self.pool, self.scene, self.matrices, dl.instance, dl.cluster,
-                            dl.inside)
 
 
 class PlanCache:

@@ -136,22 +136,21 @@ class KeyGroups:
             local[base[i]:base[i + 1]] = run[0]
             per_inst[i] = run[1]
         group = np.repeat(np.cumsum(per_inst) - per_inst, n_keys) + local
-        order = np.argsort(group, kind="stable")
-        sg = group[order]
-        starts = np.flatnonzero(np.r_[True, sg[1:] != sg[:-1]]) if sg.size \
-            else np.zeros(0, np.int64)
-        if sg.size:
-            glo = np.minimum.reduceat(wlo[order], starts)
-            ghi = np.maximum.reduceat(whi[order], starts)
-        else:
-            glo = ghi = np.zeros((0, 3))
-        rows = np.ascontiguousarray(np.vstack([glo.T, ghi.T]).astype(np.float32))
         tris = np.take(pool.clusters[:, 1], pool.pool_clusters(inst, cluster)).astype(np.int64)
-        gsize = np.diff(np.append(starts, sg.size)).astype(np.int64)
-        gtris = np.add.reduceat(tris[order], starts) if sg.size else np.zeros(0, np.int64)
-        return cls(inst, cluster, tris, group, rows, order, starts.astype(np.int64), gsize,
-                   gtris.astype(np.int64), inst[order[starts]] if sg.size
-                   else np.zeros(0, np.int64), np.flatnonzero(~wbounded))
+        order = np.argsort(group, kind="stable")
+        if not order.size:   # no keys, no groups
+            e = np.zeros(0, np.int64)
+            return cls(inst, cluster, tris, group, np.zeros((6, 0), np.float32), order, e, e,
+                       e, e, e)
+        sg = group[order]
+        starts = np.flatnonzero(np.r_[True, sg[1:] != sg[:-1]])
+        glo = np.minimum.reduceat(wlo[order], starts)
+        ghi = np.maximum.reduceat(whi[order], starts)
+        rows = np.ascontiguousarray(np.vstack([glo.T, ghi.T]).astype(np.float32))
+        return cls(inst, cluster, tris, group, rows, order, starts,
+                   np.diff(np.append(starts, sg.size)),
+                   np.add.reduceat(tris[order], starts), inst[order[starts]],
+                   np.flatnonzero(~wbounded))
 
 
 class OcclusionHistory:
@@ -360,11 +359,6 @@ def _add_ms(totals: FrameTotals, name: str, ms: float) -> None:
     totals.timings_ms[name] = totals.timings_ms.get(name, 0.0) + ms
 
 
-def _subset(dl: DrawList, mask: np.ndarray) -> DrawList:
-    """The pairs of ``dl`` where ``mask`` is set (no counts)."""
-    return DrawList(dl.instance[mask], dl.cluster[mask], dl.inside[mask])
-
-
 def _merge(a: DrawList, b: DrawList, base: np.ndarray, counts: dict[str, int]) -> DrawList:
     """The pairs of ``a`` and ``b`` (disjoint, each in draw order) in draw order, their
     cone-culled pairs together, ``counts``."""
@@ -437,7 +431,7 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         second = codes[:keys2.size] == Occlusion.VISIBLE
         hiz_ms += ms or 0.0
     t_draw = time.perf_counter()
-    out = draw(plan.draws_for(_subset(dl2, second)), out)
+    out = draw(plan.draws_for(dl2, second), out)
     draw_ms += (time.perf_counter() - t_draw) * 1e3
     # visibility for the next frame, as the flat schedule
     drawn = np.concatenate([keys1, keys2[second]])
