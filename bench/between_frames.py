@@ -1,12 +1,20 @@
 """Spot's raster time at 1920x1080 with different work between its frames: nothing, a frame
-of the NumPy twin, a 200 MB allocation, or a sum over an existing 100 MB array.
+of the NumPy twin, a 200 MB allocation, a sum over an existing 100 MB array, or 20 ms of
+sleep.
 
-    PYTHONPATH=. python bench/between_frames.py            # all four, each in a fresh process
+    PYTHONPATH=. python bench/between_frames.py            # all five, each in a fresh process
+    CLRASTER_PIN_THREADS=0 PYTHONPATH=. python bench/between_frames.py   # PoCL's threads free
 
 Why the harness (whose rounds put llvmpipe's and the twin's frames between clraster's)
 measures spot's raster at about twice what alternating clraster processes do. Medians of
 ``--frames`` frames after 3 warm-up ones; the raster's device time (profiling events) and the
-minor page faults of a frame.
+minor page faults of a frame, and how many frames' rasters took over 1.5x the fastest one.
+
+What it found (2026-11-24): the slow rasters after other work were not memory effects (no
+page faults; huge pages for every buffer changed nothing) but PoCL's two worker threads put
+on one core by the scheduler after an idle moment, the kernel then running on one core; with
+the workers pinned one per CPU (clraster.device, the default since) every mode gives the
+back-to-back time. The printed line says whether this process pinned them.
 """
 
 from __future__ import annotations
@@ -16,16 +24,17 @@ import resource
 import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-MODES = ("nothing", "twin", "alloc", "sweep")
+MODES = ("nothing", "twin", "alloc", "sweep", "sleep")
 
 
 def run(mode: str, frames: int) -> str:
     import numpy as np
 
-    from clraster import Camera, Mesh, Renderer
+    from clraster import Camera, Mesh, Renderer, device
     from clraster import reference as twin
 
     w, h = 1920, 1080
@@ -47,10 +56,15 @@ def run(mode: str, frames: int) -> str:
             a = np.ones(200_000_000 // 8)
             a += 1.0
             del a
+        elif mode == "sleep":
+            time.sleep(0.02)
         elif big is not None:
             big.sum()
+    slow = sum(t > 1.5 * min(raster) for t in raster)
     return (f"{mode:8s} raster {statistics.median(raster):.2f} ms, "
-            f"minor faults a frame {statistics.median(faults):.0f}")
+            f"minor faults a frame {statistics.median(faults):.0f}, "
+            f"slow rasters {slow}/{len(raster)}, PoCL threads pinned: "
+            f"{device.pin_pocl_threads()}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,6 +7,18 @@ first, which is ~1000× slower.
 
 Programs are built once per (context, stage, build options) and cached here; PoCL also keeps
 compiled binaries on disk, so a second process skips the LLVM compile (cold vs warm start).
+
+Worker threads: PoCL's CPU device runs kernels on one worker thread per core. Left to the
+Linux scheduler, the workers of this 2-core VM were often both placed on one core after the
+process had been idle for a few milliseconds (a Python pause, another library's frame): a
+kernel then ran on one core, twice as long (spot's raster at 1080p 2.3 ms back to back,
+4.1-4.2 ms in most frames after a 20 ms sleep; per-thread run times showed one worker doing
+the whole kernel). So `platforms` asks PoCL to pin worker i to CPU i (``POCL_AFFINITY=1``)
+when that is safe: on Linux, the process may run on every CPU, and it has not been given
+fewer PoCL threads than CPUs (a process sharing the machine, e.g. one of several Dask
+workers, would pin its threads onto the same first CPUs as the others). ``POCL_AFFINITY``
+set in the environment is honoured as it is; ``CLRASTER_PIN_THREADS=0`` turns the choice
+off. The variable is set only while PoCL starts, so child processes do not inherit it.
 """
 
 from __future__ import annotations
@@ -34,6 +46,44 @@ _INSTALL_HINT = (
 )
 
 _PROBE_SRC = "__kernel void probe(__global float *a) { a[get_global_id(0)] *= 2.0f; }"
+
+
+#: Environment variables that bound PoCL's CPU worker threads: PoCL 3.x reads the first,
+#: PoCL 4+ the second (an unknown one is ignored, so both are set).
+POCL_THREAD_VARS = ("POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_COUNT")
+
+
+def pin_pocl_threads() -> bool:
+    """Whether `platforms` asks PoCL to pin its worker threads, one per CPU (module
+    docstring): Linux, no ``POCL_AFFINITY`` or ``CLRASTER_PIN_THREADS=0`` in the
+    environment, every CPU in this process's affinity mask, and no PoCL thread count below
+    the CPU count."""
+    env = os.environ
+    if env.get("CLRASTER_PIN_THREADS", "1") == "0" or "POCL_AFFINITY" in env:
+        return False
+    try:
+        allowed = os.sched_getaffinity(0)
+    except AttributeError:   # not Linux: PoCL pins only there anyway
+        return False
+    n = os.cpu_count() or 0
+    if n < 2 or allowed != set(range(n)):
+        return False
+    return all(env.get(k) in (None, "", str(n)) for k in POCL_THREAD_VARS)
+
+
+def platforms() -> list:
+    """``cl.get_platforms()``, with PoCL's workers pinned where `pin_pocl_threads` says so.
+
+    PoCL starts its worker threads when the platforms are first listed in a process, so
+    this is the call that decides; a later call changes nothing."""
+    pin = pin_pocl_threads()
+    if pin:
+        os.environ["POCL_AFFINITY"] = "1"
+    try:
+        return cl.get_platforms()
+    finally:
+        if pin:
+            os.environ.pop("POCL_AFFINITY", None)
 
 
 class NoDeviceError(RuntimeError):
@@ -150,6 +200,7 @@ def default_context() -> cl.Context:
 def _default_context() -> cl.Context:
     if os.environ.get("PYOPENCL_CTX"):
         try:
+            platforms()   # PoCL's threads start here, pinned or not (module docstring)
             return _warn_if_simulator(cl.create_some_context(interactive=False))
         except Exception as exc:  # pyopencl raises several types here
             raise NoDeviceError(
@@ -158,13 +209,13 @@ def _default_context() -> cl.Context:
                 f"part of the name; the platforms here are: {_platform_list()}. Unset it to "
                 f"let clraster choose PoCL") from exc
     try:
-        platforms = cl.get_platforms()
+        found = platforms()
     except cl.Error as exc:
         raise NoDeviceError(f"no OpenCL platform found ({exc}). {_INSTALL_HINT}") from exc
     # PoCL first; never the Oclgrind simulator. A platform is used only if it can actually
     # compile a kernel: several PoCLs may be installed side by side and an old one may be
     # unable to target this CPU.
-    ordered = sorted(platforms, key=lambda p: "portable computing" not in p.name.lower())
+    ordered = sorted(found, key=lambda p: "portable computing" not in p.name.lower())
     failures = []
     for plat in ordered:
         if "oclgrind" in plat.name.lower():
@@ -184,7 +235,7 @@ def _default_context() -> cl.Context:
             continue
         log.debug("clraster: using %s / %s", plat.version, devs[0].name)
         return ctx
-    names = ", ".join(p.name for p in platforms) or "none"
+    names = ", ".join(p.name for p in found) or "none"
     why = ("; platforms that failed to compile a probe kernel: " + " | ".join(failures)
            if failures else "")
     raise NoDeviceError(f"no usable OpenCL CPU device (platforms: {names}){why}. "

@@ -54,6 +54,7 @@ import numpy as np
 from .batch import RenderSummary, ViewFailure
 from .composite import Crop, composite_crops, crop, uncrop
 from .config import RasterConfig
+from .device import POCL_THREAD_VARS as _POCL_THREAD_VARS
 from .frame import Frame
 from .mesh import Mesh
 from .scene import Scene
@@ -66,9 +67,8 @@ __all__ = ["POCL_THREAD_VARS", "ChunkRecord", "Part", "ScatteredParts", "SortLas
 
 log = logging.getLogger(__name__)
 
-#: Environment variables that bound PoCL's CPU worker threads: PoCL 3.x reads the first,
-#: PoCL 4+ the second (an unknown one is ignored, so both are set).
-POCL_THREAD_VARS = ("POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_COUNT")
+#: Environment variables that bound PoCL's CPU worker threads (defined in clraster.device)
+POCL_THREAD_VARS = _POCL_THREAD_VARS
 
 
 # -- client helpers --------------------------------------------------------------------------

@@ -5,6 +5,7 @@ Ctrl-C. Each case runs in a fresh interpreter with a time limit, so a hang or a 
 
 from __future__ import annotations
 
+import ast
 import os
 import signal
 import subprocess
@@ -29,8 +30,10 @@ def cam(k=0):
 """
 
 
-def run_script(body: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    """Run PRELUDE + ``body`` as a script file (spawned children re-import it by path)."""
+def run_script(body: str, timeout: float = 120.0,
+               env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run PRELUDE + ``body`` as a script file (spawned children re-import it by path), in
+    ``env`` (default: this process's environment)."""
     import tempfile
 
     with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as fh:
@@ -38,7 +41,8 @@ def run_script(body: str, timeout: float = 120.0) -> subprocess.CompletedProcess
     try:
         return subprocess.run([sys.executable, fh.name], cwd=REPO, capture_output=True,
                               text=True, timeout=timeout,
-                              env={**os.environ, "PYTHONPATH": str(REPO)})
+                              env={**(os.environ if env is None else env),
+                                   "PYTHONPATH": str(REPO)})
     except subprocess.TimeoutExpired as exc:
         pytest.fail(f"timed out after {timeout} s (a hang): {exc.stdout!r} {exc.stderr!r}")
     finally:
@@ -222,3 +226,41 @@ def test_cli_ctrl_c_exits_promptly_and_quietly(tmp_path):
     assert took < 5.0, f"exit took {took:.1f} s"
     assert "Traceback" not in err and err.strip() == "clraster: interrupted"
     assert not (tmp_path / "x.png").exists()
+
+
+PINNING = """
+import os
+from clraster import device
+before = set(os.listdir('/proc/self/task'))
+r = Renderer(32, 32)
+r.render(MESH, cam())
+new = sorted(set(os.listdir('/proc/self/task')) - before)
+print(sorted(sorted(os.sched_getaffinity(int(t))) for t in new))
+print(device.pin_pocl_threads(), 'POCL_AFFINITY' in os.environ)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or (os.cpu_count() or 1) < 2
+                    or len(os.sched_getaffinity(0)) != os.cpu_count(),
+                    reason="PoCL pins its threads on Linux, with every CPU usable")
+@pytest.mark.parametrize("extra,pinned", [({}, True), ({"CLRASTER_PIN_THREADS": "0"}, False),
+                                          ({"POCL_MAX_PTHREAD_COUNT": "1"}, False)])
+def test_pocl_worker_threads_pinned_one_per_cpu(extra, pinned):
+    """With the whole machine, PoCL's worker threads are pinned one per CPU (clraster.device:
+    unpinned, both were often put on one core after an idle moment, and kernels ran at half
+    speed), and the variable that asked for it is not left in the environment for child
+    processes; opting out, or a process given fewer PoCL threads than CPUs, pins nothing."""
+    n = os.cpu_count()
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("POCL_AFFINITY", "CLRASTER_PIN_THREADS", "POCL_MAX_PTHREAD_COUNT",
+                        "POCL_CPU_MAX_CU_COUNT", "PYOPENCL_CTX")}
+    p = run_script(PINNING, env={**env, **extra})
+    assert p.returncode == 0, p.stderr
+    out, flags = p.stdout.strip().splitlines()[-2:]
+    masks = ast.literal_eval(out)
+    single = sorted(m[0] for m in masks if len(m) == 1)
+    if pinned:
+        assert single == list(range(n)), masks
+    else:
+        assert single == [], masks
+    assert flags.split()[1] == "False"   # POCL_AFFINITY not left in the environment

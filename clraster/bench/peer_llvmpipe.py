@@ -162,8 +162,8 @@ def _load_opencl_first() -> None:
     way round, both work. So: enumerate the OpenCL platforms first (cheap; nothing is built).
     """
     try:
-        import pyopencl
-        pyopencl.get_platforms()
+        from ..device import platforms
+        platforms()   # PoCL's threads start here (clraster.device: pinned where safe)
     except Exception:  # noqa: BLE001 - no OpenCL is fine for the peer itself
         pass
 
