@@ -20,21 +20,36 @@
  * submission order with no atomics: deterministic, and nothing can overflow.
  *
  * Setup says per slot (tile1[t]) whether it has nothing to bin, one piece whose pixel box
- * lies in one tile (that tile: most pieces of a dense mesh), or pieces to walk: both passes
- * handle the first two from that word alone, bin_count without a branch on which (random
- * from slot to slot on a dense mesh) and without reading the 96-byte records; pieces over
- * at most 2 x 2 tiles test each tile (products) instead of finding runs (divisions).
- * Dragon 871K at 1080p: bin 0.80x (bench/proc_ab.py, loaded machine).
+ * lies in one tile (that tile: most pieces of a dense mesh), one piece over at most 2 x 2
+ * tiles (which of them its edges reach), or pieces to walk: both passes handle the first
+ * three from that word alone, bin_count without a branch on the first two (random from
+ * slot to slot on a dense mesh) and without reading the 96-byte records; walked pieces over
+ * at most 2 x 2 tiles (clipped ones) test each tile (products) instead of finding runs
+ * (divisions). Dragon 871K at 1080p: bin 0.80x (bench/proc_ab.py, loaded machine); the
+ * 2 x 2 masks from setup: see setup.cl.
  *
  * Piece index space: 0..m-1 are the unclipped slots (Piece at pieces[t]); m + j is clipped
  * piece j (clip_pieces[j]). A clipped triangle's pieces stay at its position in the stream.
  */
 #include "common.h"
 
-/* tile1[t] (setup.cl): >= 0 the one tile of an ST_RASTER piece whose box lies in one tile,
- * TILE1_NONE nothing to bin, TILE1_WALK a piece or pieces to walk (FOR_SLOT_ENTRY) */
-#define TILE1_NONE (-1)
-#define TILE1_WALK (-2)
+/* tile1[t] (setup.cl; the encoding: common.h TILE1_*): >= 0 the one tile of an ST_RASTER
+ * piece whose box lies in one tile, TILE1_NONE nothing to bin, TILE1_WALK a piece or pieces
+ * to walk (FOR_SLOT_ENTRY), <= TILE1_FEW a piece over at most 2 x 2 tiles with the mask of
+ * those its edges reach (FOR_FEW_TILES) */
+
+/* Each tile of a TILE1_FEW word c, in the order FOR_SLOT_ENTRY visits them (rows, then
+ * columns). BODY sees `tile`. */
+#define FOR_FEW_TILES(c, BODY)                                                            \
+    {                                                                                     \
+        uint code_ = (uint)(TILE1_FEW - (c));                                              \
+        int t0_ = (int)(code_ >> 4);                                                      \
+        for (int j_ = 0; j_ < 4; ++j_) {                                                  \
+            if (!(code_ & (1u << j_))) continue;                                          \
+            int tile = t0_ + (j_ & 1) + (j_ >> 1) * tiles_x;                              \
+            BODY                                                                          \
+        }                                                                                 \
+    }
 
 inline void tile_rect(int bb_min, int bb_max, int *tx0, int *ty0, int *tx1, int *ty1)
 {
@@ -166,6 +181,8 @@ __kernel void bin_count(__global const uchar *restrict status,
              * from one triangle to the next on a dense mesh, so a branch there was
              * mispredicted about every other slot): row[0] += 0 when there is nothing */
             row[c >= 0 ? c : 0] += c >= 0;
+        } else if (c <= TILE1_FEW) {
+            FOR_FEW_TILES(c, row[tile] += 1;)
         } else {
             uchar st = status[t];
             FOR_SLOT_ENTRY(t, st, row[tile] += 1;)
@@ -235,6 +252,8 @@ __kernel void bin_scatter(__global const uchar *restrict status,
         if (c == TILE1_NONE) continue;
         if (c >= 0) {
             put_piece(&entries[tile_start[c] + row[c]++], &pieces[t]);
+        } else if (c <= TILE1_FEW) {
+            FOR_FEW_TILES(c, put_piece(&entries[tile_start[tile] + row[tile]++], &pieces[t]);)
         } else {
             uchar st = status[t];
             FOR_SLOT_ENTRY(t, st, put_piece(&entries[tile_start[tile] + row[tile]++], pc);)

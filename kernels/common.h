@@ -210,3 +210,35 @@ ALWAYS_INLINE bool rect_outside(int X0, int Y0, int X1, int Y1, int X2, int Y2,
         || !edge_reaches(X2, Y2, X0, Y0, x0, y0, x1, y1)
         || !edge_reaches(X0, Y0, X1, Y1, x0, y0, x1, y1);
 }
+
+/* Setup's word per triangle slot for binning (setup.cl writes it, bin.cl reads it):
+ *   >= 0         the one tile of an ST_RASTER piece whose pixel box lies in one tile;
+ *   TILE1_NONE   nothing to bin;
+ *   TILE1_WALK   a piece or pieces whose tiles binning finds from the records;
+ *   <= TILE1_FEW a piece whose box spans 2 x 1, 1 x 2 or 2 x 2 tiles: TILE1_FEW minus
+ *                (top-left tile << 4 | mask), mask bit j set iff the piece's edges reach
+ *                tile (tx0 + (j & 1), ty0 + (j >> 1)) (few_tile_mask: the test binning
+ *                made per tile from the record, tile_missed), so binning counts such a
+ *                piece without reading its record. (n_tiles <= 2^22, so the code fits.) */
+#define TILE1_NONE (-1)
+#define TILE1_WALK (-2)
+#define TILE1_FEW (-3)
+
+/* The TILE1_FEW mask of a piece with 24.8 vertices x, y and pixel box [bx0, bx1] x
+ * [by0, by1] over tiles [tx0, tx1] x [ty0, ty1] (at most 2 x 2): bit j for the tile
+ * (tx0 + (j & 1), ty0 + (j >> 1)) when it is inside the span and its rectangle ∩ the box is
+ * not rect_outside. */
+ALWAYS_INLINE uint few_tile_mask(const int *x, const int *y, int bx0, int by0, int bx1,
+                                 int by1, int tx0, int ty0, int tx1, int ty1)
+{
+    uint mask = 0;
+    for (int j = 0; j < 4; ++j) {
+        int tx = tx0 + (j & 1), ty = ty0 + (j >> 1);
+        if (tx > tx1 || ty > ty1) continue;
+        int x0 = imax(bx0, tx << TILE_LOG2), x1 = imin(bx1, ((tx + 1) << TILE_LOG2) - 1);
+        int y0 = imax(by0, ty << TILE_LOG2), y1 = imin(by1, ((ty + 1) << TILE_LOG2) - 1);
+        if (!rect_outside(x[0], y[0], x[1], y[1], x[2], y[2], x0, y0, x1, y1))
+            mask |= 1u << j;
+    }
+    return mask;
+}

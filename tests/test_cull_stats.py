@@ -218,6 +218,35 @@ def test_fragment_and_bin_counts_single_triangle():
         assert xs.min() >= 3 and xs.max() <= 20 and ys.min() >= 5 and ys.max() <= 9
 
 
+def test_bin_counts_piece_over_two_by_two_tiles():
+    """A right triangle A (9.3, 9.4), B (21.6, 9.1), C (9.1, 21.7), by hand: pixel box
+    [9, 21] × [9, 21], its hypotenuse BC on x + y ≈ 30.7. With 16-px tiles the box spans
+    tiles (0..1) × (0..1), and the first pixel centre of tile (1, 1), (16.5, 16.5), has
+    x + y = 33: beyond BC, so the piece goes to 3 tiles (setup's 2 × 2 tile mask, binning
+    without its record); with 8-px tiles (1..2) × (1..2), tile (2, 2) skipped the same way:
+    3; with 32-px tiles 1. Every covered pixel is drawn (fragments = covered pixels) and
+    none lies where both x and y are ≥ 16."""
+    mesh = window_mesh([[[9.3, 9.4], [21.6, 9.1], [9.1, 21.7]]], 32, 32)
+    for t, entries in ((3, 3), (4, 3), (5, 1)):
+        fr, c = counts_of(mesh, tile_log2=t)
+        assert c["binned_entries"] == entries, t
+        assert c["fragments_tested"] == c["fragments_passed"] == fr.mask.sum() > 50
+        ys, xs = np.nonzero(fr.mask)
+        assert xs.min() >= 9 and xs.max() <= 21 and ys.min() >= 9 and ys.max() <= 21
+        assert not fr.mask[16:, 16:].any()
+        assert fr.mask[9:16, 16:].any() and fr.mask[16:, 9:16].any()
+    # not symmetric: A (9.3, 9.2), B (22.4, 9.6), C (21.8, 22.3), its edge CA near the
+    # diagonal y = x, so of the 16-px tiles it reaches (0, 0), (1, 0) and (1, 1), not
+    # (0, 1) (x < 16, y ≥ 16: below CA); its pixels in (1, 0) and (1, 1) are drawn only if
+    # the piece is in those tiles' lists
+    mesh = window_mesh([[[9.3, 9.2], [22.4, 9.6], [21.8, 22.3]]], 32, 32)
+    fr, c = counts_of(mesh, tile_log2=4)
+    assert c["binned_entries"] == 3
+    assert c["fragments_tested"] == c["fragments_passed"] == fr.mask.sum() > 50
+    assert not fr.mask[16:, :16].any()
+    assert fr.mask[:16, :16].any() and fr.mask[:16, 16:].any() and fr.mask[16:, 16:].any()
+
+
 def test_partly_off_screen_triangle_is_clamped():
     mesh = window_mesh([[[-40.0, -30.0], [50.0, 10.0], [10.0, 60.0]]], 32, 32)
     fr, c = counts_of(mesh)
