@@ -70,10 +70,12 @@ inline double4 onto_plane(int p, double4 v, double kx, double ky)
 
 /* The vertex stage's double clip position and depth numerator of vertex-stream vertex i
  * (vertex.cl): computed once per vertex there rather than once per
- * triangle corner here, which cost ~17 ms of setup on the dragon at 1080p. A macro, not a
+ * triangle corner here, which cost ~17 ms of setup on the dragon at 1080p. The numerator is
+ * p.z unless the frame is reversed-Z (the kernel argument `reversed`, in scope wherever
+ * this is used), and only then written by the vertex stage. A macro, not a
  * function returning the struct: inlining that (an sret pointer, noalias) emitted an
  * intrinsic Oclgrind cannot run. */
-#define clip_in(clip64, rnum, i) ((ClipIn){(clip64)[i], (rnum)[i]})
+#define clip_in(clip64, rnum, i) ((ClipIn){(clip64)[i], reversed ? (rnum)[i] : (clip64)[i].z})
 
 /* The clip position with z replaced by the depth numerator: what value_planes reads. */
 inline double4 value_vertex(double4 p, double r)

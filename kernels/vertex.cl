@@ -124,6 +124,6 @@ __kernel void vertex_transform(__global const float *restrict pos,
         win[i] = v;
         ucode[i] = (uchar)uc;
         clip64[i] = (double4)(adx[l], ady[l], adz[l], adw[l]);
-        rnum[i] = ar[l];
+        if (reversed) rnum[i] = ar[l];   /* else r = z: setup.cl clip_in reads clip64 */
     }
 }

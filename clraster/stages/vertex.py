@@ -25,7 +25,8 @@ class ClipBuffers:
     win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
     ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
     clip64: float64 (N, 4) clip positions from the float64 matrices and rnum: float64 (N,)
-    depth numerators (kernels/vertex.cl): setup's value planes and clipper.
+    depth numerators (kernels/vertex.cl): setup's value planes and clipper; rnum only for
+    reversed-Z frames (otherwise the numerator is clip64's z and rnum is not written).
     n_verts: N of the last run.
     """
 
@@ -59,6 +60,7 @@ class VertexStage:
                          b.win.ensure(16 * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
                          b.ucode.ensure(n_verts), geo.mvps64.buf, geo.zrows.buf,
                          np.int32(params.reversed_z), b.clip64.ensure(32 * n_verts),
-                         b.rnum.ensure(8 * n_verts))
+                         # written only for reversed-Z (else setup reads r = z from clip64)
+                         b.rnum.ensure(8 * n_verts if params.reversed_z else 8))
         b.n_verts = n_verts
         return b, [ev]
