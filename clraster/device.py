@@ -14,11 +14,12 @@ process had been idle for a few milliseconds (a Python pause, another library's 
 kernel then ran on one core, twice as long (spot's raster at 1080p 2.3 ms back to back,
 4.1-4.2 ms in most frames after a 20 ms sleep; per-thread run times showed one worker doing
 the whole kernel). So `platforms` asks PoCL to pin worker i to CPU i (``POCL_AFFINITY=1``)
-when that is safe: on Linux, the process may run on every CPU, and it has not been given
-fewer PoCL threads than CPUs (a process sharing the machine, e.g. one of several Dask
-workers, would pin its threads onto the same first CPUs as the others). ``POCL_AFFINITY``
+when that is safe: on Linux, the process may run on every CPU, and no PoCL thread count
+other than the CPU count is set (with fewer, the process shares the machine, e.g. one of
+several Dask workers, and would pin its threads onto the same first CPUs as the others;
+with more, PoCL would pin a worker to a CPU that is not there and abort). ``POCL_AFFINITY``
 set in the environment is honoured as it is; ``CLRASTER_PIN_THREADS=0`` turns the choice
-off. The variable is set only while PoCL starts, so child processes do not inherit it.
+off. The variables are set only while PoCL starts, so child processes do not inherit them.
 """
 
 from __future__ import annotations
@@ -53,11 +54,20 @@ _PROBE_SRC = "__kernel void probe(__global float *a) { a[get_global_id(0)] *= 2.
 POCL_THREAD_VARS = ("POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_COUNT")
 
 
+#: PoCL's lower bounds on its worker count (3.x, 4+): with one above the CPU count PoCL
+#: would pin a worker to a CPU that does not exist, and abort
+_POCL_MIN_THREAD_VARS = ("POCL_PTHREAD_MIN_THREADS", "POCL_CPU_MIN_CU_COUNT")
+
+#: held while the environment carries POCL_AFFINITY (`platforms`)
+_platforms_lock = threading.Lock()
+
+
 def pin_pocl_threads() -> bool:
     """Whether `platforms` asks PoCL to pin its worker threads, one per CPU (module
     docstring): Linux, no ``POCL_AFFINITY`` or ``CLRASTER_PIN_THREADS=0`` in the
-    environment, every CPU in this process's affinity mask, and no PoCL thread count below
-    the CPU count."""
+    environment, every CPU in this process's affinity mask, and no PoCL thread count set
+    other than the CPU count (PoCL pins worker i to CPU i and aborts the process if that
+    CPU is not there, so the worker count must be the CPU count exactly)."""
     env = os.environ
     if env.get("CLRASTER_PIN_THREADS", "1") == "0" or "POCL_AFFINITY" in env:
         return False
@@ -68,22 +78,34 @@ def pin_pocl_threads() -> bool:
     n = os.cpu_count() or 0
     if n < 2 or allowed != set(range(n)):
         return False
-    return all(env.get(k) in (None, "", str(n)) for k in POCL_THREAD_VARS)
+    return all(env.get(k) in (None, str(n)) for k in POCL_THREAD_VARS + _POCL_MIN_THREAD_VARS)
 
 
 def platforms() -> list:
     """``cl.get_platforms()``, with PoCL's workers pinned where `pin_pocl_threads` says so.
 
     PoCL starts its worker threads when the platforms are first listed in a process, so
-    this is the call that decides; a later call changes nothing."""
-    pin = pin_pocl_threads()
-    if pin:
-        os.environ["POCL_AFFINITY"] = "1"
-    try:
-        return cl.get_platforms()
-    finally:
-        if pin:
-            os.environ.pop("POCL_AFFINITY", None)
+    this is the call that decides; a later call changes nothing. While pinning, the
+    environment also bounds PoCL's worker count to the CPU count from both sides (PoCL
+    falls back to a fixed count where it cannot read the machine's topology, and a worker
+    beyond the CPUs would abort the process); all of it is restored when PoCL has started.
+    A process started by another thread during that call inherits those variables."""
+    with _platforms_lock:
+        saved = {}
+        if pin_pocl_threads():
+            n = str(os.cpu_count())
+            pinned = {"POCL_AFFINITY": "1",
+                      **{k: n for k in POCL_THREAD_VARS + _POCL_MIN_THREAD_VARS}}
+            saved = {k: os.environ.get(k) for k in pinned}
+            os.environ.update(pinned)
+        try:
+            return cl.get_platforms()
+        finally:
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
 
 
 class NoDeviceError(RuntimeError):

@@ -30,8 +30,10 @@ class SetupBuffers:
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
-    tile1: int32 (M,) for an ST_RASTER slot whose pixel box lies in one tile, that tile's
-    index (binning counts it without reading the 96-byte record), else −1.
+    tile1: int32 (M,) what binning needs of each slot without reading its 96-byte record
+    (kernels/common.h TILE1_*): the one tile of a piece whose pixel box lies in one tile,
+    the top-left tile and tile mask of one over at most 2 × 2 tiles, −1 nothing to bin,
+    −2 pieces to walk (clipped triangles, pieces over more tiles).
     n_tris, n_clip_pieces: M and P of the last run.
     """
 
