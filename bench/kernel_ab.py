@@ -10,8 +10,10 @@ Two renderers are built, one from each set of sources (kernel files taken with
 noisy, so compare the two rows of one run, never across runs. It also checks that both
 give identical ids, depth and barycentrics: a kernel change must never change the image.
 The host code is the working tree's for both, so REV's kernels must take the same
-arguments and launch sizes (across a change of those, e.g. d19f502's bin_scatter and
-raster_tiles or d40dce6's vertex work-items, compare whole trees with proc_ab.py).
+arguments, launch sizes and buffer sizes (across a change of those, e.g. d19f502's
+bin_scatter and raster_tiles, d40dce6's vertex work-items, or f62e4a4's rnum buffer, sized
+only for reversed-Z frames since — an older vertex kernel writes it in full, out of bounds —
+compare whole trees with proc_ab.py).
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ import numpy as np
 from .batch import RenderSummary, ViewFailure
 from .composite import Crop, composite_crops, crop, uncrop
 from .config import RasterConfig
-from .device import POCL_THREAD_VARS as _POCL_THREAD_VARS
+from .device import POCL_THREAD_VARS  # re-exported: the worker environment's variables
 from .frame import Frame
 from .mesh import Mesh
 from .scene import Scene
@@ -66,9 +66,6 @@ __all__ = ["POCL_THREAD_VARS", "ChunkRecord", "Part", "ScatteredParts", "SortLas
            "worker_target"]
 
 log = logging.getLogger(__name__)
-
-#: Environment variables that bound PoCL's CPU worker threads (defined in clraster.device)
-POCL_THREAD_VARS = _POCL_THREAD_VARS
 
 
 # -- client helpers --------------------------------------------------------------------------

@@ -94,15 +94,13 @@ ALWAYS_INLINE void row_span(__global const Piece *pc, int ty, int *lo, int *hi)
 }
 
 /* Whether the piece's edges miss every pixel centre of tile (tx, ty) ∩ its pixel box:
- * rect_outside, the test row_span answers a row at a time. */
+ * rect_outside, the test row_span answers a row at a time (common.h tile_box_outside, the
+ * test setup's 2 x 2 tile masks make too). */
 inline bool tile_missed(__global const Piece *pc, int tx, int ty)
 {
-    int x0 = imax(bb_x(pc->bb_min), tx << TILE_LOG2);
-    int x1 = imin(bb_x(pc->bb_max), ((tx + 1) << TILE_LOG2) - 1);
-    int y0 = imax(bb_y(pc->bb_min), ty << TILE_LOG2);
-    int y1 = imin(bb_y(pc->bb_max), ((ty + 1) << TILE_LOG2) - 1);
-    return rect_outside(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
-                        x0, y0, x1, y1);
+    return tile_box_outside(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
+                            bb_x(pc->bb_min), bb_y(pc->bb_min), bb_x(pc->bb_max),
+                            bb_y(pc->bb_max), tx, ty);
 }
 
 /* Copy a 96-byte record with non-temporal stores (three aligned 32-byte halves of lines:

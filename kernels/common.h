@@ -224,10 +224,21 @@ ALWAYS_INLINE bool rect_outside(int X0, int Y0, int X1, int Y1, int X2, int Y2,
 #define TILE1_WALK (-2)
 #define TILE1_FEW (-3)
 
+/* Whether a piece with 24.8 vertices (X0, Y0), (X1, Y1), (X2, Y2) and pixel box
+ * [bx0, bx1] x [by0, by1] misses every pixel centre of tile (tx, ty) ∩ its box:
+ * rect_outside on that rectangle (binning's per-tile test: bin.cl tile_missed on a record,
+ * few_tile_mask in setup). */
+ALWAYS_INLINE bool tile_box_outside(int X0, int Y0, int X1, int Y1, int X2, int Y2, int bx0,
+                                    int by0, int bx1, int by1, int tx, int ty)
+{
+    int x0 = imax(bx0, tx << TILE_LOG2), x1 = imin(bx1, ((tx + 1) << TILE_LOG2) - 1);
+    int y0 = imax(by0, ty << TILE_LOG2), y1 = imin(by1, ((ty + 1) << TILE_LOG2) - 1);
+    return rect_outside(X0, Y0, X1, Y1, X2, Y2, x0, y0, x1, y1);
+}
+
 /* The TILE1_FEW mask of a piece with 24.8 vertices x, y and pixel box [bx0, bx1] x
  * [by0, by1] over tiles [tx0, tx1] x [ty0, ty1] (at most 2 x 2): bit j for the tile
- * (tx0 + (j & 1), ty0 + (j >> 1)) when it is inside the span and its rectangle ∩ the box is
- * not rect_outside. */
+ * (tx0 + (j & 1), ty0 + (j >> 1)) when it is inside the span and not tile_box_outside. */
 ALWAYS_INLINE uint few_tile_mask(const int *x, const int *y, int bx0, int by0, int bx1,
                                  int by1, int tx0, int ty0, int tx1, int ty1)
 {
@@ -235,9 +246,7 @@ ALWAYS_INLINE uint few_tile_mask(const int *x, const int *y, int bx0, int by0, i
     for (int j = 0; j < 4; ++j) {
         int tx = tx0 + (j & 1), ty = ty0 + (j >> 1);
         if (tx > tx1 || ty > ty1) continue;
-        int x0 = imax(bx0, tx << TILE_LOG2), x1 = imin(bx1, ((tx + 1) << TILE_LOG2) - 1);
-        int y0 = imax(by0, ty << TILE_LOG2), y1 = imin(by1, ((ty + 1) << TILE_LOG2) - 1);
-        if (!rect_outside(x[0], y[0], x[1], y[1], x[2], y[2], x0, y0, x1, y1))
+        if (!tile_box_outside(x[0], y[0], x[1], y[1], x[2], y[2], bx0, by0, bx1, by1, tx, ty))
             mask |= 1u << j;
     }
     return mask;
