@@ -178,11 +178,11 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
     pc->pad[0] = 0; pc->pad[1] = 0;
 }
 
-/* Set up one triangle from its three window-space vertices (coverage) and the same three
+/* Set up one triangle from its three snapped window positions (coverage: win_xy) and the same three
  * vertices in clip space, double (values: value_planes). Returns ST_RASTER when it
  * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
  * exchanged to make the doubled area positive. */
-ALWAYS_INLINE int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, double4 c1, double4 c2,
+ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, double4 c2,
                       int width, int height, double zs, double zo, Piece *pc, int *swapped)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
@@ -191,7 +191,7 @@ ALWAYS_INLINE int make_piece(WinVert v0, WinVert v1, WinVert v2, double4 c0, dou
      * every piece with positive area; facing was decided before (facing()). */
     *swapped = area2 < 0;
     if (area2 < 0) {
-        WinVert t = v1; v1 = v2; v2 = t;
+        int2 t = v1; v1 = v2; v2 = t;
         double4 tc = c1; c1 = c2; c2 = tc;
         area2 = -area2;
     }
@@ -312,8 +312,8 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
          * does not put w > 0 on the near plane; it has no window position: dropped */
         if (!(f0.w > 0.0f && f1.w > 0.0f && f2.w > 0.0f))
             continue;
-        if (make_piece(viewport_vertex(f0, hw, hh), viewport_vertex(f1, hw, hh),
-                       viewport_vertex(f2, hw, hh), value_vertex(poly[0].p, poly[0].r),
+        if (make_piece(win_xy(viewport_vertex(f0, hw, hh)), win_xy(viewport_vertex(f1, hw, hh)),
+                       win_xy(viewport_vertex(f2, hw, hh)), value_vertex(poly[0].p, poly[0].r),
                        value_vertex(poly[k].p, poly[k].r),
                        value_vertex(poly[k + 1].p, poly[k + 1].r), width, height, zs, zo,
                        &pc, &sw)
@@ -391,7 +391,7 @@ inline void user_dists(__global const float *pos, __global const int *vert_ids,
 
 __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global const ushort *restrict outcode,
-                              __global const WinVert *restrict win, DRAW_ARGS, const int width,
+                              __global const int2 *restrict win, DRAW_ARGS, const int width,
                               const int height, const int cull, const float kx, const float ky,
                               const int reversed, __global Piece *restrict pieces,
                               __global uchar *restrict status, __global int *restrict clip_count,

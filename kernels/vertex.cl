@@ -4,7 +4,8 @@
  * its own row-major float32 matrix (clip = M · [x y z 1]ᵀ) in mvps[16 * instance].
  * Output vertex i = draw.vert_base + local index; a vertex shared by two clusters is
  * transformed once per cluster, bit-identically.
- * Also the viewport transform (WinVert) of every vertex that can be drawn unclipped.
+ * Also the viewport transform (win_xy: the snapped window x, y, all setup reads) of every
+ * vertex that can be drawn unclipped.
  * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
  * same expressions the clipper uses (setup.cl plane_dist), so the two never disagree.
  * User clip planes (n_user of them): ucode bit k is set iff the vertex's distance to plane
@@ -36,7 +37,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
                                const float ky, const int width, const int height,
                                __global float4 *restrict clip,
                                __global ushort *restrict outcode,
-                               __global WinVert *restrict win,
+                               __global int2 *restrict win,
                                __global const double *restrict uplanes, const int n_user,
                                __global uchar *restrict ucode,
                                __global const double *restrict mvps64,
@@ -67,7 +68,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
      * unclipped; a lane with w = 0 gets inf here, never stored) */
     fvec iw = 1.0f / cw;
     float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
-    fvec xs = WIN_X_SUB(cx, iw, hw), ys = WIN_Y_SUB(cy, iw, hh), wz = WIN_Z(cz, iw);
+    fvec xs = WIN_X_SUB(cx, iw, hw), ys = WIN_Y_SUB(cy, iw, hh);
     /* The double clip position setup's value planes and clipper use, from the instance's
      * float64 matrix (FrameDraws.mvps64: VP · model before it is rounded to float32 for
      * coverage, so the value planes do not inherit that rounding, ~1e-7 relative, which
@@ -81,10 +82,10 @@ __kernel void vertex_transform(__global const float *restrict pos,
     dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
     dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
     dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
-    flanes acx, acy, acz, acw, axs, ays, awz, aiw;
+    flanes acx, acy, acz, acw, axs, ays;
     dlanes adx, ady, adz, adw, ar;
     *(fvec *)acx = cx; *(fvec *)acy = cy; *(fvec *)acz = cz; *(fvec *)acw = cw;
-    *(fvec *)axs = xs; *(fvec *)ays = ys; *(fvec *)awz = wz; *(fvec *)aiw = iw;
+    *(fvec *)axs = xs; *(fvec *)ays = ys;
     *(dvec *)adx = dx; *(dvec *)ady = dy; *(dvec *)adz = dz; *(dvec *)adw = dw;
     *(dvec *)ar = r;
     uint i0 = (uint)dr.vert_base + (uint)lv0;
@@ -105,13 +106,11 @@ __kernel void vertex_transform(__global const float *restrict pos,
             o |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
             o |= (c.w > 0.0f) ? 0 : OC_W_NONPOS;
         }
-        WinVert v = {0, 0, 0.0f, 0.0f};
+        int2 v = (int2)(0, 0);   /* win_xy's layout, as a vector: see common.h win_xy */
         if (!(o & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP))) {
             /* round half to even, as common.h viewport_vertex */
             v.x = (int)RINTF(axs[l]);
             v.y = (int)RINTF(ays[l]);
-            v.z = awz[l];
-            v.iw = aiw[l];
         }
         uint uc = 0;
         if (n_user > 0 && !(o & OC_INVALID)) {

@@ -133,7 +133,8 @@ def test_python_modules_use_the_layout_objects():
     from clraster.stages import lines as st_lines
     from clraster.stages import pyramid as st_pyramid
 
-    for name in ("PIECE_DTYPE", "DRAW_DTYPE", "WINVERT_DTYPE", "CULL_MODES", "STATUS_NAMES"):
+    for name in ("PIECE_DTYPE", "DRAW_DTYPE", "WINVERT_DTYPE", "WINXY_DTYPE", "CULL_MODES",
+                 "STATUS_NAMES"):
         assert getattr(config, name) is getattr(layout, name)
     for _, group in layout.C_DEFINES:
         for name in group:

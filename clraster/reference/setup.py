@@ -146,7 +146,7 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     space (values), as make_piece in setup.cl.
 
     Args:
-        wv: WINVERT_DTYPE (K, 3). c: float64 (K, 3, 4) unsnapped clip positions (z: the
+        wv: WINXY_DTYPE or WINVERT_DTYPE (K, 3) (x, y are read). c: float64 (K, 3, 4) unsnapped clip positions (z: the
             depth numerator). zs, zo: as `value_planes`.
 
     Returns (status uint8 (K,), pieces PIECE_DTYPE (K,) valid where status == ST_RASTER,
@@ -366,7 +366,7 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
           reversed_z: bool = False, udist: np.ndarray | None = None,
           uclip: int = 0xFF) -> SetupResult:
     """Triangle setup over the vertex stage's outputs (clip float32 (N, 4), outcode uint16
-    (N,), win WINVERT_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
+    (N,), win WINXY_DTYPE (N,)) for the triangle stream tri_verts int (M, 3) with ids
     int (M,). clip64: float64 (N, 5) the clipper's and value planes' inputs
     (`object_clip`; None: ``clip`` itself, depth numerator z). mirrored: bool (M,)
     triangles of mirroring draws (`draw_mirrored`; None: none). reversed_z: the depth

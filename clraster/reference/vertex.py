@@ -21,6 +21,7 @@ from ..config import (
     OC_Z_POS,
     SUBPIXEL_ONE,
     WINVERT_DTYPE,
+    WINXY_DTYPE,
 )
 
 F32 = np.float32
@@ -56,7 +57,7 @@ def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.floa
 
     Returns:
         clip float32 (N, 4), outcode uint16 (N,) (config.OC_* bits; a vertex whose clip
-        position is not finite gets OC_INVALID alone) and win WINVERT_DTYPE (N,): the
+        position is not finite gets OC_INVALID alone) and win WINXY_DTYPE (N,): the
         viewport transform of vertices that need no clipping (zeros for the others).
     """
     v = np.asarray(vertices, np.float32)
@@ -80,9 +81,10 @@ def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.floa
         oc[inside] = 0
     bad = ~np.all(np.isfinite(clip), axis=1)
     oc[bad] = OC_INVALID
-    win = np.zeros(v.shape[0], WINVERT_DTYPE)
+    win = np.zeros(v.shape[0], WINXY_DTYPE)   # x, y alone, as vertex.cl writes them
     ok = (oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0
-    win[ok] = viewport(clip[ok], width, height)
+    wv = viewport(clip[ok], width, height)
+    win["x"][ok], win["y"][ok] = wv["x"], wv["y"]
     return clip, oc, win
 
 

@@ -15,7 +15,7 @@ from typing import Any, cast
 
 import pyopencl as cl
 
-from ..config import DRAW_DTYPE, PIECE_DTYPE, WINVERT_DTYPE, RasterConfig
+from ..config import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE, RasterConfig
 from ..drawlist import FrameDraws
 from ..params import FrameParams, FrameTotals
 from ..streaming import BinBudgetExceeded
@@ -52,7 +52,7 @@ class StageChain:
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
-        least one triangle), vertex stream 75 bytes × 3·M vertices (a draw has at most 3
+        least one triangle), vertex stream 67 bytes × 3·M vertices (a draw has at most 3
         vertices per triangle), setup 109·M (96-byte record, status, clip count and
         offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
         pieces than E is split like one with too many entries), bin entries 96·E. The
@@ -63,7 +63,7 @@ class StageChain:
                       self.binning.buffers)
         return {g.draws: DRAW_DTYPE.itemsize * m, v.clip: 16 * 3 * m, v.outcode: 2 * 3 * m,
                 v.ucode: 3 * m, v.clip64: 32 * 3 * m, v.rnum: 8 * 3 * m,
-                v.win: WINVERT_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
+                v.win: WINXY_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
                 s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
                 b.entries: PIECE_DTYPE.itemsize * e}

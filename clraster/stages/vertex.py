@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import CLUSTER_MAX, RasterConfig
+from ..config import CLUSTER_MAX, WINXY_DTYPE, RasterConfig
 from ..device import kernel, program
 from ..layout import VERTEX_LANES
 from ..params import FrameParams
@@ -22,7 +22,7 @@ class ClipBuffers:
 
     clip: float32 (N, 4) clip-space positions. outcode: uint16 (N,) outcode bits
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
-    win: WINVERT_DTYPE (N,) viewport transform of the vertices that need no clipping.
+    win: WINXY_DTYPE (N,) snapped window x, y of the vertices that need no clipping.
     ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
     clip64: float64 (N, 4) clip positions from the float64 matrices and rnum: float64 (N,)
     depth numerators (kernels/vertex.cl): setup's value planes and clipper; rnum only for
@@ -57,7 +57,7 @@ class VertexStage:
                          np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
-                         b.win.ensure(16 * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
+                         b.win.ensure(WINXY_DTYPE.itemsize * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
                          b.ucode.ensure(n_verts), geo.mvps64.buf, geo.zrows.buf,
                          np.int32(params.reversed_z), b.clip64.ensure(32 * n_verts),
                          # written only for reversed-Z (else setup reads r = z from clip64)
