@@ -74,7 +74,8 @@ __all__ = [
     "OC_X_NEG", "OC_X_POS", "OC_Y_NEG", "OC_Y_POS", "OC_Z_NEG", "OC_Z_POS", "PF_CLIPPED",
     "PF_INDEX_SHIFT", "PF_SWAPPED", "PIECE_DTYPE", "ST_BACKFACE", "ST_CLIPPED", "ST_DEGENERATE",
     "ST_INVALID", "ST_NO_SAMPLE", "ST_RASTER", "ST_TRIVIAL_REJECT", "STATUS_NAMES",
-    "SUBPIXEL_BITS", "SUBPIXEL_ONE", "WINVERT_DTYPE", "WINXY_DTYPE", "RasterConfig", "guard_band_factors",
+    "SUBPIXEL_BITS", "SUBPIXEL_ONE", "WINVERT_DTYPE", "WINXY_DTYPE", "RasterConfig",
+    "guard_band_factors",
 ]
 
 MAX_IMAGE_SIZE = 16384

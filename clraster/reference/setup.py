@@ -146,8 +146,8 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     space (values), as make_piece in setup.cl.
 
     Args:
-        wv: WINXY_DTYPE or WINVERT_DTYPE (K, 3) (x, y are read). c: float64 (K, 3, 4) unsnapped clip positions (z: the
-            depth numerator). zs, zo: as `value_planes`.
+        wv: WINXY_DTYPE or WINVERT_DTYPE (K, 3) (x, y are read). c: float64 (K, 3, 4)
+            unsnapped clip positions (z: the depth numerator). zs, zo: as `value_planes`.
 
     Returns (status uint8 (K,), pieces PIECE_DTYPE (K,) valid where status == ST_RASTER,
     swapped bool (K,)).

@@ -57,7 +57,8 @@ class VertexStage:
                          np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
-                         b.win.ensure(WINXY_DTYPE.itemsize * n_verts), geo.uplanes.buf, np.int32(geo.n_user),
+                         b.win.ensure(WINXY_DTYPE.itemsize * n_verts), geo.uplanes.buf,
+                         np.int32(geo.n_user),
                          b.ucode.ensure(n_verts), geo.mvps64.buf, geo.zrows.buf,
                          np.int32(params.reversed_z), b.clip64.ensure(32 * n_verts),
                          # written only for reversed-Z (else setup reads r = z from clip64)
