@@ -76,6 +76,16 @@
 #define NT_STORE(v, p) __builtin_nontemporal_store((v), (p))
 #endif
 
+/* Ask for the cache line at p (any address space) ahead of its use: prefetcht0 on x86 from
+ * clang's builtin (a hint: it never faults, so an address past the end of a buffer is
+ * harmless); nothing on other platforms (-DCLRASTER_PORTABLE: Oclgrind). The raster reads
+ * its bin entries, written non-temporally by bin_scatter, from memory in list order. */
+#ifdef CLRASTER_PORTABLE
+#define PREFETCH(p) ((void)0)
+#else
+#define PREFETCH(p) __builtin_prefetch((__global const char *)(p))
+#endif
+
 /* A helper PoCL must inline. Its inliner left some larger helpers called once per triangle
  * or vertex as real calls (perf shows them as symbols of their own in the kernel's .so:
  * make_piece, value_planes, rect_outside, row_span and the vertex stage's double transform,

@@ -155,6 +155,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
 
     for (int k = e0; k < e1; ++k) {
         __global const Piece *pc = &entries[k];
+        /* the record eight entries on (1.5 lines of 64 bytes): its first loads were
+         * cache misses (perf: 8% of raster_tile's samples on the dragon at 1080p);
+         * prefetched, dragon raster 6.72 -> 6.42 ms (bench/proc_ab.py, 11 rounds) */
+        PREFETCH(pc + 8);
+        PREFETCH((__global const char *)(pc + 8) + 64);
         int x0 = imax(bb_x(pc->bb_min), tx0), x1 = imin(bb_x(pc->bb_max), tx1);
         int y0 = imax(bb_y(pc->bb_min), ty0), y1 = imin(bb_y(pc->bb_max), ty1);
         if (x0 > x1 || y0 > y1) continue;
