@@ -394,7 +394,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global const int2 *restrict win, DRAW_ARGS, const int width,
                               const int height, const int cull, const float kx, const float ky,
                               const int reversed, __global Piece *restrict pieces,
-                              __global uchar *restrict status, __global int *restrict clip_count,
+                              __global uchar *restrict status,
                               const int tiles_x, __global int *restrict tile1,
                               __global int *restrict any_clipped)
 {
@@ -413,7 +413,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         u_or = u0 | u1 | u2;
         u_and = u0 & u1 & u2;
     }
-    int st, nclip = 0, one = TILE1_NONE;   /* tile1 (common.h TILE1_*) */
+    int st, one = TILE1_NONE;   /* tile1 (common.h TILE1_*) */
     if (o_or & OC_INVALID) {
         st = ST_INVALID;
     } else if ((o_and & OC_FRUSTUM) || u_and) {
@@ -476,7 +476,10 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         }
     }
     status[t] = (uchar)st;
-    clip_count[t] = nclip;
+    /* clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
+     * and nothing reads it for others (the scan and setup_clipped look at status first;
+     * binning reads it for clipped slots only). Writing 0 for every slot was 4 bytes a
+     * triangle (2.7 MB on the dragon at 1080p). */
     tile1[t] = st == ST_CLIPPED ? TILE1_WALK : one;
 }
 
@@ -522,7 +525,8 @@ __kernel void setup_count_clipped(__global const float4 *restrict clip,
 __kernel void setup_clipped(__global const float4 *restrict clip,
                             __global const ushort *restrict outcode, DRAW_ARGS,
                             const int width, const int height, const float kx, const float ky,
-                            const int reversed, __global const int *restrict clip_count,
+                            const int reversed, __global const uchar *restrict status,
+                            __global const int *restrict clip_count,
                             __global const int *restrict clip_offset,
                             __global Piece *restrict clip_pieces,
                             __global float *restrict clip_bary)
@@ -530,7 +534,8 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
     DEPTH_MODE(reversed);
     int t, i0, i1, i2, id, dflags;
     if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id, &dflags) || clip_count[t] == 0)
+                     &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED
+        || clip_count[t] == 0)
         return;
     int written;   /* clip_count[t], counted before */
     CLIP_TRIANGLE(written, 1, clip_pieces, clip_bary, clip_offset[t]);
@@ -541,18 +546,24 @@ __kernel void setup_clipped(__global const float4 *restrict clip,
  * the ranges before it and writes the prefix. One work-item per range, no barriers or local
  * memory (pyopencl's GenericScanKernel has a benign but real data race that Oclgrind
  * reports, and is slower on PoCL for these sizes). */
-__kernel void scan_partials(__global const int *restrict cnt, const uint m, const uint chunks,
+/* Pieces of triangle i for the scan: its clip_count where it is ST_CLIPPED (the only slots
+ * where clip_count is written), else 0. */
+#define CLIPPED_COUNT(i) (status[i] == ST_CLIPPED ? cnt[i] : 0)
+
+__kernel void scan_partials(__global const uchar *restrict status,
+                            __global const int *restrict cnt, const uint m, const uint chunks,
                             __global int *restrict partial)
 {
     uint c = get_global_id(0);
     if (c >= chunks) return;
     uint s0 = (uint)(((ulong)c * m) / chunks), s1 = (uint)(((ulong)(c + 1) * m) / chunks);
     int s = 0;
-    for (uint i = s0; i < s1; ++i) s += cnt[i];
+    for (uint i = s0; i < s1; ++i) s += CLIPPED_COUNT(i);
     partial[c] = s;
 }
 
-__kernel void scan_offsets(__global const int *restrict cnt, const uint m, const uint chunks,
+__kernel void scan_offsets(__global const uchar *restrict status,
+                           __global const int *restrict cnt, const uint m, const uint chunks,
                            __global const int *restrict partial, __global int *restrict off,
                            __global int *restrict total)
 {
@@ -561,6 +572,6 @@ __kernel void scan_offsets(__global const int *restrict cnt, const uint m, const
     int s = 0;
     for (uint k = 0; k < c; ++k) s += partial[k];
     uint s0 = (uint)(((ulong)c * m) / chunks), s1 = (uint)(((ulong)(c + 1) * m) / chunks);
-    for (uint i = s0; i < s1; ++i) { off[i] = s; s += cnt[i]; }
+    for (uint i = s0; i < s1; ++i) { off[i] = s; s += CLIPPED_COUNT(i); }
     if (c + 1 == chunks) total[0] = s;
 }

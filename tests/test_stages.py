@@ -10,8 +10,9 @@ stage:
 
 * vertex → setup: clip-space positions and outcodes of every stream vertex (exact), window
   positions of the vertices that need no clipping (exact);
-* setup → bin: status of every triangle, clip_count / clip_offset, the setup record of every
-  unclipped survivor, the clipped pieces and their parent barycentrics (all exact, bytes);
+* setup → bin: status of every triangle, clip_count (clipped triangles) / clip_offset, the
+  setup record of every unclipped survivor, the clipped pieces and their parent
+  barycentrics (all exact, bytes);
 * bin → raster: tile_start and every tile list (exact, bytes: same records, same order).
 """
 
@@ -24,7 +25,14 @@ from conftest import MatrixCamera
 from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Mesh, RasterConfig
-from clraster.config import OC_INVALID, OC_NEEDS_CLIP, OC_W_NONPOS, PIECE_DTYPE, ST_RASTER
+from clraster.config import (
+    OC_INVALID,
+    OC_NEEDS_CLIP,
+    OC_W_NONPOS,
+    PIECE_DTYPE,
+    ST_CLIPPED,
+    ST_RASTER,
+)
 from clraster.device import default_context
 from clraster.drawlist import PlanCache, plan_frame
 from clraster.params import FrameParams, FrameTotals
@@ -115,10 +123,14 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
     st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, cull, params.kx, params.ky,
                          ref_setup.object_clip(pool, fd), ref_setup.draw_mirrored(pool, fd))
     _assert_records("setup", "status", _read(queue, setup.status, np.uint8, m), st.status)
-    _assert_records("setup", "clip_count", _read(queue, setup.clip_count, np.int32, m),
-                    st.clip_count)
-    _assert_records("setup", "clip_offset", _read(queue, setup.clip_offset, np.int32, m),
-                    st.clip_offset)
+    # clip_count is written for clipped triangles only, clip_offset only when there are any
+    # (SetupBuffers); the twin has 0 elsewhere
+    clipped = st.status == ST_CLIPPED
+    _assert_records("setup", "clip_count (clipped triangles)",
+                    _read(queue, setup.clip_count, np.int32, m)[clipped], st.clip_count[clipped])
+    if clipped.any():
+        _assert_records("setup", "clip_offset", _read(queue, setup.clip_offset, np.int32, m),
+                        st.clip_offset)
     live = st.status == ST_RASTER
     _assert_records("setup", "setup record (unclipped)",
                     _read(queue, setup.pieces, PIECE_DTYPE, m)[live], st.pieces[live])

@@ -25,8 +25,10 @@ class SetupBuffers:
 
     pieces: PIECE_DTYPE (M,), slot t valid iff status[t] == ST_RASTER.
     status: uint8 (M,) config.ST_* per triangle.
-    clip_count: int32 (M,) surviving pieces per clipped triangle (0 otherwise).
-    clip_offset: int32 (M,) exclusive scan of clip_count.
+    clip_count: int32 (M,) surviving pieces per clipped triangle, written only where
+    status[t] == ST_CLIPPED (undefined elsewhere: read it through status).
+    clip_offset: int32 (M,) exclusive scan of the clipped triangles' piece counts (0 for the
+    others), written only when some triangle is clipped.
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
@@ -98,7 +100,7 @@ class SetupStage:
         ev = [self.k_setup(queue, gsize, lsize, clip, outcode, win, *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
-                           b.status.ensure(m), b.clip_count.ensure(4 * m),
+                           b.status.ensure(m),
                            np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag)]
         # Most passes clip nothing: then the clipper's count, the scan and their launches
         # are skipped; the wait here replaces the one after the scan (bench/proc_ab.py, 21
@@ -107,16 +109,20 @@ class SetupStage:
         total = np.zeros(1, np.int32)
         wait(queue)   # interruptibly, with the GIL free (device.wait)
         cl.enqueue_copy(queue, total, flag)
-        b.clip_offset.ensure(4 * max(m, 1))   # bin's argument (read for clipped slots only)
+        # bin's arguments (read for clipped slots only); clip_count is written by k_count
+        b.clip_offset.ensure(4 * max(m, 1))
+        b.clip_count.ensure(4 * max(m, 1))
         if m and total[0]:
             ev.append(self.k_count(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                    np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
                                    b.status.buf, b.clip_count.buf))
             chunks = np.uint32(min(SCAN_CHUNKS, m))
             part = self.partial.ensure(4 * SCAN_CHUNKS)
-            ev.append(self.k_partials(queue, (int(chunks),), (1,), b.clip_count.buf,
+            ev.append(self.k_partials(queue, (int(chunks),), (1,), b.status.buf,
+                                      b.clip_count.buf,
                                       np.uint32(m), chunks, part))
-            ev.append(self.k_offsets(queue, (int(chunks),), (1,), b.clip_count.buf,
+            ev.append(self.k_offsets(queue, (int(chunks),), (1,), b.status.buf,
+                                     b.clip_count.buf,
                                      np.uint32(m), chunks, part, b.clip_offset.ensure(4 * m),
                                      b.clip_total.ensure(4)))
             wait(queue)
@@ -129,7 +135,7 @@ class SetupStage:
         if p:
             ev.append(self.k_clipped(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                      np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
-                                     b.clip_count.buf,
+                                     b.status.buf, b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))
         else:  # the kernels still need valid buffer arguments downstream
