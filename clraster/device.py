@@ -27,6 +27,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import queue as queue_mod
 import re
 import threading
 import time
@@ -383,8 +384,55 @@ def device_busy() -> bool:
     return bool(_in_flight)
 
 
-#: Sleeps (s) between the first status polls of `wait`, before it switches to a callback.
+#: Sleeps (s) between the first status polls of `wait`, before it hands the wait over to
+#: the calling thread's waiter (`_Waiter`).
 _SHORT_POLLS = (2e-5, 4e-5, 4e-5)
+
+
+class _Waiter:
+    """A helper thread of one calling thread that blocks in OpenCL's own wait
+    (``Event.wait``: clWaitForEvents, GIL released) on the markers `wait` gives it and sets
+    each marker's `threading.Event` when it returns, so that the calling thread can wait in
+    interruptible slices and still wake as soon as the device is done.
+
+    One per calling thread (`_waiter`): a waiter shared by two renderers in two threads
+    would keep one's wait behind the other's frame. It ends with its thread (`__del__`,
+    when the thread's locals go) and is made again in a forked child (a thread does not
+    survive fork)."""
+
+    def __init__(self) -> None:
+        self.pid = os.getpid()
+        self.jobs: queue_mod.SimpleQueue = queue_mod.SimpleQueue()
+        threading.Thread(target=self._run, args=(self.jobs,), daemon=True,
+                         name="clraster-wait").start()
+
+    @staticmethod
+    def _run(jobs: queue_mod.SimpleQueue) -> None:
+        while True:
+            job = jobs.get()
+            if job is None:
+                return
+            ev, done = job
+            try:
+                ev.wait()
+            except cl.Error:   # a failed command: the calling thread raises (`wait`)
+                pass
+            done.set()
+
+    def __del__(self) -> None:
+        if self.pid == os.getpid():
+            self.jobs.put(None)
+
+
+_waiters = threading.local()
+
+
+def _waiter() -> _Waiter:
+    """The calling thread's `_Waiter` (made on first use, and again after a fork)."""
+    w = getattr(_waiters, "waiter", None)
+    if w is None or w.pid != os.getpid():
+        w = _waiters.waiter = _Waiter()
+    return w
 
 
 def wait(queue: cl.CommandQueue, keep: object = None) -> None:
@@ -396,33 +444,35 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     ``queue.finish()`` waits inside one C call: the GIL is released, but Python runs its
     signal handlers only when the call returns, so Ctrl-C during a long frame took effect
     only at the frame's end (16 s late in a 19 s frame). Instead: a few status polls
-    over the first ~100 µs (`_SHORT_POLLS`; a short wait is over before a callback would
-    fire), then a marker's completion callback sets a `threading.Event` that this thread
-    waits on in 50 ms slices: a lock wait sleeps with the GIL free, takes no core from
-    PoCL's threads and is interrupted by signals, so KeyboardInterrupt gets through at
-    once. Before, the status was polled for the whole wait with sleeps of 20 µs doubling
-    to 250 µs: up to 250 µs late and a wake-up every 250 µs on the cores the kernels run
-    on. bench/host_overhead.py: ~85 µs late after kernels of 0.9, 8 and 80 ms (polled:
-    274, 133, 232 µs); bench/proc_ab.py, 31 rounds: spot 0.974x, bunny 0.975x, dragon
-    0.973x, an empty frame 1.04x (1.73 -> 1.80 ms, not explained). (Tried too: the
-    main thread blocking on a lock while a helper thread sat in ``Event.wait``: spot
-    frames at 1080p 1.07x slower, its raster too — that wait competes with PoCL's threads
-    for the cores.)
+    over the first ~100 µs (`_SHORT_POLLS`), then this thread's `_Waiter` blocks in
+    OpenCL's wait on a marker and sets a `threading.Event` that this thread waits on in
+    50 ms slices: a lock wait sleeps with the GIL free, takes no core from PoCL's threads
+    and is interrupted by signals, so KeyboardInterrupt gets through at once (the waiter
+    goes on waiting for the abandoned marker).
+
+    History: the status polled for the whole wait with sleeps of 20 µs doubling to
+    250 µs was up to 250 µs late, with a wake-up every 250 µs on the kernels' cores. A
+    marker's completion callback setting the Event (pyopencl runs callbacks through a
+    thread of its own) returned 176–193 µs after the dragon's raster ended at 1080p,
+    against 79 µs for ``queue.finish()`` and 126 µs with the waiter (a scratch timeline
+    of 60 frames); bench/proc_ab.py, 15 rounds, waiter against callback: spot 0.961x,
+    bunny 0.977x, dragon 0.977x, plant 10M occlusion 0.999x, empty 1.008x (it waits
+    once). A helper thread blocked in ``Event.wait`` had been tried in session 12, before
+    PoCL's workers were pinned one per CPU (spot 1.07x slower, its raster too; the pinning
+    is the likely difference, not measured apart).
     """
     ev = cl.enqueue_marker(queue)
     queue.flush()
     complete = cl.command_execution_status.COMPLETE
     try:
-        for delay in _SHORT_POLLS:   # a short wait is cheaper polled than called back
+        for delay in _SHORT_POLLS:   # a short wait is cheaper polled than handed over
             if ev.command_execution_status == complete:
                 return
             time.sleep(delay)
         done = threading.Event()
-        # called on completion or abnormal termination (a negative status), from another
-        # thread
-        ev.set_callback(complete, lambda status: done.set())
+        _waiter().jobs.put((ev, done))   # set when the marker completes or fails
         while not done.wait(0.05):
-            # a safety net: a platform that never calls back is still polled every 50 ms
+            # a safety net: should the waiter never return, the status is polled every 50 ms
             if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)
                 break
         if ev.command_execution_status < 0:   # the command failed: let pyopencl raise
