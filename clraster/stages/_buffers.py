@@ -3,7 +3,11 @@ needed more than the frame budget allows (`GrowBuffer.bound`, `trim`)."""
 
 from __future__ import annotations
 
+import numpy as np
 import pyopencl as cl
+
+from ..arraypool import page_aligned
+from ..device import shares_host_memory
 
 _MIN_BYTES = 256
 
@@ -20,15 +24,24 @@ class GrowBuffer:
     beyond it — a single draw whose bin list is over the budget — gets exactly its size),
     and `trim` releases a buffer left larger than it, so after an outsized pass the
     renderer's memory returns to the budget's bound.
+
+    ``host=True`` (small buffers of results the host reads after a wait: counts, flags):
+    where the device works in host memory itself (`clraster.device.shares_host_memory`),
+    the buffer is a CL_MEM_USE_HOST_PTR buffer over a page-aligned array of its own, so
+    `read` and `write` are plain memory accesses instead of commands; elsewhere they are
+    blocking reads and queued writes.
     """
 
-    def __init__(self, ctx: cl.Context, flags: int = cl.mem_flags.READ_WRITE) -> None:
+    def __init__(self, ctx: cl.Context, flags: int = cl.mem_flags.READ_WRITE,
+                 host: bool = False) -> None:
         self.ctx = ctx
         self.flags = flags
         self.capacity = 0
         self.buf: cl.Buffer | None = None
         self.limit = int(ctx.devices[0].max_mem_alloc_size)
         self.bound: int | None = None
+        self.host = host and shares_host_memory(ctx)
+        self._mem: np.ndarray | None = None   # the host array behind buf (host mode)
 
     def ensure(self, nbytes: int, what: str = "buffer") -> cl.Buffer:
         nbytes = max(int(nbytes), _MIN_BYTES)
@@ -44,13 +57,40 @@ class GrowBuffer:
                 cap = min(cap, max(nbytes, self.bound))
             cap = min(cap, self.limit)
             self.buf = None   # let the old allocation go before the new one is made
-            self.buf = cl.Buffer(self.ctx, self.flags, cap)
+            if self.host:
+                self._mem = page_aligned(cap)
+                self.buf = cl.Buffer(self.ctx, self.flags | cl.mem_flags.USE_HOST_PTR,
+                                     hostbuf=self._mem)
+            else:
+                self.buf = cl.Buffer(self.ctx, self.flags, cap)
             self.capacity = cap
         return self.buf
+
+    def read(self, queue: cl.CommandQueue, dtype: type | np.dtype, count: int) -> np.ndarray:
+        """The first ``count`` items of ``dtype``, copied; call after a wait that saw the
+        commands writing them complete (`clraster.device.wait`). In host mode a copy of
+        the array, else a blocking read."""
+        dt = np.dtype(dtype)
+        if self._mem is not None:
+            return self._mem[:count * dt.itemsize].view(dt).copy()
+        out = np.empty(count, dt)
+        assert self.buf is not None, "read before ensure"
+        cl.enqueue_copy(queue, out, self.buf)
+        return out
+
+    def write(self, queue: cl.CommandQueue, arr: np.ndarray) -> None:
+        """Put ``arr`` at the start of the buffer (ensured large enough), while no enqueued
+        command uses it: in host mode a copy into the array, else a queued write."""
+        buf = self.ensure(arr.nbytes)
+        if self._mem is not None:
+            self._mem[:arr.nbytes] = np.ascontiguousarray(arr).view(np.uint8).ravel()
+        else:
+            cl.enqueue_copy(queue, buf, arr, is_blocking=False)
 
     def trim(self) -> None:
         """Release the buffer if it is larger than ``bound`` (the next `ensure` allocates
         what it asks for)."""
         if self.bound is not None and self.capacity > max(self.bound, _MIN_BYTES):
             self.buf = None
+            self._mem = None
             self.capacity = 0

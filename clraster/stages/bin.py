@@ -56,6 +56,7 @@ class BinStage:
             for name in ("bin_count", "bin_offsets", "bin_scan_tiles", "bin_scatter"))
         self.config = config
         self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers.summary = GrowBuffer(ctx, host=True)   # read after a wait
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams,
             max_entries: int | None = None, *, defer: bool = False
@@ -110,9 +111,8 @@ class BinStage:
             ev.append(self._scatter(queue, cap))
             b.pending, b.cap = True, cap
             return b, ev
-        summary = np.zeros(10, np.int32)
         wait(queue)   # interruptibly, with the GIL free (device.wait)
-        cl.enqueue_copy(queue, summary, summary_buf)
+        summary = b.summary.read(queue, np.int32, 10)
         e = self._check(summary, params, max_entries, ev)
         b.entries.ensure(rec * e, "bin list")
         ev.append(self._scatter(queue, e))
@@ -127,8 +127,7 @@ class BinStage:
         has been scattered again into a buffer of E entries (its event appended to
         ``events``) and the pass must be drawn again; False when it was complete."""
         b = self.buffers
-        summary = np.zeros(10, np.int32)
-        cl.enqueue_copy(queue, summary, self._scatter_args[3])   # blocking
+        summary = b.summary.read(queue, np.int32, 10)   # the raster's wait saw the scan
         e = self._check(summary, params, max_entries, events)
         b.pending = False
         if e <= b.cap:

@@ -15,7 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import RasterConfig
-from ..device import kernel, program
+from ..device import kernel, program, wait
 from ..inputs import check_boxes
 from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
@@ -106,7 +106,10 @@ class PyramidStage:
         prg = program(ctx, "pyramid", (config or RasterConfig()).build_options())
         self.k_reduce = kernel(prg, "pyramid_reduce")
         self.k_test = kernel(prg, "hiz_test_boxes")
-        self.buffers = PyramidBuffers(*(GrowBuffer(ctx) for _ in range(5)))
+        # boxes, view_proj and result go between host and device every test: host mode
+        # (`GrowBuffer`), where the device works in host memory no command each
+        self.buffers = PyramidBuffers(GrowBuffer(ctx), GrowBuffer(ctx),
+                                      *(GrowBuffer(ctx, host=True) for _ in range(3)))
         self._table_key: tuple[int, int] | None = None
         self._table_buf: cl.Buffer | None = None
 
@@ -201,16 +204,16 @@ class PyramidStage:
             soa[:, :k] = rows
         bbox = b.boxes.ensure(soa.nbytes, "box buffer")
         bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
-        cl.enqueue_copy(queue, bbox, soa, is_blocking=False)
-        cl.enqueue_copy(queue, bvp, vp, is_blocking=False)
+        # (no pending command uses these two: every test waits for its result)
+        b.boxes.write(queue, soa)
+        b.view_proj.write(queue, vp)
         n_wi = n_pad // 8
         gsize = -(-n_wi // TEST_LOCAL) * TEST_LOCAL
         ev = self.k_test(queue, (gsize,), (TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
                          np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
                          np.int32(pyramid.n_levels), np.float32(zoff), bres)
-        res = np.empty(n_pad, np.uint8)
-        cl.enqueue_copy(queue, res, bres, is_blocking=True)
-        return res[:k], ev
+        wait(queue)   # interruptibly (device.wait); the pyramid's build too
+        return b.result.read(queue, np.uint8, k), ev
 
 
 def check_test_inputs(mins, maxs, view_proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

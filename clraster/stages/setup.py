@@ -64,15 +64,16 @@ class SetupStage:
         self.k_partials = kernel(prg, "scan_partials")
         self.k_offsets = kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers.clip_total = GrowBuffer(ctx, host=True)   # read after a wait
         self.partial = GrowBuffer(ctx)
-        self.flag = GrowBuffer(ctx)   # any triangle ST_CLIPPED (setup_triangles)
+        self.flag = GrowBuffer(ctx, host=True)   # any triangle ST_CLIPPED (setup_triangles)
 
     def prepare(self, queue: cl.CommandQueue) -> None:
         """Zero the any-clipped flag `run` reads; call before the pass's first kernel.
         Enqueued behind a running kernel, this host-to-device write blocked the calling
         thread, GIL held, until that kernel was done (~15 ms of a 3.5M-triangle frame in
         which no other Python thread ran: tests/test_processes.py)"""
-        cl.enqueue_copy(queue, self.flag.ensure(4), np.zeros(1, np.int32), is_blocking=False)
+        self.flag.write(queue, np.zeros(1, np.int32))
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
             params: FrameParams, max_pieces: int | None = None
@@ -106,9 +107,8 @@ class SetupStage:
         # are skipped; the wait here replaces the one after the scan (bench/proc_ab.py, 21
         # rounds: spot 0.985x, bunny 0.97x; the dragon, whose count kernel took ~0.5 ms,
         # within noise).
-        total = np.zeros(1, np.int32)
         wait(queue)   # interruptibly, with the GIL free (device.wait)
-        cl.enqueue_copy(queue, total, flag)
+        total = self.flag.read(queue, np.int32, 1)
         # bin's arguments (read for clipped slots only); clip_count is written by k_count
         b.clip_offset.ensure(4 * max(m, 1))
         b.clip_count.ensure(4 * max(m, 1))
@@ -126,7 +126,7 @@ class SetupStage:
                                      np.uint32(m), chunks, part, b.clip_offset.ensure(4 * m),
                                      b.clip_total.ensure(4)))
             wait(queue)
-            cl.enqueue_copy(queue, total, cast(cl.Buffer, b.clip_total.buf))   # ensured
+            total = b.clip_total.read(queue, np.int32, 1)
         else:
             total[0] = 0
         p = int(total[0])

@@ -1,0 +1,95 @@
+"""Where the device works in host memory (PoCL's CPU drivers), the host reads and writes the
+small per-pass buffers and the frame arrays directly instead of through commands
+(`clraster.device.shares_host_memory`, `GrowBuffer` host mode). The two paths must give the
+same frames: a renderer whose context is marked as not sharing memory (maps, reads and
+writes as commands) renders the same random scenes, clipped, streamed in small passes and
+occlusion culled, with the same counts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+from conftest import MatrixCamera, assert_frames_equal
+from random_scenes import Lens, random_soup, random_view, to_world
+
+from clraster import Mesh, RasterConfig, Renderer, device
+from clraster.scenes import plant, plant_inside_camera
+from clraster.stages._buffers import GrowBuffer
+
+
+def _context(shared: bool) -> cl.Context:
+    """A new context on clraster's device, marked as sharing host memory or not."""
+    ctx = cl.Context(devices=device.default_context().devices)
+    setattr(ctx, device._SHARED_ATTR, shared)
+    return ctx
+
+
+def test_pocl_cpu_device_shares_host_memory():
+    """The probe finds PoCL's CPU device working in the arrays of USE_HOST_PTR buffers (a
+    platform where it did not would take the command path: the test below)."""
+    ctx = device.default_context()
+    if "portable computing" not in ctx.devices[0].platform.name.lower():
+        pytest.skip("not PoCL")
+    assert device.shares_host_memory(ctx)
+    fresh = cl.Context(devices=ctx.devices)   # probed anew: nothing cached on it
+    assert device._probe_shared(fresh)
+
+
+@pytest.mark.parametrize("shared", [True, False])
+def test_grow_buffer_reads_and_writes_what_kernels_see(shared):
+    """A host-mode buffer written by the host is what a kernel reads, and what a kernel
+    wrote is what `read` returns, on both paths."""
+    ctx = _context(shared)
+    queue = cl.CommandQueue(ctx)
+    twice = cl.Kernel(cl.Program(ctx, """
+        __kernel void twice(__global const int *a, __global int *b)
+        { int i = get_global_id(0); b[i] = 2 * a[i] + 1; }""").build(), "twice")
+    a, b = GrowBuffer(ctx, host=True), GrowBuffer(ctx, host=True)
+    assert a.host == shared
+    src = np.arange(37, dtype=np.int32) * 3 - 50
+    a.write(queue, src)
+    twice(queue, (37,), None, a.buf, b.ensure(4 * 37))
+    device.wait(queue)
+    assert np.array_equal(b.read(queue, np.int32, 37), 2 * src + 1)
+    a.write(queue, src[::-1].copy())   # written again while the queue is idle
+    twice(queue, (37,), None, a.buf, b.buf)
+    device.wait(queue)
+    assert np.array_equal(b.read(queue, np.int32, 37), 2 * src[::-1] + 1)
+
+
+def _soup(seed: int, w: int, h: int):
+    rng = np.random.default_rng(seed)
+    lens = Lens(fov_y=60.0, near=0.05, far=50.0)
+    v, f, _ = random_soup(rng, 3000, w, h, lens)
+    view = random_view(rng)
+    return Mesh(to_world(v, view), f), MatrixCamera(lens.projection(w / h) @ view)
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_shared_and_command_paths_render_the_same(seed):
+    """Random soups (clipped triangles: setup's flag and clipped-piece total; degenerate
+    and duplicate ones) in passes of at most 512 triangles and 2,000 entries (many uploads
+    and bin summaries a frame): same ids, depth, barycentrics and counts either way."""
+    w, h = 173, 129
+    mesh, cam = _soup(seed, w, h)
+    cfg = RasterConfig(batch_triangles=512, batch_entries=2000)
+    frames = [Renderer(w, h, config=cfg, context=_context(s)).render(mesh, cam, cull="none")
+              for s in (True, False)]
+    assert_frames_equal(frames[0], frames[1], f"seed {seed}", bary_atol=0.0)
+    counts = frames[0].stats.counts()
+    assert counts == frames[1].stats.counts()
+    assert counts["clipped"] > 0 and counts["binned_entries"] > 2000   # several passes
+
+
+def test_shared_and_command_paths_agree_with_occlusion_culling():
+    """Two-phase occlusion culling (two passes into the same arrays, the pyramid and its
+    tests between them) over three frames of a small plant, both paths."""
+    scene = plant(60_000)
+    w, h = 160, 96
+    cam = plant_inside_camera(scene, w, h)
+    r = [Renderer(w, h, context=_context(s)) for s in (True, False)]
+    for k in range(3):
+        a, b = (x.render(scene, cam, occlusion=True) for x in r)
+        assert_frames_equal(a, b, f"frame {k}", bary_atol=0.0)
+        assert a.stats.counts() == b.stats.counts()
