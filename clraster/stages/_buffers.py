@@ -81,10 +81,11 @@ class GrowBuffer:
     def write(self, queue: cl.CommandQueue, arr: np.ndarray) -> None:
         """Put ``arr`` at the start of the buffer (ensured large enough), while no enqueued
         command uses it: in host mode a copy into the array, else a queued write."""
+        arr = np.ascontiguousarray(arr)
         buf = self.ensure(arr.nbytes)
         if self._mem is not None:
-            self._mem[:arr.nbytes] = np.ascontiguousarray(arr).view(np.uint8).ravel()
-        else:
+            self._mem[:arr.nbytes] = arr.reshape(-1).view(np.uint8)
+        else:   # (pyopencl keeps arr alive until the write is done)
             cl.enqueue_copy(queue, buf, arr, is_blocking=False)
 
     def trim(self) -> None:

@@ -69,10 +69,11 @@ class SetupStage:
         self.flag = GrowBuffer(ctx, host=True)   # any triangle ST_CLIPPED (setup_triangles)
 
     def prepare(self, queue: cl.CommandQueue) -> None:
-        """Zero the any-clipped flag `run` reads; call before the pass's first kernel.
-        Enqueued behind a running kernel, this host-to-device write blocked the calling
-        thread, GIL held, until that kernel was done (~15 ms of a 3.5M-triangle frame in
-        which no other Python thread ran: tests/test_processes.py)"""
+        """Zero the any-clipped flag `run` reads; call before the pass's first kernel,
+        while the queue is idle. (As a command enqueued behind a running kernel, this
+        host-to-device write blocked the calling thread, GIL held, until that kernel was
+        done: ~15 ms of a 3.5M-triangle frame in which no other Python thread ran,
+        tests/test_processes.py. In host mode it is a plain store.)"""
         self.flag.write(queue, np.zeros(1, np.int32))
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
