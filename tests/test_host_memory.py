@@ -3,7 +3,8 @@ small per-pass buffers and the frame arrays directly instead of through commands
 (`clraster.device.shares_host_memory`, `GrowBuffer` host mode). The two paths must give the
 same frames: a renderer whose context is marked as not sharing memory (maps, reads and
 writes as commands) renders the same random scenes, clipped, streamed in small passes and
-occlusion culled, with the same counts."""
+occlusion culled, with the same counts. And a pass in which no triangle can be clipped
+does not wait for setup's clipped flag at all (`GeometryBuffers.may_clip`)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import pytest
 from conftest import MatrixCamera, assert_frames_equal
 from random_scenes import Lens, random_soup, random_view, to_world
 
-from clraster import Mesh, RasterConfig, Renderer, device
+from clraster import Camera, Mesh, RasterConfig, Renderer, device
 from clraster.scenes import plant, plant_inside_camera
 from clraster.stages._buffers import GrowBuffer
 
@@ -93,3 +94,37 @@ def test_shared_and_command_paths_agree_with_occlusion_culling():
         a, b = (x.render(scene, cam, occlusion=True) for x in r)
         assert_frames_equal(a, b, f"frame {k}", bary_atol=0.0)
         assert a.stats.counts() == b.stats.counts()
+
+
+
+def _wavy_grid(n: int = 21) -> Mesh:
+    """A 2 × 2 wavy grid around the origin, z in [-0.3, 0.3]."""
+    g = np.linspace(-1.0, 1.0, n)
+    xx, yy = np.meshgrid(g, g)
+    v = np.stack([xx.ravel(), yy.ravel(), 0.3 * np.sin(3 * xx).ravel()], axis=1)
+    q = np.arange(n * n).reshape(n, n)[:-1, :-1].ravel()
+    f = np.concatenate([np.stack([q, q + 1, q + n], 1), np.stack([q + 1, q + n + 1, q + n], 1)])
+    return Mesh(v, f)
+
+
+def test_setup_waits_for_the_clip_flag_exactly_when_a_triangle_can_be_clipped():
+    """Setup skips its wait for the clipped flag only in passes whose draws are all inside
+    the frustum by a margin with no clipping user plane (GeometryBuffers.may_clip: a framed
+    mesh), and there no triangle is clipped; a camera whose near plane cuts the mesh, or a
+    user clip plane through it, makes it wait, and then triangles are clipped."""
+    w, h = 200, 150
+    mesh = _wavy_grid()
+    r = Renderer(w, h)
+
+    def clipped(cam, **kw) -> tuple[bool, int]:
+        f = r.render(mesh, cam, cull="none", **kw)
+        return r.chain.geometry.buffers.may_clip, f.stats.counts()["clipped"]
+
+    framed = Camera.framing(*mesh.bounds(), aspect=w / h)
+    assert clipped(framed) == (False, 0)
+    near_cut = Camera.look_at(eye=(0.0, 0.0, 0.1), target=(0.3, 0.2, -1.0), up=(0, 1, 0),
+                              fov_y=70.0, near=0.2, far=10.0)
+    may, n = clipped(near_cut)
+    assert may and n > 0
+    may, n = clipped(framed, clip_planes=[(1.0, 0.0, 0.0, 0.1)])   # keeps x >= -0.1
+    assert may and n > 0

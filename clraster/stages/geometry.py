@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
+from ..config import DRAW_INSIDE
 from ..drawlist import FrameDraws, GeometryPool
 from ._buffers import GrowBuffer
 
@@ -21,7 +22,10 @@ class GeometryBuffers:
     pass. n_user: K, the user clip planes of the draws uploaded last; uclip: the bits of
     those that clip (`FrameDraws.uclip`).
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
-    uploaded last (drawlist.FrameDraws).
+    uploaded last (drawlist.FrameDraws). may_clip: whether setup can clip any of their
+    triangles: False when every draw is inside the frustum by a margin (DRAW_INSIDE: the
+    vertex stage sets no clip bits for it) and no user plane clips (uclip 0), so that
+    setup need not wait to learn that none was clipped (`SetupStage.run`).
     """
 
     positions: GrowBuffer
@@ -39,6 +43,7 @@ class GeometryBuffers:
     uclip: int = 0
     n_verts: int = 0
     n_tris: int = 0
+    may_clip: bool = True
 
 
 class GeometryStage:
@@ -76,4 +81,6 @@ class GeometryStage:
                 gb.write(queue, arr)
         b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
         b.n_user, b.uclip = fd.n_user, fd.uclip
+        inside = (fd.draws["flags"] & DRAW_INSIDE) != 0
+        b.may_clip = bool((fd.n_user > 0 and fd.uclip != 0) or not inside.all())
         return b
