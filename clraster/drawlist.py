@@ -41,7 +41,8 @@ class GeometryPool:
         ~1e6) is stored as small float32 coordinates and its 1e6 offset cancels against the
         camera's in float64 (camera-relative rendering). Zero for meshes near the origin.
     vert_ids: int32 (V,) pool vertex index of each cluster-local vertex (the identity:
-        positions are stored in cluster order; the kernels keep the indirection).
+        positions are stored in cluster order, and the kernels read a cluster's positions
+        in place, without this array; `GeometryStage.upload_pool` checks it).
     local_tris: uint8 (T, 4) local vertex indices of each clustered triangle (4th byte
         padding). face_ids: int32 (T,) the triangle's face index in its mesh.
     clusters: int32 (C, 4) per global cluster (tri_offset, n_tris, vert_offset, n_verts)

@@ -363,18 +363,19 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const Draw *restrict draws, const uint n_draws,                               \
     __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
     __global const int *restrict face_ids, __global const float *restrict pos,             \
-    __global const int *restrict vert_ids, __global const double4 *restrict clip64,        \
+    __global const double4 *restrict clip64,                                               \
     __global const double *restrict rnum, __global const double *restrict uplanes,        \
     const int n_user, const uint uclip, __global const uchar *restrict ucode
 
 /* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
  * ud[3k + j] (vertex j, plane k): user_dist, as the vertex stage's ucode. */
-inline void user_dists(__global const float *pos, __global const int *vert_ids,
-                       __global const int4 *clusters, __global const double *uplanes,
-                       int n_user, uint umask, Draw dr, int i0, int i1, int i2, double *ud)
+inline void user_dists(__global const float *pos, __global const int4 *clusters,
+                       __global const double *uplanes, int n_user, uint umask, Draw dr,
+                       int i0, int i1, int i2, double *ud)
 {
+    /* the pool's positions of the draw's cluster, side by side (vertex.cl) */
     int vb = clusters[dr.cluster].z - dr.vert_base;
-    int v[3] = {vert_ids[vb + i0], vert_ids[vb + i1], vert_ids[vb + i2]};
+    int v[3] = {vb + i0, vb + i1, vb + i2};
     __global const double *q = uplanes + 4 * n_user * dr.instance;
     for (int k = 0; k < n_user; ++k) {
         if (!(umask & (1u << k))) continue;
@@ -492,7 +493,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     uint o_or_ = outcode[i0] | outcode[i1] | outcode[i2];                                 \
     uint u_or_ = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;      \
     double ud_[3 * USER_PLANES_MAX];                                                      \
-    user_dists(pos, vert_ids, clusters, uplanes, n_user, u_or_, draws[get_group_id(0)],   \
+    user_dists(pos, clusters, uplanes, n_user, u_or_, draws[get_group_id(0)],             \
                i0, i1, i2, ud_);                                                          \
     count = clip_and_emit(clip[i0], clip[i1], clip[i2], clip_in(clip64, rnum, i0),        \
                   clip_in(clip64, rnum, i1), clip_in(clip64, rnum, i2),                   \

@@ -30,7 +30,6 @@ typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
 typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 
 __kernel void vertex_transform(__global const float *restrict pos,
-                               __global const int *restrict vert_ids,
                                __global const int4 *restrict clusters,
                                __global const Draw *restrict draws, const uint n_draws,
                                __global const float *restrict mvps, const float kx,
@@ -54,10 +53,22 @@ __kernel void vertex_transform(__global const float *restrict pos,
     int lv0 = (int)get_local_id(0) * VERTEX_LANES;
     if (lv0 >= ci.w) return;
     int n = imin(VERTEX_LANES, ci.w - lv0);
+    /* The pool stores a cluster's positions side by side (clusters[c].z is the first):
+     * read in place, straight for a full set of lanes. Gathered through an index array
+     * (the identity; the kernel read it until session 17), vpgatherdd and vgatherdps
+     * completions were a fifth of this kernel's perf samples (dragon 1080p vertex 3.4 ->
+     * 3.0 ms, bench/kernel_ab.py median of 15). */
+    __global const float *p0 = pos + 3 * (ci.z + lv0);
     flanes px, py, pz;
-    for (int l = 0; l < VERTEX_LANES; ++l) {
-        int vi = vert_ids[ci.z + lv0 + (l < n ? l : 0)];   /* spare lanes: a real vertex */
-        px[l] = pos[3 * vi]; py[l] = pos[3 * vi + 1]; pz[l] = pos[3 * vi + 2];
+    if (n == VERTEX_LANES) {
+        for (int l = 0; l < VERTEX_LANES; ++l) {
+            px[l] = p0[3 * l]; py[l] = p0[3 * l + 1]; pz[l] = p0[3 * l + 2];
+        }
+    } else {
+        for (int l = 0; l < VERTEX_LANES; ++l) {
+            int k = l < n ? l : 0;   /* spare lanes: a real vertex */
+            px[l] = p0[3 * k]; py[l] = p0[3 * k + 1]; pz[l] = p0[3 * k + 2];
+        }
     }
     fvec x = *(fvec *)px, y = *(fvec *)py, z = *(fvec *)pz;
     __global const float *m = mvps + 16 * dr.instance;

@@ -128,3 +128,22 @@ def test_setup_waits_for_the_clip_flag_exactly_when_a_triangle_can_be_clipped():
     assert may and n > 0
     may, n = clipped(framed, clip_planes=[(1.0, 0.0, 0.0, 0.1)])   # keeps x >= -0.1
     assert may and n > 0
+
+
+def test_pool_positions_must_be_in_cluster_order():
+    """The kernels read a cluster's positions in place (no index array): a pool whose
+    vert_ids is not the identity is refused at upload, not rendered wrong."""
+    import dataclasses
+
+    from clraster.boxes import box_geometry
+    from clraster.stages.geometry import GeometryStage
+
+    ctx = device.default_context()
+    queue = cl.CommandQueue(ctx)
+    mins = np.array([[0.0, 0.0, -3.0], [1.0, 0.0, -4.0]])
+    pool, _ = box_geometry(mins, mins + 0.5, np.eye(4, dtype=np.float32))
+    stage = GeometryStage(ctx)
+    stage.upload_pool(queue, pool)   # the identity: accepted
+    shuffled = dataclasses.replace(pool, vert_ids=pool.vert_ids[::-1].copy())
+    with pytest.raises(ValueError, match="cluster order"):
+        stage.upload_pool(queue, shuffled)

@@ -16,7 +16,9 @@ from ._buffers import GrowBuffer
 class GeometryBuffers:
     """Scene → vertex/setup boundary (see drawlist.GeometryPool for shapes and dtypes).
 
-    positions, vert_ids, clusters, local_tris, face_ids: the pool, uploaded once per scene.
+    positions, clusters, local_tris, face_ids: the pool, uploaded once per scene (not its
+    vert_ids: the kernels read a cluster's positions in place, so the pool must store them
+    in cluster order, vert_ids the identity — `GeometryStage.upload_pool` checks it).
     draws: DRAW_DTYPE (D,), mvps: float32 (I, 16), mvps64: float64 (I, 16) and zrows:
     float64 (I, 4), uplanes: float64 (I, K, 4) (drawlist.FrameDraws), uploaded for every
     pass. n_user: K, the user clip planes of the draws uploaded last; uclip: the bits of
@@ -29,7 +31,6 @@ class GeometryBuffers:
     """
 
     positions: GrowBuffer
-    vert_ids: GrowBuffer
     clusters: GrowBuffer
     local_tris: GrowBuffer
     face_ids: GrowBuffer
@@ -49,7 +50,7 @@ class GeometryBuffers:
 class GeometryStage:
     def __init__(self, ctx: cl.Context) -> None:
         # the pool's buffers, then the per-pass records, written by the host (`upload_frame`)
-        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(5)),  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = GeometryBuffers(*(GrowBuffer(ctx) for _ in range(4)),  # type: ignore[arg-type]  # one GrowBuffer per buffer field
                                        *(GrowBuffer(ctx, host=True) for _ in range(5)))
         self._pool: GeometryPool | None = None
 
@@ -57,9 +58,12 @@ class GeometryStage:
         if pool is self._pool:
             return
         b = self.buffers
-        for gb, arr in ((b.positions, pool.positions), (b.vert_ids, pool.vert_ids),
-                        (b.clusters, pool.clusters), (b.local_tris, pool.local_tris),
-                        (b.face_ids, pool.face_ids)):
+        vids = np.asarray(pool.vert_ids)
+        if not np.array_equal(vids, np.arange(vids.shape[0], dtype=vids.dtype)):
+            raise ValueError("the geometry pool must store its positions in cluster order "
+                             "(vert_ids the identity): the kernels read them in place")
+        for gb, arr in ((b.positions, pool.positions), (b.clusters, pool.clusters),
+                        (b.local_tris, pool.local_tris), (b.face_ids, pool.face_ids)):
             buf = gb.ensure(arr.nbytes, "geometry buffer")
             if arr.nbytes:
                 cl.enqueue_copy(queue, buf, np.ascontiguousarray(arr), is_blocking=False)

@@ -92,7 +92,7 @@ class SetupStage:
         # the pool too (user clip plane distances from object space, common.h user_dist) and
         # the vertex stage's double positions (value planes and the clipper's inputs)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
-                     geo.face_ids.buf, geo.positions.buf, geo.vert_ids.buf, verts.clip64.buf,
+                     geo.face_ids.buf, geo.positions.buf, verts.clip64.buf,
                      verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
                      verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)

@@ -52,8 +52,7 @@ class VertexStage:
         n_draws, n_verts = geo.n_draws, geo.n_verts
         group = CLUSTER_MAX // VERTEX_LANES   # work-items per draw (kernels/vertex.cl)
         ev = self.kernel(queue, (max(n_draws, 1) * group,), (group,),
-                         geo.positions.buf,
-                         geo.vert_ids.buf, geo.clusters.buf, geo.draws.buf,
+                         geo.positions.buf, geo.clusters.buf, geo.draws.buf,
                          np.uint32(n_draws), geo.mvps.buf, np.float32(params.kx),
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
