@@ -178,10 +178,10 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
     pc->pad[0] = 0; pc->pad[1] = 0;
 }
 
-/* Set up one triangle from its three snapped window positions (coverage: win_xy) and the same three
- * vertices in clip space, double (values: value_planes). Returns ST_RASTER when it
- * survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2 were
- * exchanged to make the doubled area positive. */
+/* Set up one triangle from its three snapped window positions (coverage: win_xy) and the
+ * same three vertices in clip space, double (values: value_planes). Returns ST_RASTER when
+ * it survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2
+ * were exchanged to make the doubled area positive. */
 ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, double4 c2,
                       int width, int height, double zs, double zo, Piece *pc, int *swapped)
 {
@@ -312,7 +312,8 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
          * does not put w > 0 on the near plane; it has no window position: dropped */
         if (!(f0.w > 0.0f && f1.w > 0.0f && f2.w > 0.0f))
             continue;
-        if (make_piece(win_xy(viewport_vertex(f0, hw, hh)), win_xy(viewport_vertex(f1, hw, hh)),
+        if (make_piece(win_xy(viewport_vertex(f0, hw, hh)),
+                       win_xy(viewport_vertex(f1, hw, hh)),
                        win_xy(viewport_vertex(f2, hw, hh)), value_vertex(poly[0].p, poly[0].r),
                        value_vertex(poly[k].p, poly[k].r),
                        value_vertex(poly[k + 1].p, poly[k + 1].r), width, height, zs, zo,
