@@ -424,6 +424,19 @@ def clear_program_cache(ctx: cl.Context) -> None:
 _in_flight: list[tuple[cl.Event, object]] = []
 
 
+def abandon(queue: cl.CommandQueue, keep: object) -> None:
+    """After an exception that left work enqueued on ``queue`` (an interrupted wait, an
+    error between two launches): keep ``keep`` — the objects owning host memory that work
+    may still read or write (host-mode buffers, frame arrays) — alive until everything
+    enqueued so far has run (a marker in the in-flight list, `device_busy`)."""
+    try:
+        ev = cl.enqueue_marker(queue)
+        queue.flush()
+    except cl.Error:   # a broken queue: nothing more will run on it
+        return
+    _in_flight.append((ev, keep))
+
+
 def device_busy() -> bool:
     """True while work abandoned by an interrupted `wait` may still be running."""
     _in_flight[:] = [(ev, keep) for ev, keep in _in_flight
@@ -450,8 +463,19 @@ class _Waiter:
     def __init__(self) -> None:
         self.pid = os.getpid()
         self.jobs: queue_mod.SimpleQueue = queue_mod.SimpleQueue()
+        self.last: threading.Event | None = None   # the Event of the last marker given
         threading.Thread(target=self._run, args=(self.jobs,), daemon=True,
                          name="clraster-wait").start()
+
+    @property
+    def busy(self) -> bool:
+        """Still waiting for a marker: one whose wait was interrupted (the device goes on
+        with the abandoned work)."""
+        return self.last is not None and not self.last.is_set()
+
+    def submit(self, ev: cl.Event, done: threading.Event) -> None:
+        self.last = done
+        self.jobs.put((ev, done))
 
     @staticmethod
     def _run(jobs: queue_mod.SimpleQueue) -> None:
@@ -462,7 +486,7 @@ class _Waiter:
             ev, done = job
             try:
                 ev.wait()
-            except cl.Error:   # a failed command: the calling thread raises (`wait`)
+            except Exception:   # a failed command: the calling thread raises (`wait`)
                 pass
             done.set()
 
@@ -475,9 +499,14 @@ _waiters = threading.local()
 
 
 def _waiter() -> _Waiter:
-    """The calling thread's `_Waiter` (made on first use, and again after a fork)."""
+    """The calling thread's `_Waiter`: made on first use, again after a fork, and again when
+    the last one is still blocked on an abandoned marker (a wait on another queue would
+    otherwise wait behind it; the old one ends once that marker is done). Raises
+    RuntimeError where no thread can be started (interpreter shutdown)."""
     w = getattr(_waiters, "waiter", None)
-    if w is None or w.pid != os.getpid():
+    if w is None or w.pid != os.getpid() or w.busy:
+        if w is not None and w.pid == os.getpid():
+            w.jobs.put(None)
         w = _waiters.waiter = _Waiter()
     return w
 
@@ -517,8 +546,12 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
                 return
             time.sleep(delay)
         done = threading.Event()
-        _waiter().jobs.put((ev, done))   # set when the marker completes or fails
-        while not done.wait(0.05):
+        try:
+            _waiter().submit(ev, done)   # done is set when the marker completes or fails
+            slice_s = 0.05
+        except RuntimeError:   # no thread can start (interpreter shutdown): poll
+            slice_s = 0.001
+        while not done.wait(slice_s):
             # a safety net: should the waiter never return, the status is polled every 50 ms
             if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)
                 break

@@ -172,8 +172,8 @@ WINVERT_DTYPE = np.dtype([("x", np.int32), ("y", np.int32), ("z", np.float32),
 
 #: A vertex of the frame's vertex stream after the viewport transform (an ``int2`` in the
 #: kernels, common.h ``win_xy``): 24.8 fixed-point window x, y (y down), all that setup
-#: reads of it (the vertex stage wrote a 16-byte WinVert before: dragon 1080p vertex 3.58
-#: -> 2.96 ms, setup 8.55 -> 8.05, frame 0.945x).
+#: reads of it (the vertex stage wrote a 16-byte WinVert before: dragon 1080p vertex 3.54
+#: -> 2.97 ms, setup 8.93 -> 8.72, frame 0.970x).
 WINXY_DTYPE = np.dtype([("x", np.int32), ("y", np.int32)])
 
 #: One set-up line segment (C ``LineRec``), 32 bytes: 24.8 fixed-point window endpoints in

@@ -172,8 +172,9 @@ inline WinVert viewport_vertex(float4 c, float hw, float hh)
 }
 
 /* The window position of a WinVert as the vertex stream holds it: an int2 (x, y), not a
- * struct of two ints. PoCL loaded and stored the struct field by field; as int2 the vertex
- * stage and setup ran 0.84x and 0.94x (dragon 1080p, bench/proc_ab.py 15 rounds). */
+ * struct of two ints, which PoCL loaded and stored field by field (the same 8 bytes as a
+ * struct gained nothing; as int2, dragon 1080p vertex 3.54 -> 2.97 ms, setup 8.93 -> 8.72,
+ * against the 16-byte WinVert: bench/README.md, session 17). */
 inline int2 win_xy(WinVert v)
 {
     return (int2)(v.x, v.y);

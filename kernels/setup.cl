@@ -503,7 +503,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
 } while (0)
 
 /* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into
- * clip_count; other triangles keep setup_triangles' 0. */
+ * clip_count; other triangles' entries are left unwritten (read through status). */
 __kernel void setup_count_clipped(__global const float4 *restrict clip,
                                   __global const ushort *restrict outcode, DRAW_ARGS,
                                   const int width, const int height, const float kx,

@@ -29,7 +29,10 @@ class GrowBuffer:
     where the device works in host memory itself (`clraster.device.shares_host_memory`),
     the buffer is a CL_MEM_USE_HOST_PTR buffer over a page-aligned array of its own, so
     `read` and `write` are plain memory accesses instead of commands; elsewhere they are
-    blocking reads and queued writes.
+    blocking reads and queued writes. In host mode the array is this object's: `write`,
+    and an `ensure` or `trim` that reallocates, only while no enqueued command uses the
+    buffer, and keep the owner alive while one may (`clraster.device.wait`'s ``keep``,
+    `clraster.device.abandon`).
     """
 
     def __init__(self, ctx: cl.Context, flags: int = cl.mem_flags.READ_WRITE,

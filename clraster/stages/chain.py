@@ -11,11 +11,14 @@ so a frame drawn in several passes into the same frame buffers reports the sums.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any, cast
 
 import pyopencl as cl
 
 from ..config import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE, RasterConfig
+from ..device import abandon, wait
 from ..drawlist import FrameDraws
 from ..params import FrameParams, FrameTotals
 from ..streaming import BinBudgetExceeded
@@ -36,6 +39,13 @@ class StageChain:
 
     The buffers are reused from pass to pass and grown geometrically; a pass overwrites the
     previous pass's stage buffers (not the frame buffers it rasterizes into).
+
+    A pass whose host code writes buffers (the draw records, setup's flag: host mode,
+    `GrowBuffer`) relies on the queue being idle when it starts, which every pass that
+    ends normally leaves it. One ended by an exception (Ctrl-C in a wait, an error between
+    launches) may leave work running that reads and writes them: the chain then keeps
+    itself alive until that work is done (`clraster.device.abandon`) and the next pass
+    first waits for it (`_pass`).
     """
 
     def __init__(self, ctx: cl.Context, config: RasterConfig, *, raster: bool = True) -> None:
@@ -48,6 +58,24 @@ class StageChain:
         self.raster = RasterStage(ctx, config) if raster else None
         for gb, nbytes in self.budget_bounds().items():
             gb.bound = nbytes
+        self._abandoned = False   # a pass ended by an exception with work enqueued
+
+    @contextlib.contextmanager
+    def _pass(self, queue: cl.CommandQueue) -> Iterator[None]:
+        """Around one pass (`bin`, `draw`): first wait for what an abandoned pass left
+        running; on an exception other than BinBudgetExceeded (raised only once the queue
+        is idle), abandon what is enqueued, keeping the chain and its buffers alive."""
+        if self._abandoned:
+            wait(queue, keep=self)
+            self._abandoned = False
+        try:
+            yield
+        except BinBudgetExceeded:
+            raise
+        except BaseException:
+            self._abandoned = True
+            abandon(queue, self)
+            raise
 
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
@@ -99,6 +127,11 @@ class StageChain:
         or more clipped pieces — `clraster.streaming.BinBudgetExceeded` is raised before
         anything is counted in ``totals`` (only the device times of the work done).
         """
+        with self._pass(queue):
+            return self._bin_pass(queue, pool, fd, params, totals, max_entries)
+
+    def _bin_pass(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
+                  totals: FrameTotals, max_entries: int | None) -> BinBuffers:
         try:
             bins, events, n_clip = self._bin(queue, pool, fd, params, max_entries, False)
         except BinBudgetExceeded as e:   # the device time spent still counts
@@ -149,6 +182,13 @@ class StageChain:
         This is one pass of whatever size ``fd`` is; `clraster.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
         """
+        with self._pass(queue):
+            return self._draw_pass(queue, pool, fd, params, totals, into, overdraw,
+                                   max_entries, bary)
+
+    def _draw_pass(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
+                   totals: FrameTotals, into: RasterOutput | None, overdraw: bool,
+                   max_entries: int | None, bary: bool) -> RasterOutput:
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
                 into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)

@@ -73,7 +73,8 @@ class GeometryStage:
     def upload_frame(self, queue: cl.CommandQueue, fd: FrameDraws) -> GeometryBuffers:
         """Upload the draw records of ``fd`` (a frame's draws, or any subset of them);
         returns the buffers, the vertex and setup stages' input. Call while no enqueued
-        command uses them (every pass waits for its raster before the next one uploads).
+        command uses them: every pass waits for its raster before the next one uploads,
+        and after one ended by an exception `StageChain` waits for what it left running.
         Where the device works in host memory (`GrowBuffer` host mode) the records are
         copied into the buffers' own arrays; five blocking writes were five commands,
         ~0.2 ms a pass before the vertex stage could start."""

@@ -15,7 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..config import RasterConfig
-from ..device import kernel, program, wait
+from ..device import kernel, program
 from ..inputs import check_boxes
 from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
@@ -204,7 +204,7 @@ class PyramidStage:
             soa[:, :k] = rows
         bbox = b.boxes.ensure(soa.nbytes, "box buffer")
         bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
-        # (no pending command uses these two: every test waits for its result)
+        # (no pending command uses these two: every test waits for its result, in one call)
         b.boxes.write(queue, soa)
         b.view_proj.write(queue, vp)
         n_wi = n_pad // 8
@@ -212,7 +212,10 @@ class PyramidStage:
         ev = self.k_test(queue, (gsize,), (TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
                          np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
                          np.int32(pyramid.n_levels), np.float32(zoff), bres)
-        wait(queue)   # interruptibly (device.wait); the pyramid's build too
+        # Waited for in one C call, not interruptibly (device.wait): the build and the test
+        # take a few ms, and an interrupted wait would leave them running on the frame's
+        # depth and this stage's host-mode buffers (`GrowBuffer`) after the caller lets go.
+        queue.finish()
         return b.result.read(queue, np.uint8, k), ev
 
 

@@ -93,7 +93,7 @@ class RasterStage:
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
                     self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0),
                     np.int32(0))
-        wait(queue, keep=into)
+        wait(queue, keep=(into, self.buffers))   # (the kernel writes seg_stats too)
         into.sync(queue)
         return into
 
@@ -182,8 +182,8 @@ class RasterStage:
 
     def wait(self, queue: cl.CommandQueue, out: RasterOutput) -> None:
         """Wait (interruptibly, `device.wait`) for what is enqueued, ``out`` kept alive
-        should the wait be interrupted."""
-        wait(queue, keep=out)
+        should the wait be interrupted (and the stage's own buffers: seg_stats)."""
+        wait(queue, keep=(out, self.buffers))
 
     def finish(self, queue: cl.CommandQueue, params: FrameParams,
                out: RasterOutput) -> np.ndarray:

@@ -27,8 +27,8 @@ class SetupBuffers:
     status: uint8 (M,) config.ST_* per triangle.
     clip_count: int32 (M,) surviving pieces per clipped triangle, written only where
     status[t] == ST_CLIPPED (undefined elsewhere: read it through status).
-    clip_offset: int32 (M,) exclusive scan of the clipped triangles' piece counts (0 for the
-    others), written only when some triangle is clipped.
+    clip_offset: int32 (M,) exclusive scan of the clipped triangles' piece counts (the
+    others count 0), written only when some triangle is clipped.
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
