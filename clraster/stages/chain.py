@@ -41,11 +41,11 @@ class StageChain:
     previous pass's stage buffers (not the frame buffers it rasterizes into).
 
     A pass whose host code writes buffers (the draw records, setup's flag: host mode,
-    `GrowBuffer`) relies on the queue being idle when it starts, which every pass that
-    ends normally leaves it. One ended by an exception (Ctrl-C in a wait, an error between
-    launches) may leave work running that reads and writes them: the chain then keeps
-    itself alive until that work is done (`clraster.device.abandon`) and the next pass
-    first waits for it (`_pass`).
+    `GrowBuffer`) relies on the queue being idle when it starts, which `draw` leaves it.
+    `bin` returns with its last stages still running, and a pass ended by an exception
+    (Ctrl-C in a wait, an error between launches) may leave work running that reads and
+    writes them: the next pass then first waits for it (`_pass`), and after an exception
+    the chain keeps itself alive until that work is done (`clraster.device.abandon`).
     """
 
     def __init__(self, ctx: cl.Context, config: RasterConfig, *, raster: bool = True) -> None:
@@ -58,24 +58,28 @@ class StageChain:
         self.raster = RasterStage(ctx, config) if raster else None
         for gb, nbytes in self.budget_bounds().items():
             gb.bound = nbytes
-        self._abandoned = False   # a pass ended by an exception with work enqueued
+        #: the queue may still run work of the last pass (a `bin`, or a pass ended by an
+        #: exception) that the host has not waited for
+        self._pending = False
 
     @contextlib.contextmanager
-    def _pass(self, queue: cl.CommandQueue) -> Iterator[None]:
-        """Around one pass (`bin`, `draw`): first wait for what an abandoned pass left
-        running; on an exception other than BinBudgetExceeded (raised only once the queue
-        is idle), abandon what is enqueued, keeping the chain and its buffers alive."""
-        if self._abandoned:
+    def _pass(self, queue: cl.CommandQueue, leaves_work: bool) -> Iterator[None]:
+        """Around one pass (`bin`: ``leaves_work``, `draw`): first wait for what the last
+        pass may have left running; on an exception other than BinBudgetExceeded (raised
+        only once the queue is idle), abandon what is enqueued, keeping the chain and its
+        buffers alive until it is done."""
+        if self._pending:
             wait(queue, keep=self)
-            self._abandoned = False
+            self._pending = False
         try:
             yield
         except BinBudgetExceeded:
             raise
         except BaseException:
-            self._abandoned = True
+            self._pending = True
             abandon(queue, self)
             raise
+        self._pending = leaves_work
 
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
@@ -127,7 +131,7 @@ class StageChain:
         or more clipped pieces — `clraster.streaming.BinBudgetExceeded` is raised before
         anything is counted in ``totals`` (only the device times of the work done).
         """
-        with self._pass(queue):
+        with self._pass(queue, leaves_work=True):
             return self._bin_pass(queue, pool, fd, params, totals, max_entries)
 
     def _bin_pass(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
@@ -182,7 +186,7 @@ class StageChain:
         This is one pass of whatever size ``fd`` is; `clraster.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
         """
-        with self._pass(queue):
+        with self._pass(queue, leaves_work=False):
             return self._draw_pass(queue, pool, fd, params, totals, into, overdraw,
                                    max_entries, bary)
 
