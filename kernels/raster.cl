@@ -16,7 +16,8 @@
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
-#define TRIM_ROWS 4  /* pieces over more rows of a tile than this first narrow their rows */
+#define TRIM_ROWS 4
+#define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))  /* pieces over more rows of a tile than this first narrow their rows */
 
 /* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
  * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
@@ -108,7 +109,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
     float zbuf[TILE_PIXELS] __attribute__((aligned(32)));
     int win[TILE_PIXELS] __attribute__((aligned(32)));   /* winning entry, -1 = none */
-    int wid[TILE_PIXELS];   /* its triangle id; INT_MAX for background */
+    int wid[TILE_PIXELS] __attribute__((aligned(32)));   /* its triangle id; INT_MAX for
+                                                            * background */
     int odc[TILE_PIXELS];   /* fragments tested per pixel (after the tile Hi-Z) */
     for (int i = 0; i < TILE_PIXELS; ++i) {
         zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; odc[i] = 0;
@@ -213,6 +215,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * row in one run) and depth-tests only those, with no edge values at all; a narrow
          * one tests its few pixels' edges directly. Both are the same exact set. */
         bool wide = x1 - x0 >= WIDE_RUN;
+        int8 npass = (int8)(0);   /* the wide rows' passed fragments, per lane */
         /* Only the rows in which each edge can be met by some column of [lx0, lx1]: an
          * edge's best value over the columns is linear in the row, so edge_columns on it
          * narrows the rows (one division at most per edge and entry). The rows cut cover
@@ -241,21 +244,25 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                  * which LLVM vectorizes with blends (a branch here became masked stores:
                  * tile raster spot 0.92x, bunny 0.93x; the narrow loop below keeps its
                  * branches, where selects cost 1.1-1.3x) */
-                int row_passed = 0;   /* an int sum per row: a long one kept the loop at
-                                       * 4 lanes (plant raster 0.976x) */
-                for (int lx = c0; lx <= c1; ++lx) {
-                    float z = maxf(zrow + dzdx * (float)(lx - rx0), zlo);   /* as below */
-                    int i = row + lx;
-                    float zb = zbuf[i];
-                    int wd = wid[i], wk = win[i];
-                    bool pass = (z < zb) | ((z == zb) & (id < wd) & (wd != INT_MAX));
-                    zbuf[i] = pass ? z : zb;
-                    wid[i] = pass ? id : wd;
-                    win[i] = pass ? k : wk;
-                    row_passed += pass;
-                    if (want_overdraw) ++odc[i];
+                for (int b = c0 & ~7; b <= c1; b += 8) {
+                    int8 lx = (int8)(b) + LANE8;
+                    int8 in = (lx >= (int8)(c0)) & (lx <= (int8)(c1));
+                    float8 zf = (float8)(zrow)
+                                + (float8)(dzdx) * __builtin_convertvector(lx - (int8)(rx0),
+                                                                           float8);
+                    float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
+                    int i = row + b;
+                    float8 zb = *(float8 *)&zbuf[i];
+                    int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
+                    int8 pass = in & ((z < zb) | ((z == zb) & ((int8)(id) < wd)
+                                                  & (wd != (int8)(INT_MAX))));
+                    *(float8 *)&zbuf[i] = pass ? z : zb;
+                    *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
+                    *(int8 *)&win[i] = pass ? (int8)(k) : wk;
+                    npass -= pass;
                 }
-                passed += row_passed;
+                if (want_overdraw)
+                    for (int lx = c0; lx <= c1; ++lx) ++odc[row + lx];
                 tested += c1 >= c0 ? c1 - c0 + 1 : 0;
                 r0 += sy0; r1 += sy1; r2 += sy2;
                 continue;
@@ -280,6 +287,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 }
             }
             r0 += sy0; r1 += sy1; r2 += sy2;
+        }
+        if (wide) {
+            int4 n4 = npass.lo + npass.hi;
+            int2 n2 = n4.lo + n4.hi;
+            passed += n2.x + n2.y;
         }
     }
 
