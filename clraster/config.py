@@ -31,6 +31,7 @@ import numpy as np
 from .layout import (
     CLUSTER_LOG2,
     CLUSTER_MAX,
+    COVER_KNOWN,
     CULL_MODES,
     DRAW_DTYPE,
     DRAW_INSIDE,
@@ -68,7 +69,7 @@ from .layout import (
 )
 
 __all__ = [
-    "CLUSTER_LOG2", "CLUSTER_MAX", "CULL_MODES", "DRAW_DTYPE", "DRAW_INSIDE",
+    "CLUSTER_LOG2", "CLUSTER_MAX", "COVER_KNOWN", "CULL_MODES", "DRAW_DTYPE", "DRAW_INSIDE",
     "GUARD_BAND_PIXELS", "MAX_CLIP_VERTICES", "MAX_IMAGE_SIZE", "OC_FRUSTUM", "OC_GB_X_NEG",
     "OC_GB_X_POS", "OC_GB_Y_NEG", "OC_GB_Y_POS", "OC_INVALID", "OC_NEEDS_CLIP", "OC_W_NONPOS",
     "OC_X_NEG", "OC_X_POS", "OC_Y_NEG", "OC_Y_POS", "OC_Z_NEG", "OC_Z_POS", "PF_CLIPPED",

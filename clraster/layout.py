@@ -70,6 +70,10 @@ STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "d
 PF_SWAPPED = 1  #: vertices 1 and 2 were swapped to make the window-space area positive
 PF_CLIPPED = 2  #: made by the clipper; parent barycentrics live in the clipped-bary buffer
 PF_INDEX_SHIFT = 2  #: clipped pieces: flags >> 2 is their index in the clipped-bary buffer
+#: Piece.cover: set when bits 0..3 hold the coverage of the piece's pixel box of at most
+#: 2 x 2 centres, bit 2·oy + ox for the centre (bb_min x + ox, bb_min y + oy); 0 when the
+#: box is larger (the raster evaluates the edges then)
+COVER_KNOWN = 16
 
 # Cull modes (the setup kernel's `cull` argument).
 CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
@@ -153,7 +157,9 @@ assert DRAW_DTYPE.itemsize == 32
 #: and culling (Hi-Z, pyramid.cl's error model) relies on no fragment being nearer than its
 #: vertices. Only that side: a fragment extrapolated farther cannot make culling unsafe, and
 #: every clamped pixel moves the value away from the ray caster's (tests/test_accuracy.py).
-#: pad: keeps the record 16-byte aligned.
+#: cover: for a box of at most 2 x 2 pixel centres, which of them the piece covers
+#: (`COVER_KNOWN`; setup tests them anyway, and the raster then skips its edge functions);
+#: 0 otherwise. pad: keeps the record 16-byte aligned.
 PIECE_DTYPE = np.dtype([
     ("x", np.int32, 3), ("y", np.int32, 3),
     ("bb_min", np.int32), ("bb_max", np.int32),
@@ -161,7 +167,8 @@ PIECE_DTYPE = np.dtype([
     ("z0", np.float32), ("dzdx", np.float32), ("dzdy", np.float32),
     ("l1", np.float32), ("l1x", np.float32), ("l1y", np.float32),
     ("l2", np.float32), ("l2x", np.float32), ("l2y", np.float32),
-    ("r1", np.float32), ("r2", np.float32), ("zlo", np.float32), ("pad", np.int32, 2),
+    ("r1", np.float32), ("r2", np.float32), ("zlo", np.float32), ("cover", np.int32),
+    ("pad", np.int32),
 ])
 assert PIECE_DTYPE.itemsize == 96
 
@@ -202,6 +209,8 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
       "ST_DEGENERATE", "ST_NO_SAMPLE")),
     ("Piece flags; clipped pieces: flags >> PF_INDEX_SHIFT = index into the clipped-bary buffer",
      ("PF_SWAPPED", "PF_CLIPPED", "PF_INDEX_SHIFT")),
+    ("Piece.cover: the coverage bits of a box of at most 2 x 2 pixel centres are known",
+     ("COVER_KNOWN",)),
     ("Cull modes", ("CULL_NONE", "CULL_BACK", "CULL_FRONT")),
     ("Clipping: user clip planes; vertices of a clipped triangle and of the clipper's polygon",
      ("USER_PLANES_MAX", "MAX_CLIP_VERTICES", "POLY_MAX")),

@@ -175,7 +175,7 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
     pc->r2 = (float)(a.w / c.w);
     /* nearest vertex depth: the raster raises fragment depth to it (layout.py PIECE_DTYPE) */
     pc->zlo = (float)mind(mind(z0, z1), z2);
-    pc->pad[0] = 0; pc->pad[1] = 0;
+    pc->pad = 0;
 }
 
 /* Set up one triangle from its three snapped window positions (coverage: win_xy) and the
@@ -203,6 +203,7 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     int py0 = imax((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
     int py1 = imin((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
+    int cover = 0;   /* Piece.cover */
     if (px1 - px0 <= 1 && py1 - py0 <= 1) {
         /* A box of at most 2 x 2 pixel centres (most pieces of a dense mesh): test them
          * here, exactly as the raster would (edge i opposite vertex i, top-left rule), and
@@ -224,12 +225,17 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
         long y1s = (long)(v0.x - v2.x) << SUBPIXEL_BITS;
         long y2s = (long)(v1.x - v0.x) << SUBPIXEL_BITS;
         bool two_x = px1 > px0, two_y = py1 > py0;
-        bool any = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0))
-                   | (two_x & (e0 + x0s >= 0) & (e1 + x1s >= 0) & (e2 + x2s >= 0))
-                   | (two_y & (e0 + y0s >= 0) & (e1 + y1s >= 0) & (e2 + y2s >= 0))
-                   | (two_x & two_y & (e0 + x0s + y0s >= 0) & (e1 + x1s + y1s >= 0)
-                      & (e2 + x2s + y2s >= 0));
-        if (!any) return ST_NO_SAMPLE;
+        int c00 = (e0 >= 0) & (e1 >= 0) & (e2 >= 0);
+        int c10 = two_x & (e0 + x0s >= 0) & (e1 + x1s >= 0) & (e2 + x2s >= 0);
+        int c01 = two_y & (e0 + y0s >= 0) & (e1 + y1s >= 0) & (e2 + y2s >= 0);
+        int c11 = two_x & two_y & (e0 + x0s + y0s >= 0) & (e1 + x1s + y1s >= 0)
+                  & (e2 + x2s + y2s >= 0);
+        cover = c00 | (c10 << 1) | (c01 << 2) | (c11 << 3);
+        if (!cover) return ST_NO_SAMPLE;
+        /* the raster reads these bits instead of evaluating the edges (layout.py
+         * COVER_KNOWN): its per-pixel edge tests were mispredicted branches, and their
+         * set-up 64-bit products, on every such entry */
+        cover |= COVER_KNOWN;
     }
     pc->x[0] = v0.x; pc->x[1] = v1.x; pc->x[2] = v2.x;
     pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
@@ -237,6 +243,7 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     pc->bb_max = px1 | (py1 << 16);
     value_planes(c0, c1, c2, v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, area2,
                  0.5 * (double)width, 0.5 * (double)height, px0, py0, zs, zo, pc);
+    pc->cover = cover;
     return ST_RASTER;
 }
 

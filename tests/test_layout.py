@@ -100,7 +100,7 @@ def test_probe_detects_a_disagreement():
     # long id (still at 32, already 8-aligned) moves the fields after it by 4 and rounds
     # Piece up to 104 bytes
     after = ("flags", "z0", "dzdx", "dzdy", "l1", "l1x", "l1y", "l2", "l2x", "l2y", "r1", "r2",
-             "zlo", "pad")
+             "zlo", "cover", "pad")
     assert bad == {"OC_INVALID", "sizeof(Piece)", "sizeof(Piece.id)",
                    *(f"offsetof(Piece, {f})" for f in after)}
 

@@ -12,6 +12,7 @@ from typing import cast
 import numpy as np
 
 from ..config import (
+    COVER_KNOWN,
     CULL_MODES,
     OC_FRUSTUM,
     OC_GB_X_NEG,
@@ -175,6 +176,7 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     # a box of at most 2 x 2 pixel centres that covers none of them (exact edge functions,
     # top-left rule): no sample either (setup.cl make_piece)
     small = np.flatnonzero((status == ST_RASTER) & (px1 - px0 <= 1) & (py1 - py0 <= 1))
+    cover = np.zeros(k, np.int32)   # PIECE_DTYPE cover (layout.COVER_KNOWN)
     if small.size:
         Xs, Ys = X[small], Y[small]
 
@@ -184,21 +186,24 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
             bias = np.where((dy < 0) | ((dy == 0) & (dx > 0)), 0, 1)
             return dx * (qy - ay) - dy * (qx - ax) >= bias
 
-        anyc = np.zeros(small.size, bool)
+        bits = np.zeros(small.size, np.int32)
         for oy in (0, 1):
             for ox in (0, 1):
                 qxp, qyp = px0[small] + ox, py0[small] + oy
                 inbox = (qxp <= px1[small]) & (qyp <= py1[small])
                 qx = (qxp << SUBPIXEL_BITS) + half
                 qy = (qyp << SUBPIXEL_BITS) + half
-                anyc |= inbox & edge(1, 2, qx, qy) & edge(2, 0, qx, qy) & edge(0, 1, qx, qy)
-        status[small[~anyc]] = ST_NO_SAMPLE
+                hit = inbox & edge(1, 2, qx, qy) & edge(2, 0, qx, qy) & edge(0, 1, qx, qy)
+                bits |= hit.astype(np.int32) << (2 * oy + ox)
+        status[small[bits == 0]] = ST_NO_SAMPLE
+        cover[small] = np.where(bits != 0, bits | COVER_KNOWN, 0)
     ok = status == ST_RASTER
     pc = np.zeros(k, PIECE_DTYPE)
     pc["x"][ok] = X[ok]
     pc["y"][ok] = Y[ok]
     pc["bb_min"][ok] = (px0 | (py0 << 16))[ok]
     pc["bb_max"][ok] = (px1 | (py1 << 16))[ok]
+    pc["cover"][ok] = cover[ok]
     vals = pc[ok]
     value_planes(c[ok], X[ok], Y[ok], area2[ok], width, height, px0[ok], py0[ok], vals,
                  zs, zo)
