@@ -195,20 +195,22 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
              * dragon's raster at 1080p) */
             float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy, zlo = pc->zlo;
             int bx = bb_x(pc->bb_min), by = bb_y(pc->bb_min), id = pc->id;
-            for (int y = y0; y <= y1; ++y) {
+            /* the covered centres inside this tile: columns bx, bx + 1 are bits 0, 1 of
+             * each row's pair, rows by, by + 1 the pairs */
+            int cols = (x0 <= bx ? 5 : 0) | (x1 > bx ? 10 : 0);
+            int rows = (y0 <= by ? 3 : 0) | (y1 > by ? 12 : 0);
+            for (int m = cover & cols & rows; m; m &= m - 1) {
+                int b = ctz(m), x = bx + (b & 1), y = by + (b >> 1);
                 float zrow = z0 + dzdy * (float)(y - by);
-                for (int x = x0; x <= x1; ++x) {
-                    if (!(cover & (1 << (((y - by) << 1) + (x - bx))))) continue;
-                    float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* as below */
-                    int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
-                    float zb = zbuf[i];
-                    int wd = wid[i];
-                    ++tested;
-                    if (want_overdraw) ++odc[i];
-                    if (z < zb || (z == zb && id < wd && wd != INT_MAX)) {
-                        zbuf[i] = z; wid[i] = id; win[i] = k;
-                        ++passed;
-                    }
+                float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* as below */
+                int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
+                float zb = zbuf[i];
+                int wd = wid[i];
+                ++tested;
+                if (want_overdraw) ++odc[i];
+                if (z < zb || (z == zb && id < wd && wd != INT_MAX)) {
+                    zbuf[i] = z; wid[i] = id; win[i] = k;
+                    ++passed;
                 }
             }
             continue;
