@@ -96,6 +96,46 @@ ALWAYS_INLINE void resolve8(__global const Piece *pc, int x, int y,
     }
 }
 
+/* resolve1 for the eight pixels (x .. x + 7, y) whose winners are w[0..7] (entry indices,
+ * -1: none, barycentrics 0), none of them clipped, in float8 lanes: each lane's record
+ * fields gathered, then resolve1's operations in its order, so the same bits. Pixels of a
+ * dense mesh have different winners in most blocks of eight, which resolve8 cannot take:
+ * one at a time, the division's latency was the resolve's cost. */
+ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, int x, int y,
+                                  float *out)
+{
+    int any = w[0];
+    for (int k = 1; k < 8; ++k) any = any >= 0 ? any : w[k];
+    __global const Piece *p[8];
+    for (int k = 0; k < 8; ++k) p[k] = &entries[w[k] >= 0 ? w[k] : any];
+#define G8(f) ((float8)(p[0]->f, p[1]->f, p[2]->f, p[3]->f, p[4]->f, p[5]->f, p[6]->f, p[7]->f))
+#define G8I(f) ((int8)(p[0]->f, p[1]->f, p[2]->f, p[3]->f, p[4]->f, p[5]->f, p[6]->f, p[7]->f))
+    int8 bbmin = G8I(bb_min), fl = G8I(flags);
+    int8 live = *(const int8 *)w >= (int8)(0);
+    float8 fx = __builtin_convertvector((int8)(x) + LANE8 - (bbmin & (int8)(0xFFFF)), float8);
+    float8 fy = __builtin_convertvector((int8)(y) - (bbmin >> 16), float8);
+    float8 l1 = (G8(l1) + G8(l1x) * fx) + G8(l1y) * fy;
+    float8 l2 = (G8(l2) + G8(l2x) * fx) + G8(l2y) * fy;
+    float8 l0 = ((float8)(1.0f) - l1) - l2;
+    float8 q1 = l1 * G8(r1), q2 = l2 * G8(r2);
+#undef G8
+#undef G8I
+    float8 s = (l0 + q1) + q2;
+    float8 inv = (float8)(1.0f) / s;
+    float8 c0 = l0 * inv, c1 = q1 * inv, c2 = q2 * inv;
+    int8 sw = (fl & (int8)(PF_SWAPPED)) != (int8)(0);
+    float8 zero = (float8)(0.0f);
+    float8 B0 = live ? c0 : zero;
+    float8 B1 = live ? (sw ? c2 : c1) : zero;
+    float8 B2 = live ? (sw ? c1 : c2) : zero;
+    float b0[8] __attribute__((aligned(32))), b1[8] __attribute__((aligned(32)));
+    float b2[8] __attribute__((aligned(32)));
+    *(float8 *)b0 = B0; *(float8 *)b1 = B1; *(float8 *)b2 = B2;
+    for (int k = 0; k < 8; ++k) {
+        out[3 * k] = b0[k]; out[3 * k + 1] = b1[k]; out[3 * k + 2] = b2[k];
+    }
+}
+
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
 inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
@@ -358,6 +398,22 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                     *(int8 *)&ri[lx0] = (int8)(pc->id);
                     if (want_bary)
                         resolve8(pc, tx0 + lx0, y, clip_bary, &rb[3 * lx0]);
+                    continue;
+                }
+            }
+            if (want_bary && lx0 + 8 <= nx) {
+                /* mixed winners, none clipped (a clipped one needs its parent
+                 * barycentrics): depth and ids here, barycentrics in lanes */
+                bool clipped = false;
+                for (int j = 0; j < 8; ++j) {
+                    int i = lrow + lx0 + j, ej = win[i];
+                    size_t o = orow + lx0 + j;
+                    rd[lx0 + j] = ej < 0 && use_window && !wmask[o] ? 1.0f : zbuf[i];
+                    ri[lx0 + j] = ej >= 0 ? entries[ej].id : -1;
+                    clipped |= ej >= 0 && (entries[ej].flags & PF_CLIPPED);
+                }
+                if (!clipped) {
+                    resolve8_mixed(entries, &win[lrow + lx0], tx0 + lx0, y, &rb[3 * lx0]);
                     continue;
                 }
             }
