@@ -17,7 +17,35 @@
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
 #define TRIM_ROWS 4
-#define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))  /* pieces over more rows of a tile than this first narrow their rows */
+#define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+
+/* Counting the true lanes (-1) of int8 masks: LANE_COUNTER(c) declares counter c,
+ * COUNT_LANES(c, mask) adds a mask's, LANE_TOTAL(c) is the int total. On PoCL an int8 of
+ * per-lane counts, summed once per piece (a count through memory per block: plant raster
+ * 1.05x). Oclgrind (CLRASTER_PORTABLE) evaluates the vector form wrong — every true lane
+ * counted 255 (its zero-extension of an i1 vector, by all appearances) — so there the
+ * mask goes through memory. */
+#ifdef CLRASTER_PORTABLE
+#define LANE_COUNTER(c) int c = 0
+#define COUNT_LANES(c, mask)                                                              \
+    do {                                                                                  \
+        int m_[8] __attribute__((aligned(32)));                                           \
+        *(int8 *)m_ = (mask);                                                             \
+        for (int j_ = 0; j_ < 8; ++j_) c += m_[j_] != 0;                                  \
+    } while (0)
+#define LANE_TOTAL(c) (c)
+#else
+#define LANE_COUNTER(c) int8 c = (int8)(0)
+#define COUNT_LANES(c, mask) (c -= (mask))
+#define LANE_TOTAL(c) lane_sum(c)
+#endif
+
+inline int lane_sum(int8 v)
+{
+    int4 v4 = v.lo + v.hi;
+    int2 v2 = v4.lo + v4.hi;
+    return v2.x + v2.y;
+}  /* pieces over more rows of a tile than this first narrow their rows */
 
 /* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
  * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
@@ -98,7 +126,7 @@ ALWAYS_INLINE void resolve8(__global const Piece *pc, int x, int y,
 
 /* resolve1 for the eight pixels (x .. x + 7, y) whose winners are w[0..7] (entry indices,
  * -1: none, barycentrics 0), none of them clipped, in float8 lanes: each lane's record
- * fields gathered, then resolve1's operations in its order, so the same bits. Pixels of a
+ * fields gathered (a background lane reads another lane's record and is zeroed), then resolve1's operations in its order, so the same bits. Pixels of a
  * dense mesh have different winners in most blocks of eight, which resolve8 cannot take:
  * one at a time, the division's latency was the resolve's cost. */
 ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, int x, int y,
@@ -106,6 +134,10 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
 {
     int any = w[0];
     for (int k = 1; k < 8; ++k) any = any >= 0 ? any : w[k];
+    if (any < 0) {   /* background only: no record to read */
+        for (int k = 0; k < 24; ++k) out[k] = 0.0f;
+        return;
+    }
     __global const Piece *p[8];
     for (int k = 0; k < 8; ++k) p[k] = &entries[w[k] >= 0 ? w[k] : any];
 #define G8(f) ((float8)(p[0]->f, p[1]->f, p[2]->f, p[3]->f, p[4]->f, p[5]->f, p[6]->f, p[7]->f))
@@ -240,7 +272,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             int cols = (x0 <= bx ? 5 : 0) | (x1 > bx ? 10 : 0);
             int rows = (y0 <= by ? 3 : 0) | (y1 > by ? 12 : 0);
             for (int m = cover & cols & rows; m; m &= m - 1) {
-                int b = ctz(m), x = bx + (b & 1), y = by + (b >> 1);
+                int b = 31 - clz(m & -m);   /* lowest set bit (ctz is OpenCL 2.0) */
+                int x = bx + (b & 1), y = by + (b >> 1);
                 float zrow = z0 + dzdy * (float)(y - by);
                 float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* as below */
                 int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
@@ -284,7 +317,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * row in one run) and depth-tests only those, with no edge values at all; a narrow
          * one tests its few pixels' edges directly. Both are the same exact set. */
         bool wide = x1 - x0 >= WIDE_RUN;
-        int8 npass = (int8)(0);   /* the wide rows' passed fragments, per lane */
+        LANE_COUNTER(npass);   /* the wide rows' passed fragments */
         /* Only the rows in which each edge can be met by some column of [lx0, lx1]: an
          * edge's best value over the columns is linear in the row, so edge_columns on it
          * narrows the rows (one division at most per edge and entry). The rows cut cover
@@ -328,7 +361,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                     *(float8 *)&zbuf[i] = pass ? z : zb;
                     *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
                     *(int8 *)&win[i] = pass ? (int8)(k) : wk;
-                    npass -= pass;
+                    COUNT_LANES(npass, pass);
                 }
                 if (want_overdraw)
                     for (int lx = c0; lx <= c1; ++lx) ++odc[row + lx];
@@ -357,11 +390,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             }
             r0 += sy0; r1 += sy1; r2 += sy2;
         }
-        if (wide) {
-            int4 n4 = npass.lo + npass.hi;
-            int2 n2 = n4.lo + n4.hi;
-            passed += n2.x + n2.y;
-        }
+        if (wide) passed += LANE_TOTAL(npass);
     }
 
     /* resolve: id and perspective-correct barycentrics of the winner, per pixel, a row at
