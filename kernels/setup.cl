@@ -456,12 +456,16 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
             if (st == ST_RASTER) {
                 pc.id = id;
                 pc.flags = sw ? PF_SWAPPED : 0;
-                /* non-temporal: 96 aligned bytes written once and read back only by
-                 * binning, after the whole stage (dragon 1080p setup 0.96x) */
+                /* 96 aligned bytes, as three float8 stores. Ordinary stores, not
+                 * non-temporal ones: binning reads the records right after this stage,
+                 * and on this machine (Xeon VM, a large L3) it then finds them in the
+                 * cache (bench/kernel_ab.py, dragon at 1080p, 15 rounds: bin 4.3 -> 4.0
+                 * ms, setup 9.9 -> 9.7; non-temporal stores had been setup 0.96x on an
+                 * EPYC VM, when binning read the records later) */
                 __global float8 *d8 = (__global float8 *)&pieces[t];
-                NT_STORE(((float8 *)&pc)[0], d8);
-                NT_STORE(((float8 *)&pc)[1], d8 + 1);
-                NT_STORE(((float8 *)&pc)[2], d8 + 2);
+                d8[0] = ((float8 *)&pc)[0];
+                d8[1] = ((float8 *)&pc)[1];
+                d8[2] = ((float8 *)&pc)[2];
                 /* the one tile of a piece whose pixel box lies in one tile (most pieces of
                  * a dense mesh), or the tiles of one over at most 2 x 2: binning counts
                  * them from this word alone (common.h TILE1_*). Binning read the record
