@@ -16,7 +16,7 @@
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
-#define TRIM_ROWS 4
+#define TRIM_ROWS 4  /* pieces over more rows of a tile than this first narrow their rows */
 #define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
 
 /* Counting the true lanes (-1) of int8 masks: LANE_COUNTER(c) declares counter c,
@@ -45,7 +45,7 @@ inline int lane_sum(int8 v)
     int4 v4 = v.lo + v.hi;
     int2 v2 = v4.lo + v4.hi;
     return v2.x + v2.y;
-}  /* pieces over more rows of a tile than this first narrow their rows */
+}
 
 /* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
  * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
@@ -126,9 +126,10 @@ ALWAYS_INLINE void resolve8(__global const Piece *pc, int x, int y,
 
 /* resolve1 for the eight pixels (x .. x + 7, y) whose winners are w[0..7] (entry indices,
  * -1: none, barycentrics 0), none of them clipped, in float8 lanes: each lane's record
- * fields gathered (a background lane reads another lane's record and is zeroed), then resolve1's operations in its order, so the same bits. Pixels of a
- * dense mesh have different winners in most blocks of eight, which resolve8 cannot take:
- * one at a time, the division's latency was the resolve's cost. */
+ * fields gathered (a background lane reads another lane's record and is zeroed), then
+ * resolve1's operations in its order, so the same bits. Pixels of a dense mesh have
+ * different winners in most blocks of eight, which resolve8 cannot take: one at a time,
+ * the division's latency was the resolve's cost. */
 ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, int x, int y,
                                   float *out)
 {
@@ -276,7 +277,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 int b = 31 - clz(m & -m);   /* lowest set bit (ctz is OpenCL 2.0) */
                 int x = bx + (b & 1), y = by + (b >> 1);
                 float zrow = z0 + dzdy * (float)(y - by);
-                float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* as below */
+                float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* see below */
                 int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
                 float zb = zbuf[i];
                 int wd = wid[i];
@@ -324,6 +325,12 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * 17% of the plant's raster samples, the narrow loop's branches the dragon's
          * (bench/kernel_ab.py, 11 rounds: plant raster 16.5 -> 14.5 ms, then dragon
          * 6.1 -> 5.0, bunny 3.7 -> 3.4). */
+        /* In every path: a fragment's depth is never nearer than the piece's nearest
+         * vertex (maxf with zlo: a covered centre up to 1/512 px outside the unsnapped
+         * triangle must not extrapolate past it; Hi-Z relies on it). The test is LESS; on
+         * equal depth the lower triangle id wins, which is "first drawn wins" for
+         * triangles submitted in id order, whatever order culling or clustering actually
+         * submits them in. Nothing beats the clear value (wid INT_MAX). */
         bool wide = x1 - x0 >= WIDE_RUN;
         LANE_COUNTER(npass);   /* passed fragments of the masked blocks */
         LANE_COUNTER(ntest);   /* tested fragments of the narrow rows */
