@@ -58,7 +58,8 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
     int gx0 = bx * side, gy0 = by * side;
     int lw = imin(side, D.y - gx0), lh = imin(side, D.z - gy0);
     if (lw == side && (side & 7) == 0 && 2 * (gx0 + lw) <= ws) {
-        /* A block whose columns need no clamp (all but the last column of blocks): the
+        /* A full block (its width a multiple of 8) whose columns need no clamp (every
+         * block but, unless the width allows, the last column of blocks): the
          * first level in float8 lanes, sixteen source texels of a row at a time split into
          * even and odd columns, the same comparisons in the same order as far4 (so the
          * same bits), and level 0 copied from the same loads. The scalar loops below

@@ -1,13 +1,16 @@
 /* Tile raster: one work-item per row of screen tiles; each tile walks its bin list in
  * submission order.
  *
- * Per entry: intersect the piece's pixel box with the tile, evaluate three exact 64-bit edge
- * functions over it (top-left rule via edge_bias), interpolate window depth linearly in
- * screen space from the piece's depth plane (set up from the unsnapped vertices) and depth-test LESS against the tile's private z-buffer (equal depth: the
- * lower triangle id wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id and perspective-correct
- * barycentrics (relative to the parent triangle's vertices) are resolved once at the end.
- * With hiz, an entry whose nearest depth is behind the tile's farthest depth is skipped
- * untested (tile Hi-Z, see raster_tile).
+ * Per entry: intersect the piece's pixel box with the tile and find the covered pixel
+ * centres exactly (top-left rule via edge_bias): from the coverage bits setup found for a
+ * box of at most 2 x 2 centres (Piece.cover), else from three exact 64-bit edge functions,
+ * a row's run or its blocks of eight columns at a time; interpolate window depth linearly
+ * in screen space from the piece's depth plane (set up from the unsnapped vertices) and
+ * depth-test LESS against the tile's private z-buffer (equal depth: the lower triangle id
+ * wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id
+ * and perspective-correct barycentrics (relative to the parent triangle's vertices) are
+ * resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
+ * farthest depth is skipped untested (tile Hi-Z, see raster_tile).
  *
  * Depth arithmetic is spelled out operation by operation; clraster/reference/raster.py does
  * the same float32 operations, so both z-buffers and hence the triangle ids agree exactly.
@@ -15,6 +18,9 @@
 #include "common.h"
 
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
+#if TILE_SIZE < 8
+#error "the raster works in blocks of eight columns of a tile row: TILE_LOG2 >= 3"
+#endif
 #define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
 #define TRIM_ROWS 4  /* pieces over more rows of a tile than this first narrow their rows */
 #define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))

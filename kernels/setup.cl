@@ -469,9 +469,9 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                 /* the one tile of a piece whose pixel box lies in one tile (most pieces of
                  * a dense mesh), or the tiles of one over at most 2 x 2: binning counts
                  * them from this word alone (common.h TILE1_*). Binning read the record
-                 * of every piece over several tiles, a cache miss each (the records are
-                 * stored non-temporally and their buffer is bigger than the cache): 54%
-                 * of bin_count's perf samples on the dragon at 1080p were that load. */
+                 * of every piece over several tiles, a cache miss each (the records were
+                 * stored non-temporally then, and their buffer is bigger than the cache):
+                 * 54% of bin_count's perf samples on the dragon at 1080p were that load. */
                 int bx0 = bb_x(pc.bb_min), by0 = bb_y(pc.bb_min);
                 int bx1 = bb_x(pc.bb_max), by1 = bb_y(pc.bb_max);
                 int tx0 = bx0 >> TILE_LOG2, ty0 = by0 >> TILE_LOG2;

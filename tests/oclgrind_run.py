@@ -60,7 +60,7 @@ def main() -> int:
         r = Renderer(w, h, config=config, context=ctx)
         for name, mesh in meshes.items():
             for cull in (("none",) if quick else ("none", "back")):
-                a = r.render(mesh, cam, cull=cull)
+                a = r.render(mesh, cam, cull=cull, overdraw=True)
                 b = reference.render(mesh, cam, w, h, cull=cull, config=config)
                 results.append({
                     "case": f"{name} tile_log2={tile_log2} cull={cull}",
@@ -68,10 +68,29 @@ def main() -> int:
                     "depth_mismatch": int((a.depth != b.depth).sum()),
                     "bary_max_diff": float(np.abs(a.barycentrics - b.barycentrics).max()),
                     "counts_equal": a.stats.counts() == b.stats.counts(),
+                    # fragments tested per pixel (the raster's overdraw paths) add up
+                    "overdraw_ok": int(a.overdraw.sum()) == a.stats.fragments_tested,
                     "covered": int(a.mask.sum()),
                     "clipped": a.stats.clipped,
                 })
-    print(json.dumps({"device": ctx.devices[0].name, "results": results}))
+    # the depth pyramid against its twin, at sizes whose rows are not 32-byte aligned and
+    # whose blocks take both the float8 first level and the clamped one (pyramid.cl)
+    from clraster.reference import pyramid as ref_pyramid
+    from clraster.stages.pyramid import PyramidStage
+    queue = cl.CommandQueue(ctx)
+    stage = PyramidStage(ctx)
+    rng = np.random.default_rng(7)
+    pyramids = []
+    for ph, pw in ((37, 130), (70, 97)):
+        depth = rng.random((ph, pw), dtype=np.float32)
+        buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR,
+                        hostbuf=depth)
+        got = stage.build(queue, buf, pw, ph).read(queue)
+        want = ref_pyramid.build(depth)
+        pyramids.append({"size": f"{pw}x{ph}", "equal": len(got) == len(want) and all(
+            np.array_equal(g, t) for g, t in zip(got, want))})
+    print(json.dumps({"device": ctx.devices[0].name, "results": results,
+                      "pyramids": pyramids}))
     return 0
 
 

@@ -82,7 +82,7 @@ def _differential(seed, size, tile_log2, cull, lens, extras, bad, world_view):
     ctx = f"seed={seed} size={size} tile_log2={tile_log2} cull={cull} lens={lens}"
     assert_frames_equal(a, b, ctx + f" world_view={world_view}")
     # barycentrics bit for bit: the raster's scalar and 8-lane resolves (raster.cl
-    # resolve1 / resolve8) do the twin's float32 operations in its order
+    # resolve1 / resolve8 / resolve8_mixed) do the twin's float32 operations in its order
     np.testing.assert_array_equal(a.barycentrics.view(np.uint32),
                                   b.barycentrics.view(np.uint32), err_msg=ctx)
     s = a.stats

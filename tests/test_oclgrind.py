@@ -84,8 +84,10 @@ def test_oclgrind_matches_twin(oclgrind_run):
     results = out["results"]
     assert len(results) >= 12
     bad = [r for r in results if r["id_mismatch"] or r["depth_mismatch"]
-           or r["bary_max_diff"] > 1e-5 or not r["counts_equal"]]
+           or r["bary_max_diff"] > 1e-5 or not r["counts_equal"] or not r["overdraw_ok"]]
     assert not bad, bad
+    pyramids = out["pyramids"]
+    assert len(pyramids) == 2 and all(p["equal"] for p in pyramids), pyramids
     assert any(r["clipped"] > 50 and r["covered"] > 100 for r in results)
 
 
