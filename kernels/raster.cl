@@ -338,6 +338,9 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * triangles submitted in id order, whatever order culling or clustering actually
          * submits them in. Nothing beats the clear value (wid INT_MAX). */
         bool wide = x1 - x0 >= WIDE_RUN;
+        long8 lane8 = __builtin_convertvector(LANE8, long8);
+        long8 s0v = lane8 * (long8)(sx0), s1v = lane8 * (long8)(sx1);
+        long8 s2v = lane8 * (long8)(sx2);   /* lane·s per edge (narrow rows) */
         LANE_COUNTER(npass);   /* passed fragments of the masked blocks */
         LANE_COUNTER(ntest);   /* tested fragments of the narrow rows */
         /* Only the rows in which each edge can be met by some column of [lx0, lx1]: an
@@ -390,10 +393,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             }
             for (int b = c0 & ~7; b <= c1; b += 8) {
                 int8 lx = (int8)(b) + LANE8;
-                long8 ll = __builtin_convertvector(lx, long8);
-                long8 e_in = ((long8)(r0) + ll * (long8)(sx0) >= (long8)(b0))
-                             & ((long8)(r1) + ll * (long8)(sx1) >= (long8)(b1))
-                             & ((long8)(r2) + ll * (long8)(sx2) >= (long8)(b2));
+                /* the edges at the block's columns: r + (b + lane)·s, the lane products
+                 * made once per entry (64-bit vector multiplies are slow) */
+                long8 e_in = ((long8)(r0 + (long)b * sx0) + s0v >= (long8)(b0))
+                             & ((long8)(r1 + (long)b * sx1) + s1v >= (long8)(b1))
+                             & ((long8)(r2 + (long)b * sx2) + s2v >= (long8)(b2));
                 int8 in = __builtin_convertvector(e_in, int8) & (lx >= (int8)(c0))
                           & (lx <= (int8)(c1));
                 float8 zf = (float8)(zrow)
