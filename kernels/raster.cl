@@ -175,6 +175,26 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
     }
 }
 
+/* The depth test of one block of eight columns of a tile row, pixels (row + b .. + 7) of
+ * the tile's private buffers, lanes lx = b + 0..7 where `in` is set: fragment depth
+ * maxf(zrow + dzdx·(lx − rx0), zlo) (the scalar expression per lane, so the same bits),
+ * LESS with the lower id winning ties and nothing beating the clear value; winners store
+ * their depth, id and entry k. Returns the lanes that passed. */
+ALWAYS_INLINE int8 depth_block8(float *zbuf, int *wid, int *win, int i, int8 lx, int8 in,
+                                float zrow, float dzdx, int rx0, float zlo, int id, int k)
+{
+    float8 zf = (float8)(zrow) + (float8)(dzdx) * __builtin_convertvector(lx - (int8)(rx0),
+                                                                           float8);
+    float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
+    float8 zb = *(float8 *)&zbuf[i];
+    int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
+    int8 pass = in & ((z < zb) | ((z == zb) & ((int8)(id) < wd) & (wd != (int8)(INT_MAX))));
+    *(float8 *)&zbuf[i] = pass ? z : zb;
+    *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
+    *(int8 *)&win[i] = pass ? (int8)(k) : wk;
+    return pass;
+}
+
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
 inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
@@ -371,18 +391,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 for (int b = c0 & ~7; b <= c1; b += 8) {
                     int8 lx = (int8)(b) + LANE8;
                     int8 in = (lx >= (int8)(c0)) & (lx <= (int8)(c1));
-                    float8 zf = (float8)(zrow)
-                                + (float8)(dzdx) * __builtin_convertvector(lx - (int8)(rx0),
-                                                                           float8);
-                    float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
-                    int i = row + b;
-                    float8 zb = *(float8 *)&zbuf[i];
-                    int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
-                    int8 pass = in & ((z < zb) | ((z == zb) & ((int8)(id) < wd)
-                                                  & (wd != (int8)(INT_MAX))));
-                    *(float8 *)&zbuf[i] = pass ? z : zb;
-                    *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
-                    *(int8 *)&win[i] = pass ? (int8)(k) : wk;
+                    int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, dzdx, rx0,
+                                             zlo, id, k);
                     COUNT_LANES(npass, pass);
                 }
                 if (want_overdraw)
@@ -400,24 +410,14 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                              & ((long8)(r2 + (long)b * sx2) + s2v >= (long8)(b2));
                 int8 in = __builtin_convertvector(e_in, int8) & (lx >= (int8)(c0))
                           & (lx <= (int8)(c1));
-                float8 zf = (float8)(zrow)
-                            + (float8)(dzdx) * __builtin_convertvector(lx - (int8)(rx0),
-                                                                       float8);
-                float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
-                int i = row + b;
-                float8 zb = *(float8 *)&zbuf[i];
-                int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
-                int8 pass = in & ((z < zb) | ((z == zb) & ((int8)(id) < wd)
-                                              & (wd != (int8)(INT_MAX))));
-                *(float8 *)&zbuf[i] = pass ? z : zb;
-                *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
-                *(int8 *)&win[i] = pass ? (int8)(k) : wk;
+                int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, dzdx, rx0,
+                                         zlo, id, k);
                 COUNT_LANES(npass, pass);
                 COUNT_LANES(ntest, in);
                 if (want_overdraw) {
                     int m_[8] __attribute__((aligned(32)));
                     *(int8 *)m_ = in;
-                    for (int j = 0; j < 8; ++j) odc[i + j] += m_[j] != 0;
+                    for (int j = 0; j < 8; ++j) odc[row + b + j] += m_[j] != 0;
                 }
             }
             r0 += sy0; r1 += sy1; r2 += sy2;
