@@ -5,6 +5,7 @@
     python bench/proc_ab.py HEAD HEAD --kwb '{"outputs": ["depth", "ids"]}'   # same tree, lean
     python bench/proc_ab.py HEAD HEAD --env-b '{"POCL_WORK_GROUP_METHOD": "loops"}'   # PoCL option
     python bench/proc_ab.py 23d0dc1 --size 3840x2160 --rounds 9
+    python bench/proc_ab.py HEAD WORKTREE --scenes dragon --evict 2000   # cold caches
 
 Where `tree_ab.py` starts a process per frame, each tree here keeps one process (one
 Renderer per scene, warmed up) and renders one frame per request, the two trees taking
@@ -16,6 +17,9 @@ medians; and whether the last frames' ids agree. A revision may be a git revisio
 WORKTREE (the checkout) or a folder holding a tree. Scenes: spot, bunny, armadillo, lucy,
 dragon202k, dragon (framed as the harness does), empty (spot behind the camera), plant1m,
 plant5m, plant10m (first person, occlusion culling; ":off" no object culling).
+``--evict MB``: before each timed frame the worker reads and writes an MB-megabyte array,
+so the frame starts with cold caches and TLBs, as in the benchmark harness (where a NumPy
+twin frame and an llvmpipe frame run between two clraster frames).
 """
 from __future__ import annotations
 
@@ -44,6 +48,7 @@ FILES = {"spot": "spot.ply", "dragon": "stanford_dragon_vrip.ply",
          "armadillo": "armadillo_86k.ply", "dragon202k": "stanford_dragon_res2.ply"}
 PLANTS = {"plant1m": 1_000_000, "plant5m": 5_000_000, "plant10m": 10_100_000}
 renderers, scenes = {}, {}
+junk = {}
 
 
 def scene(name):
@@ -77,6 +82,9 @@ for line in sys.stdin:
     kw = dict(kw, **req.get("kw", {}))
     for _ in range(req.get("warm", 0)):
         r.render(t, cam, **kw)
+    if req.get("evict"):   # cold caches, as after the harness's twin and llvmpipe frames
+        junk.setdefault("a", np.ones(req["evict"] << 17))
+        junk["a"] += 1.0
     c0, t0 = cpu_ms(), time.perf_counter()
     f = r.render(t, cam, **kw)
     ms, cpu = (time.perf_counter() - t0) * 1e3, cpu_ms() - c0
@@ -99,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--env-a", default="{}", help="extra environment of A's worker, JSON "
                     '(e.g. \'{"POCL_WORK_GROUP_METHOD": "loops"}\')')
     ap.add_argument("--env-b", default="{}", help="extra environment of B's worker, JSON")
+    ap.add_argument("--evict", type=int, default=0, metavar="MB",
+                    help="touch this many MB before each timed frame (cold caches)")
     a = ap.parse_args(argv)
     w, h = a.size.lower().split("x")
     tmp = Path(tempfile.mkdtemp())
@@ -114,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     def ask(tag: str, scene: str, warm: int = 0) -> dict:
         p, kw = procs[tag]
         assert p.stdin is not None and p.stdout is not None
-        p.stdin.write(json.dumps({"scene": scene, "warm": warm, "kw": kw}) + "\n")
+        p.stdin.write(json.dumps({"scene": scene, "warm": warm, "kw": kw,
+                                  "evict": a.evict}) + "\n")
         p.stdin.flush()
         return json.loads(p.stdout.readline())
 

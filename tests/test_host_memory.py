@@ -16,6 +16,7 @@ from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Camera, Mesh, RasterConfig, Renderer, device
 from clraster.scenes import plant, plant_inside_camera
+from clraster.stages import _buffers
 from clraster.stages._buffers import GrowBuffer
 
 
@@ -57,6 +58,57 @@ def test_grow_buffer_reads_and_writes_what_kernels_see(shared):
     twice(queue, (37,), None, a.buf, b.buf)
     device.wait(queue)
     assert np.array_equal(b.read(queue, np.int32, 37), 2 * src[::-1] + 1)
+
+
+def _vma_flags(addr: int) -> dict[str, str]:
+    """The /proc/self/smaps fields of the mapping that holds address ``addr``."""
+    fields: dict[str, str] = {}
+    inside = False
+    with open("/proc/self/smaps") as fh:
+        for line in fh:
+            head = line.split()[0]
+            if "-" in head and not head.endswith(":"):
+                lo, hi = (int(x, 16) for x in head.split("-"))
+                if inside:
+                    break
+                inside = lo <= addr < hi
+            elif inside:
+                key, _, value = line.partition(":")
+                fields[key] = value.strip()
+    return fields
+
+
+def test_big_stage_buffers_are_advised_huge_pages():
+    """A stage buffer of several MiB gets transparent huge pages advised on its memory
+    (`_buffers.advise_huge_pages`): the kernel then marks its mapping THP-eligible; a small
+    one gets no advice, and neither does a buffer on a device that does not share host
+    memory. The advised buffer still holds what a kernel writes."""
+    ctx = device.default_context()
+    thp = "/sys/kernel/mm/transparent_hugepage/enabled"
+    try:
+        with open(thp) as fh:
+            mode = fh.read()
+    except OSError:
+        pytest.skip("no transparent huge pages here")
+    if "[never]" in mode or _buffers._MADVISE is None or not device.shares_host_memory(ctx):
+        pytest.skip("huge pages disabled, no madvise, or a device with memory of its own")
+    big = GrowBuffer(ctx)
+    buf = big.ensure(24 << 20)
+    queue = cl.CommandQueue(ctx)
+    mapped, _ = cl.enqueue_map_buffer(queue, buf, cl.map_flags.READ, 0, (big.capacity,),
+                                      np.uint8)
+    addr = mapped.ctypes.data
+    mapped.base.release(queue)
+    queue.finish()
+    aligned = -(-addr // (2 << 20)) * (2 << 20)
+    assert _vma_flags(aligned).get("THPeligible") == "1"
+    assert "hg" in _vma_flags(aligned).get("VmFlags", "").split()   # MADV_HUGEPAGE
+    assert not _buffers.advise_huge_pages(ctx, GrowBuffer(ctx).ensure(1 << 20), 1 << 20)
+    assert not _buffers.advise_huge_pages(_context(False), buf, 24 << 20)
+    cl.enqueue_fill_buffer(queue, buf, np.uint32(0x5A5A5A5A), 0, big.capacity)
+    out = np.empty(big.capacity // 4, np.uint32)
+    cl.enqueue_copy(queue, out, buf)
+    assert np.all(out == 0x5A5A5A5A)
 
 
 def _soup(seed: int, w: int, h: int):
