@@ -16,7 +16,8 @@
 
 /* Lanes per work-item: VERTEX_LANES vertices of one cluster go through the transforms as
  * float8 / double8 vectors (the same operations per lane as scalar code, so the same bits);
- * loads, outcodes, rounding and stores stay per vertex. PoCL does not vectorize this kernel
+ * a full set of lanes without user clip planes also gets its outcodes, rounding and
+ * stores in lanes (store_lanes), the rest per vertex. PoCL does not vectorize this kernel
  * across work-items itself (ARCHITECTURE.md, "Writing kernels for PoCL's CPU device"), so
  * the lanes are written out: dragon 871K at 1080p, vertex 5.10 -> 3.66 ms, frame 0.95x
  * (bench/proc_ab.py, 15 rounds). Outcodes as vector compares ORed into int8 masks came out
@@ -28,6 +29,80 @@ typedef double8 dvec;
 /* one value per lane in private memory, aligned for the vector loads and stores above */
 typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
 typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
+
+/* Unaligned vectors (a draw's first vertex has no particular alignment) for the stores of
+ * a full set of lanes. */
+typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
+typedef double double8u __attribute__((ext_vector_type(8), aligned(8)));
+typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
+typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
+typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
+
+/* Outcodes, window positions and every store of a full set of VERTEX_LANES lanes without
+ * user clip planes, in lanes: the same values as the per-vertex loop of vertex_transform
+ * (the same compares; roundeven is rint in the default rounding mode), written as whole
+ * vectors, the float4 and double4 positions interleaved from the lanes by shuffles. The
+ * per-vertex loop (eight rounds of scalar compares, rounding and five stores from the
+ * lanes spilled to private arrays) was most of the kernel: dragon 871K at 1080p, vertex
+ * 2.6/2.8 -> 1.6/1.8 ms, plant 10M occlusion 1.1 -> 0.7 (bench/kernel_ab.py, min/median of
+ * 9 and 7 rounds, outputs identical). Not under CLRASTER_PORTABLE
+ * (Oclgrind has no roundeven, and its vector masks differed before: see above), which
+ * keeps the loop. */
+#ifndef CLRASTER_PORTABLE
+ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec ys,
+                               dvec dx, dvec dy, dvec dz, dvec dw, dvec r, int flags,
+                               float kx, float ky, int reversed,
+                               __global float4 *clip, __global ushort *outcode,
+                               __global int2 *win, __global uchar *ucode,
+                               __global double4 *clip64, __global double *rnum)
+{
+    const int8 exp_mask = (int8)0x7f800000;
+    int8 finite = ((as_int8(cx) & exp_mask) != exp_mask) & ((as_int8(cy) & exp_mask) != exp_mask)
+                  & ((as_int8(cz) & exp_mask) != exp_mask) & ((as_int8(cw) & exp_mask) != exp_mask);
+    int8 o = (int8)0;
+    if (!(flags & DRAW_INSIDE)) {
+        o |= (cx + cw < 0.0f) ? (int8)OC_X_NEG : (int8)0;
+        o |= (cw - cx < 0.0f) ? (int8)OC_X_POS : (int8)0;
+        o |= (cy + cw < 0.0f) ? (int8)OC_Y_NEG : (int8)0;
+        o |= (cw - cy < 0.0f) ? (int8)OC_Y_POS : (int8)0;
+        o |= (cz + cw < 0.0f) ? (int8)OC_Z_NEG : (int8)0;
+        o |= (cw - cz < 0.0f) ? (int8)OC_Z_POS : (int8)0;
+        o |= (cx + kx * cw < 0.0f) ? (int8)OC_GB_X_NEG : (int8)0;
+        o |= (kx * cw - cx < 0.0f) ? (int8)OC_GB_X_POS : (int8)0;
+        o |= (cy + ky * cw < 0.0f) ? (int8)OC_GB_Y_NEG : (int8)0;
+        o |= (ky * cw - cy < 0.0f) ? (int8)OC_GB_Y_POS : (int8)0;
+        o |= (cw > 0.0f) ? (int8)0 : (int8)OC_W_NONPOS;
+    }
+    o = finite ? o : (int8)OC_INVALID;
+    int8 drawn = (o & (int8)(OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0;
+    int8 wx = drawn ? convert_int8(__builtin_elementwise_roundeven(xs)) : (int8)0;
+    int8 wy = drawn ? convert_int8(__builtin_elementwise_roundeven(ys)) : (int8)0;
+    __global float8u *c8 = (__global float8u *)clip;
+    fvec xy_lo = __builtin_shufflevector(cx, cy, 0, 8, 1, 9, 2, 10, 3, 11);
+    fvec xy_hi = __builtin_shufflevector(cx, cy, 4, 12, 5, 13, 6, 14, 7, 15);
+    fvec zw_lo = __builtin_shufflevector(cz, cw, 0, 8, 1, 9, 2, 10, 3, 11);
+    fvec zw_hi = __builtin_shufflevector(cz, cw, 4, 12, 5, 13, 6, 14, 7, 15);
+    c8[0] = __builtin_shufflevector(xy_lo, zw_lo, 0, 1, 8, 9, 2, 3, 10, 11);
+    c8[1] = __builtin_shufflevector(xy_lo, zw_lo, 4, 5, 12, 13, 6, 7, 14, 15);
+    c8[2] = __builtin_shufflevector(xy_hi, zw_hi, 0, 1, 8, 9, 2, 3, 10, 11);
+    c8[3] = __builtin_shufflevector(xy_hi, zw_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+    *(__global ushort8u *)outcode = convert_ushort8(o);
+    __global int8u *w8 = (__global int8u *)win;
+    w8[0] = __builtin_shufflevector(wx, wy, 0, 8, 1, 9, 2, 10, 3, 11);
+    w8[1] = __builtin_shufflevector(wx, wy, 4, 12, 5, 13, 6, 14, 7, 15);
+    *(__global uchar8u *)ucode = (uchar8)0;
+    __global double8u *d8 = (__global double8u *)clip64;
+    dvec dxy_lo = __builtin_shufflevector(dx, dy, 0, 8, 1, 9, 2, 10, 3, 11);
+    dvec dxy_hi = __builtin_shufflevector(dx, dy, 4, 12, 5, 13, 6, 14, 7, 15);
+    dvec dzw_lo = __builtin_shufflevector(dz, dw, 0, 8, 1, 9, 2, 10, 3, 11);
+    dvec dzw_hi = __builtin_shufflevector(dz, dw, 4, 12, 5, 13, 6, 14, 7, 15);
+    d8[0] = __builtin_shufflevector(dxy_lo, dzw_lo, 0, 1, 8, 9, 2, 3, 10, 11);
+    d8[1] = __builtin_shufflevector(dxy_lo, dzw_lo, 4, 5, 12, 13, 6, 7, 14, 15);
+    d8[2] = __builtin_shufflevector(dxy_hi, dzw_hi, 0, 1, 8, 9, 2, 3, 10, 11);
+    d8[3] = __builtin_shufflevector(dxy_hi, dzw_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+    if (reversed) *(__global double8u *)rnum = r;
+}
+#endif
 
 __kernel void vertex_transform(__global const float *restrict pos,
                                __global const int4 *restrict clusters,
@@ -93,13 +168,20 @@ __kernel void vertex_transform(__global const float *restrict pos,
     dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
     dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
     dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
+    uint i0 = (uint)dr.vert_base + (uint)lv0;
+#ifndef CLRASTER_PORTABLE
+    if (n == VERTEX_LANES && n_user == 0) {
+        store_lanes(cx, cy, cz, cw, xs, ys, dx, dy, dz, dw, r, dr.flags, kx, ky, reversed,
+                    clip + i0, outcode + i0, win + i0, ucode + i0, clip64 + i0, rnum + i0);
+        return;
+    }
+#endif
     flanes acx, acy, acz, acw, axs, ays;
     dlanes adx, ady, adz, adw, ar;
     *(fvec *)acx = cx; *(fvec *)acy = cy; *(fvec *)acz = cz; *(fvec *)acw = cw;
     *(fvec *)axs = xs; *(fvec *)ays = ys;
     *(dvec *)adx = dx; *(dvec *)ady = dy; *(dvec *)adz = dz; *(dvec *)adw = dw;
     *(dvec *)ar = r;
-    uint i0 = (uint)dr.vert_base + (uint)lv0;
     for (int l = 0; l < n; ++l) {
         uint i = i0 + l;
         float4 c = (float4)(acx[l], acy[l], acz[l], acw[l]);

@@ -26,6 +26,7 @@ from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Mesh, RasterConfig
 from clraster.config import (
+    DRAW_INSIDE,
     OC_INVALID,
     OC_NEEDS_CLIP,
     OC_W_NONPOS,
@@ -157,3 +158,53 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
                         f"y {t // params.tiles_x})", got[s0:s1], entries[s0:s1])
     # the soup really reached every boundary (not vacuous)
     assert live.any() and p > 0 and entries.size > 0, (int(live.sum()), p, entries.size)
+
+
+@pytest.mark.parametrize("frustum", [False, True])
+def test_vertex_lanes_match_twin_on_invalid_and_w0_vertices(device, frustum):
+    """The vertex stage's full sets of eight lanes (kernels/vertex.cl store_lanes) against
+    the twin: NaN and infinite coordinates (OC_INVALID), vertices in the eye plane (w = 0)
+    and behind it, far outside the guard band, mixed into every set of lanes; with the
+    frustum test on, clusters inside the frustum by a margin skip the plane tests
+    (DRAW_INSIDE) and a lane there is still invalid when its coordinates are."""
+    ctx, queue = device
+    w, h = 96, 64
+    lens = Lens(70.0, 0.5, 100.0)
+    rng = np.random.default_rng(23)
+    v, f, _ = random_soup(rng, 1500, w, h, lens)
+    v = v.copy()
+    pick = rng.choice(v.shape[0], size=(5, v.shape[0] // 40), replace=False)
+    v[pick[0], 0] = np.nan
+    v[pick[1], 1] = np.inf
+    v[pick[2], 2] = -np.inf
+    v[pick[3], 2] = 0.0   # in the eye plane: w = 0
+    v[pick[4], :2] *= 1e7   # far past the guard band
+    # and a dense patch well inside the view: clusters inside the frustum by a margin
+    g = np.linspace(-1.0, 1.0, 31)
+    gx, gy = np.meshgrid(g, g)
+    gv = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, -5.0)], axis=1)
+    q = (np.arange(30)[:, None] * 31 + np.arange(30)[None, :]).ravel()
+    gf = np.concatenate([np.stack([q, q + 1, q + 32], 1), np.stack([q, q + 32, q + 31], 1)])
+    f = np.concatenate([f, gf + v.shape[0]])
+    v = np.concatenate([v, gv])
+    cam = MatrixCamera(lens.projection(w / h))
+    config = RasterConfig()
+    plan = plan_frame(Mesh(v, f), cam, w, h, cull="none", frustum=frustum, cones=False,
+                      cache=PlanCache())
+    pool, fd = plan.pool, plan.frame
+    params = FrameParams.make(w, h, config, "none")
+    chain = StageChain(ctx, config, raster=False)
+    chain.bin(queue, pool, fd, params, FrameTotals())
+    queue.finish()
+    verts, n = chain.vertex.buffers, fd.n_verts
+    clip, oc, win = ref_vertex.transform_draws(pool, fd, params.kx, params.ky, w, h)
+    _assert_records("vertex", "outcode", _read(queue, verts.outcode, np.uint16, n), oc)
+    _assert_records("vertex", "clip position", _read(queue, verts.clip, np.float32, n, (4,)),
+                    clip)
+    plain = (oc & (OC_NEEDS_CLIP | OC_INVALID | OC_W_NONPOS)) == 0
+    _assert_records("vertex", "window position (unclipped vertices)",
+                    _read(queue, verts.win, win.dtype, n)[plain], win[plain])
+    # not vacuous: full sets of lanes with each kind of vertex
+    assert (oc & OC_INVALID).any() and (oc & OC_W_NONPOS).any() and plain.any()
+    if frustum:
+        assert (fd.draws["flags"] & DRAW_INSIDE).any()
