@@ -98,8 +98,10 @@ class RasterConfig:
         batch_triangles: a frame's draws go through the stage chain (vertex → setup →
             bin → raster) in consecutive batches of at most this many triangles, each
             rasterized into the same frame buffers (`clraster.streaming`), so the vertex,
-            setup and bin buffers are sized by the batch, never by the scene: at most 242
-            bytes per triangle of the budget (`StageChain.budget_bounds`). A draw (one
+            setup and bin buffers are sized by the batch, never by the scene: at most 346
+            bytes per triangle of the budget (`StageChain.budget_bounds`: draw records,
+            the vertex stream of three vertices, the setup record, status and tile words,
+            the list of slots to bin). A draw (one
             cluster, ≤ CLUSTER_MAX triangles) is the smallest unit, so values below
             CLUSTER_MAX are refused. Never changes the image or the counts. Each extra pass
             costs a few launches and waits, and the raster reloads the tiles it touches.
@@ -107,8 +109,8 @@ class RasterConfig:
             2**16 was clearly slower (dragon min 203 vs 106 ms; 5M plant outside 1418 vs
             1041–1120 ms), 2**18 a little slower, 2**20 and 2**22 alike within the noise;
             2**20 keeps the dragon (871K triangles) in one pass and bounds these buffers to
-            ~242 MiB (207 MiB with the 64-byte records this was measured with), where 2**22
-            held 642 MiB on the plant.
+            ~346 MiB (207 MiB with the 64-byte records and float32 vertex stream this was
+            measured with), where 2**22 held 642 MiB on the plant.
         batch_entries: the (piece, tile) entries of one pass's bin list, at most (clipped
             pieces count against it too). A batch whose count step finds more is split and
             drawn again in smaller batches (never truncated, never refused); a single draw

@@ -22,6 +22,8 @@ class BinBuffers:
     counts: int32 (C, T) per-chunk tile counts, then per-chunk offsets within each tile.
     tile_count: int32 (T,). tile_start: int32 (T + 1,), tile_start[T] = E.
     hist: int32 (C, 8) triangles per setup status code (config.ST_*) per chunk.
+    live: int32 (M,) per chunk, from the chunk's first slot on, the slots that have
+    something to bin (setup's tile1 not TILE1_NONE), in order; n_live: int32 (C,) how many.
     summary: int32 (10,): E (clamped), 1 when E would not fit an int32, then the status
     counts summed over the chunks.
     entries: PIECE_DTYPE (E,) copies of the setup records, tile-major, submission order
@@ -38,6 +40,8 @@ class BinBuffers:
     summary: GrowBuffer
     entries: GrowBuffer
     hist: GrowBuffer
+    live: GrowBuffer
+    n_live: GrowBuffer
     n_entries: int = 0
     status_counts: np.ndarray = field(default_factory=lambda: np.zeros(8, np.int64))
     cap: int = 0
@@ -55,7 +59,7 @@ class BinStage:
             kernel(prg, name)
             for name in ("bin_count", "bin_offsets", "bin_scan_tiles", "bin_scatter"))
         self.config = config
-        self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = BinBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.buffers.summary = GrowBuffer(ctx, host=True)   # read after a wait
 
     def run(self, queue: cl.CommandQueue, setup: SetupBuffers, params: FrameParams,
@@ -95,14 +99,15 @@ class BinStage:
                   np.uint32(chunks), np.int32(tiles_x), np.int32(n_tiles), counts,
                   setup.tile1.buf)
         hist = b.hist.ensure(4 * 8 * chunks)
-        ev = [self.k_count(queue, (chunks,), (1,), *common, hist)]
+        live = (b.live.ensure(4 * max(m, 1)), b.n_live.ensure(4 * chunks))
+        ev = [self.k_count(queue, (chunks,), (1,), *common, hist, *live)]
         ev.append(self.k_offsets(queue, (n_tiles,), None, np.uint32(chunks),
                                  np.int32(n_tiles), counts, b.tile_count.ensure(4 * n_tiles)))
         tile_start = b.tile_start.ensure(4 * (n_tiles + 1))
         summary_buf = b.summary.ensure(40)
         ev.append(self.k_scan(queue, (1,), (1,), np.int32(n_tiles), b.tile_count.buf,
                               tile_start, np.uint32(chunks), hist, summary_buf))
-        self._scatter_args = (chunks, common, tile_start, summary_buf)
+        self._scatter_args = (chunks, common, tile_start, summary_buf, live)
         rec = PIECE_DTYPE.itemsize
         if defer and b.entries.capacity >= rec:
             cap = b.entries.capacity // rec
@@ -139,9 +144,9 @@ class BinStage:
 
     def _scatter(self, queue: cl.CommandQueue, cap: int) -> cl.Event:
         """bin_scatter into the entry buffer, which holds ``cap`` records."""
-        chunks, common, tile_start, summary_buf = self._scatter_args
+        chunks, common, tile_start, summary_buf, live = self._scatter_args
         return self.k_scatter(queue, (chunks,), (1,), *common, tile_start,
-                              self.buffers.entries.buf, summary_buf, np.int32(cap))
+                              self.buffers.entries.buf, summary_buf, np.int32(cap), *live)
 
     def _check(self, summary: np.ndarray, params: FrameParams, max_entries: int | None,
                events: list) -> int:

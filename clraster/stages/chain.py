@@ -87,7 +87,8 @@ class StageChain:
         least one triangle), vertex stream 67 bytes × 3·M vertices (a draw has at most 3
         vertices per triangle), setup 109·M (96-byte record, status, clip count and
         offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
-        pieces than E is split like one with too many entries), bin entries 96·E. The
+        pieces than E is split like one with too many entries), bin entries 96·E and the
+        list of slots to bin 4·M. The
         per-tile buffers
         (C·T counts, tile starts, tile stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
@@ -98,7 +99,7 @@ class StageChain:
                 v.win: WINXY_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
                 s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
-                b.entries: PIECE_DTYPE.itemsize * e}
+                b.entries: PIECE_DTYPE.itemsize * e, b.live: 4 * m}
 
     def trim(self) -> None:
         """Release the per-pass buffers left above the budget's bound (`budget_bounds`) by
