@@ -300,7 +300,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             int cols = (x0 <= bx ? 5 : 0) | (x1 > bx ? 10 : 0);
             int rows = (y0 <= by ? 3 : 0) | (y1 > by ? 12 : 0);
             for (int m = cover & cols & rows; m; m &= m - 1) {
-                int b = 31 - clz(m & -m);   /* lowest set bit (ctz is OpenCL 2.0) */
+                int b = CTZ((uint)m);   /* lowest set bit */
                 int x = bx + (b & 1), y = by + (b >> 1);
                 float zrow = z0 + dzdy * (float)(y - by);
                 float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* see below */
