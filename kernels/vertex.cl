@@ -75,8 +75,10 @@ ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec
     }
     o = finite ? o : (int8)OC_INVALID;
     int8 drawn = (o & (int8)(OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0;
-    int8 wx = drawn ? convert_int8(__builtin_elementwise_roundeven(xs)) : (int8)0;
-    int8 wy = drawn ? convert_int8(__builtin_elementwise_roundeven(ys)) : (int8)0;
+    /* 0 chosen before the conversion: a non-finite or out-of-range lane converted to int
+     * would be undefined (LLVM's poison), even where the choice then drops it */
+    int8 wx = convert_int8(__builtin_elementwise_roundeven(drawn ? xs : (fvec)0.0f));
+    int8 wy = convert_int8(__builtin_elementwise_roundeven(drawn ? ys : (fvec)0.0f));
     __global float8u *c8 = (__global float8u *)clip;
     fvec xy_lo = __builtin_shufflevector(cx, cy, 0, 8, 1, 9, 2, 10, 3, 11);
     fvec xy_hi = __builtin_shufflevector(cx, cy, 4, 12, 5, 13, 6, 14, 7, 15);

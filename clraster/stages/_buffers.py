@@ -4,7 +4,7 @@ needed more than the frame budget allows (`GrowBuffer.bound`, `trim`)."""
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
+import functools
 import mmap
 import sys
 
@@ -16,27 +16,25 @@ from ..device import shares_host_memory
 
 _MIN_BYTES = 256
 
-#: Transparent huge pages for the big stage buffers (`advise_huge_pages`): 2 MiB pages,
-#: on buffers of at least this many bytes.
+#: Transparent huge pages for the big stage buffers (`advise_huge_pages`): the x86-64 and
+#: arm64 (4 KiB base pages) huge page size; buffers of at least two of them are advised.
 _HUGE = 2 << 20
 _QUEUE_ATTR = "_clraster_advice_queue"
 
 
+@functools.cache
 def _madvise():
-    """libc's madvise and MADV_HUGEPAGE, or None where there are none (not Linux)."""
+    """libc's madvise and MADV_HUGEPAGE, or None where there are none (not Linux); looked
+    up on first use (the process's own symbols: no ldconfig run at import)."""
     if not sys.platform.startswith("linux") or not hasattr(mmap, "MADV_HUGEPAGE"):
         return None
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-    except OSError:
+        fn = ctypes.CDLL(None, use_errno=True).madvise
+    except (OSError, AttributeError):
         return None
-    fn = libc.madvise
     fn.argtypes = (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int)
     fn.restype = ctypes.c_int
     return fn, mmap.MADV_HUGEPAGE
-
-
-_MADVISE = _madvise()
 
 
 def advise_huge_pages(ctx: cl.Context, buf: cl.Buffer, nbytes: int) -> bool:
@@ -56,8 +54,11 @@ def advise_huge_pages(ctx: cl.Context, buf: cl.Buffer, nbytes: int) -> bool:
 
     The buffer stays PoCL's (its lifetime is OpenCL's, in-flight commands included): its
     host address comes from a map on a queue of this module's own, made once per
-    context, and the advice only changes how pages not yet touched are backed."""
-    if _MADVISE is None or nbytes < 2 * _HUGE or not shares_host_memory(ctx):
+    context, and the advice only changes how pages not yet touched are backed. With
+    Linux's default `defrag` setting the first touch of an advised buffer may wait while
+    the kernel compacts memory for a huge page: a cost of the frames that grow a buffer,
+    not of the frames that reuse it."""
+    if nbytes < 2 * _HUGE or _madvise() is None or not shares_host_memory(ctx):
         return False
     queue = getattr(ctx, _QUEUE_ATTR, None)
     try:
@@ -73,7 +74,7 @@ def advise_huge_pages(ctx: cl.Context, buf: cl.Buffer, nbytes: int) -> bool:
         return False
     lo = -(-addr // _HUGE) * _HUGE
     hi = (addr + nbytes) // _HUGE * _HUGE
-    fn, advice = _MADVISE
+    fn, advice = _madvise()
     return hi > lo and fn(lo, hi - lo, advice) == 0
 
 
