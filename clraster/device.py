@@ -24,6 +24,7 @@ off. The variables are set only while PoCL starts, so child processes do not inh
 
 from __future__ import annotations
 
+import atexit
 import functools
 import logging
 import os
@@ -32,6 +33,7 @@ import re
 import threading
 import time
 import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -466,6 +468,7 @@ class _Waiter:
         self.last: threading.Event | None = None   # the Event of the last marker given
         threading.Thread(target=self._run, args=(self.jobs,), daemon=True,
                          name="clraster-wait").start()
+        _all_waiters.add(self)
 
     @property
     def busy(self) -> bool:
@@ -496,6 +499,28 @@ class _Waiter:
 
 
 _waiters = threading.local()
+#: Every `_Waiter` of this process, for `_drain_waiters` at exit.
+_all_waiters: weakref.WeakSet = weakref.WeakSet()
+
+
+def _drain_waiters() -> None:
+    """At interpreter exit (atexit): wait until no waiter thread is inside OpenCL's wait.
+
+    A daemon thread that wakes from ``Event.wait`` (clWaitForEvents, in pyopencl's C++
+    with the GIL released) while the interpreter is finalizing is stopped as it takes the
+    GIL back, from inside a C++ destructor that may not throw, and the process aborts
+    ("terminate called without an active exception"): seen when Ctrl-C ended `clraster
+    render` just as a frame's wait was ending (tests/test_processes.py), and whenever a
+    script exited while the device still ran work a waiter was waiting for. Here the
+    interpreter is still whole: the waiters finish their waits (the device runs what it
+    was given) and go back to their queue, where finalization stops them harmlessly.
+    `clraster.cli` leaves with os._exit while work is in flight, so it does not wait."""
+    for w in list(_all_waiters):
+        if w.pid == os.getpid() and w.last is not None:
+            w.last.wait()
+
+
+atexit.register(_drain_waiters)
 
 
 def _waiter() -> _Waiter:

@@ -273,3 +273,38 @@ def test_pocl_worker_threads_pinned_one_per_cpu(extra, pinned):
     else:
         assert single == [], masks
     assert flags.split()[1] == "False"   # the environment is as it was
+
+
+def test_exit_while_a_wait_is_ending_does_not_abort(tmp_path):
+    """A script that exits while clraster's waiter thread is in OpenCL's wait for work the
+    device is finishing: the waiter used to wake during finalization and abort the process
+    from pyopencl's C++ ("terminate called without an active exception"; the CLI's Ctrl-C
+    test caught it now and then). device._drain_waiters lets it finish first. A minimal
+    script (finalization is short), kernels of a few lengths, each twice: without the
+    drain, about every other run aborted here."""
+    kernel = ("__kernel void spin(__global float *a, const float n) {"
+              " float x = a[get_global_id(0)];"
+              " for (int i = 0; i < (int)n; ++i) x = x * 1.0000001f + 1e-7f;"
+              " a[get_global_id(0)] = x; }")
+    script = tmp_path / "exit_race.py"
+    script.write_text("\n".join([
+        "import sys, threading, time",
+        "import numpy as np",
+        "import pyopencl as cl",
+        "from clraster import device",
+        "ctx = device.default_context()",
+        "q = cl.CommandQueue(ctx)",
+        f"spin = cl.Kernel(cl.Program(ctx, {kernel!r}).build(), 'spin')",
+        "a = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, 8)",
+        "cl.enqueue_fill_buffer(q, a, np.float32(1), 0, 8)",
+        "spin(q, (2,), None, a, np.float32(float(sys.argv[1])))",
+        "ev = cl.enqueue_marker(q)",
+        "q.flush()",
+        "device._waiter().submit(ev, threading.Event())",
+        "time.sleep(0.002)   # the waiter takes the marker and blocks in OpenCL's wait",
+        "sys.exit(0)", ""]))
+    for n in ("1e6", "2e6", "3e6") * 2:
+        res = subprocess.run([sys.executable, str(script), n], cwd=REPO, capture_output=True,
+                             text=True, timeout=120,
+                             env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert res.returncode == 0 and "terminate called" not in res.stderr, (n, res.stderr)
