@@ -22,6 +22,7 @@ import statistics
 import time
 from pathlib import Path
 
+import numpy as np
 import pyopencl as cl
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -62,7 +63,6 @@ def main(argv: list[str] | None = None) -> int:
         r.render(target, cam, **kw)
     per: dict[str, list[tuple[float, int]]] = collections.defaultdict(list)
     walls = []
-    import numpy as np
     junk = np.ones(a.evict << 17) if a.evict else None   # float64: MB << 17 of them
     for _ in range(a.frames):
         if junk is not None:

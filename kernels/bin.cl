@@ -1,15 +1,16 @@
 /* Binning: setup records -> per-tile lists, in submission order, exact sizes.
  *
  * The triangle slots are cut into `chunks` contiguous ranges (one work-item each).
- *   bin_count:   each chunk counts its pieces per tile into its own row counts[chunk][tile],
- *                and its triangles per setup status into hist[chunk][status] (the frame's
- *                stats: the host no longer reads and counts a status byte per triangle).
+ *   bin_count:   each chunk lists its slots that have something to bin (live), counts
+ *                their pieces per tile into its own row counts[chunk][tile], and its
+ *                triangles per setup status into hist[chunk][status] (the frame's stats:
+ *                the host no longer reads and counts a status byte per triangle).
  *   bin_offsets: per tile, turns the column counts[.][tile] into exclusive offsets within the
  *                tile and writes the tile's total.
  *   bin_scan_tiles: one work-item scans the tile totals into tile_start[0..tiles] and sums
  *                the status counts into summary[]; the host reads the summary (total
  *                entries, overflow, status counts) and sizes the entry buffer to fit.
- *   bin_scatter: each chunk walks its pieces again and copies each setup record to
+ *   bin_scatter: each chunk walks its listed slots again and copies each setup record to
  *                entries[tile_start[tile] + counts[chunk][tile]++].
  * Copying whole 96-byte records (not indices) makes the raster read its tile's list
  * sequentially: with indices it chased one random cache line per entry, and on the dragon at

@@ -49,6 +49,20 @@ typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
  * (Oclgrind has no roundeven, and its vector masks differed before: see above), which
  * keeps the loop. */
 #ifndef CLRASTER_PORTABLE
+/* Lanes 0-3 / 4-7 of a and b interleaved (a0 b0 a1 b1 ...), and pairs of them interleaved
+ * (a0 a1 b0 b1 ...): with these, eight lanes of x, y, z, w become eight consecutive
+ * (x, y, z, w) records, stored as four 8-vectors through d (STORE_XYZW8). */
+#define ZIP_LO(a, b) __builtin_shufflevector(a, b, 0, 8, 1, 9, 2, 10, 3, 11)
+#define ZIP_HI(a, b) __builtin_shufflevector(a, b, 4, 12, 5, 13, 6, 14, 7, 15)
+#define PAIRS_LO(a, b) __builtin_shufflevector(a, b, 0, 1, 8, 9, 2, 3, 10, 11)
+#define PAIRS_HI(a, b) __builtin_shufflevector(a, b, 4, 5, 12, 13, 6, 7, 14, 15)
+#define STORE_XYZW8(d, x, y, z, w) do {                                                   \
+        (d)[0] = PAIRS_LO(ZIP_LO(x, y), ZIP_LO(z, w));                                    \
+        (d)[1] = PAIRS_HI(ZIP_LO(x, y), ZIP_LO(z, w));                                    \
+        (d)[2] = PAIRS_LO(ZIP_HI(x, y), ZIP_HI(z, w));                                    \
+        (d)[3] = PAIRS_HI(ZIP_HI(x, y), ZIP_HI(z, w));                                    \
+    } while (0)
+
 ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec ys,
                                dvec dx, dvec dy, dvec dz, dvec dw, dvec r, int flags,
                                float kx, float ky, int reversed,
@@ -57,10 +71,12 @@ ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec
                                __global double4 *clip64, __global double *rnum)
 {
     const int8 exp_mask = (int8)0x7f800000;
-    int8 finite = ((as_int8(cx) & exp_mask) != exp_mask) & ((as_int8(cy) & exp_mask) != exp_mask)
-                  & ((as_int8(cz) & exp_mask) != exp_mask) & ((as_int8(cw) & exp_mask) != exp_mask);
+    int8 finite = ((as_int8(cx) & exp_mask) != exp_mask)
+                  & ((as_int8(cy) & exp_mask) != exp_mask)
+                  & ((as_int8(cz) & exp_mask) != exp_mask)
+                  & ((as_int8(cw) & exp_mask) != exp_mask);   /* finite_f, per lane */
     int8 o = (int8)0;
-    if (!(flags & DRAW_INSIDE)) {
+    if (!(flags & DRAW_INSIDE)) {   /* common.h frustum_outcode, then the loop's bits */
         o |= (cx + cw < 0.0f) ? (int8)OC_X_NEG : (int8)0;
         o |= (cw - cx < 0.0f) ? (int8)OC_X_POS : (int8)0;
         o |= (cy + cw < 0.0f) ? (int8)OC_Y_NEG : (int8)0;
@@ -79,29 +95,13 @@ ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec
      * would be undefined (LLVM's poison), even where the choice then drops it */
     int8 wx = convert_int8(__builtin_elementwise_roundeven(drawn ? xs : (fvec)0.0f));
     int8 wy = convert_int8(__builtin_elementwise_roundeven(drawn ? ys : (fvec)0.0f));
-    __global float8u *c8 = (__global float8u *)clip;
-    fvec xy_lo = __builtin_shufflevector(cx, cy, 0, 8, 1, 9, 2, 10, 3, 11);
-    fvec xy_hi = __builtin_shufflevector(cx, cy, 4, 12, 5, 13, 6, 14, 7, 15);
-    fvec zw_lo = __builtin_shufflevector(cz, cw, 0, 8, 1, 9, 2, 10, 3, 11);
-    fvec zw_hi = __builtin_shufflevector(cz, cw, 4, 12, 5, 13, 6, 14, 7, 15);
-    c8[0] = __builtin_shufflevector(xy_lo, zw_lo, 0, 1, 8, 9, 2, 3, 10, 11);
-    c8[1] = __builtin_shufflevector(xy_lo, zw_lo, 4, 5, 12, 13, 6, 7, 14, 15);
-    c8[2] = __builtin_shufflevector(xy_hi, zw_hi, 0, 1, 8, 9, 2, 3, 10, 11);
-    c8[3] = __builtin_shufflevector(xy_hi, zw_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+    STORE_XYZW8((__global float8u *)clip, cx, cy, cz, cw);
     *(__global ushort8u *)outcode = convert_ushort8(o);
     __global int8u *w8 = (__global int8u *)win;
-    w8[0] = __builtin_shufflevector(wx, wy, 0, 8, 1, 9, 2, 10, 3, 11);
-    w8[1] = __builtin_shufflevector(wx, wy, 4, 12, 5, 13, 6, 14, 7, 15);
+    w8[0] = ZIP_LO(wx, wy);
+    w8[1] = ZIP_HI(wx, wy);
     *(__global uchar8u *)ucode = (uchar8)0;
-    __global double8u *d8 = (__global double8u *)clip64;
-    dvec dxy_lo = __builtin_shufflevector(dx, dy, 0, 8, 1, 9, 2, 10, 3, 11);
-    dvec dxy_hi = __builtin_shufflevector(dx, dy, 4, 12, 5, 13, 6, 14, 7, 15);
-    dvec dzw_lo = __builtin_shufflevector(dz, dw, 0, 8, 1, 9, 2, 10, 3, 11);
-    dvec dzw_hi = __builtin_shufflevector(dz, dw, 4, 12, 5, 13, 6, 14, 7, 15);
-    d8[0] = __builtin_shufflevector(dxy_lo, dzw_lo, 0, 1, 8, 9, 2, 3, 10, 11);
-    d8[1] = __builtin_shufflevector(dxy_lo, dzw_lo, 4, 5, 12, 13, 6, 7, 14, 15);
-    d8[2] = __builtin_shufflevector(dxy_hi, dzw_hi, 0, 1, 8, 9, 2, 3, 10, 11);
-    d8[3] = __builtin_shufflevector(dxy_hi, dzw_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+    STORE_XYZW8((__global double8u *)clip64, dx, dy, dz, dw);
     if (reversed) *(__global double8u *)rnum = r;
 }
 #endif

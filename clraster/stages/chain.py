@@ -88,9 +88,8 @@ class StageChain:
         vertices per triangle), setup 109·M (96-byte record, status, clip count and
         offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
         pieces than E is split like one with too many entries), bin entries 96·E and the
-        list of slots to bin 4·M. The
-        per-tile buffers
-        (C·T counts, tile starts, tile stats) depend on the image only."""
+        list of slots to bin 4·M. The per-tile buffers (C·T counts, tile starts, tile
+        stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
         g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,
                       self.binning.buffers)
