@@ -30,7 +30,8 @@ import numpy.typing as npt
 
 from .inputs import check_mat4, check_size
 
-__all__ = ["Camera", "intrinsics_projection", "look_at_matrix", "perspective_matrix"]
+__all__ = ["Camera", "CameraArgumentError", "intrinsics_projection", "look_at_matrix",
+           "perspective_matrix", "projection_fault"]
 
 #: |sin| of the angle between `up` and the view direction below which they count as parallel.
 _PARALLEL_SIN = 1e-6
@@ -41,6 +42,26 @@ _MAX_COND = 1e12
 _CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
 #: Camera-frame conventions of a pose (camera → world) accepted by the intrinsics cameras.
 CONVENTIONS = ("opencv", "opengl")
+#: Condition number from which a projection counts as singular (float64's 1/eps is 4.5e15):
+#: the bound `clraster.views` has always applied to a camera file's projection matrices.
+_MAX_PROJ_COND = 1e15
+_F32_MAX = float(np.finfo(np.float32).max)
+#: Smallest normal float32: device code may flush anything below it to zero.
+_F32_TINY = float(np.finfo(np.float32).tiny)
+
+
+class CameraArgumentError(ValueError):
+    """A camera constructor's argument is wrong: ``argument`` names it (``"eye"``,
+    ``"fx"``, ``"near"``, ...), so that a camera list file can blame the entry's field of
+    that name. A ValueError like every other camera error."""
+
+    def __init__(self, argument: str, message: str) -> None:
+        self.argument = argument
+        super().__init__(message)
+
+    def __reduce__(self):
+        # pickle by both fields (the default would call __init__ with the message alone)
+        return (type(self), (self.argument, str(self)))
 
 
 def _real_array(value: npt.ArrayLike, name: str, expected: str) -> np.ndarray:
@@ -85,41 +106,155 @@ def _check_lens(fov_y: float, near: float, far: float) -> tuple[float, float, fl
     return fov_y, near, far
 
 
+def _unit_free_cond(p: np.ndarray) -> float:
+    """Condition number of the projection `p` up to a change of units: eye-space units
+    scale its translation column against the other three (P·diag(1, 1, 1, k) images the
+    same scene in units k times larger), so that column is scaled to the size of the
+    others first. A camera whose near plane is 1e-20 or 1e16 units away is as well
+    conditioned as one at 0.1."""
+    top = float(np.abs(p).max())
+    if top == 0.0:
+        return math.inf
+    q = p / top
+    c3, c012 = float(np.abs(q[:, 3]).max()), float(np.abs(q[:, :3]).max())
+    if c3 > 0.0 and c012 > 0.0:
+        q[:, 3] *= c012 / c3
+    if np.linalg.det(q) == 0.0:
+        return math.inf
+    return float(np.linalg.cond(q))
+
+
+def projection_fault(proj: np.ndarray) -> str | None:
+    """Why the eye → clip matrix `proj` ((4, 4) float64) cannot make an image, or None.
+
+    A fault is: a non-finite entry; an entry beyond float32's range (the renderer draws in
+    float32); a matrix that is singular (condition number ≥ 1e15, up to a change of units)
+    in float64, or in float32 once entries below float32's smallest normal number
+    (1.2e-38) are flushed to zero as device code may do. A singular projection maps space
+    onto a plane or a line (or rounding decides the image): the frame would be blank or
+    garbage. The text completes "the projection ...", e.g. "is singular (...)".
+    """
+    if not np.all(np.isfinite(proj)):
+        return "is not finite: a value overflows float64"
+    if np.any(np.abs(proj) > _F32_MAX):
+        return ("overflows float32, the precision the renderer draws in (entries must stay "
+                "below 3.4e38)")
+    p32 = proj.astype(np.float32).astype(np.float64)
+    p32[np.abs(p32) < _F32_TINY] = 0.0
+    for p, where in ((proj, ""), (p32, " in float32, the precision the renderer draws in, "
+                                       "where entries below 1.2e-38 flush to zero")):
+        cond = _unit_free_cond(p)
+        if not cond < _MAX_PROJ_COND:
+            return (f"is singular{where} (not invertible: condition number {cond:.3g} up to "
+                    f"a change of units; it must be below 1e15): it maps space onto a plane "
+                    f"or a line, or rounding decides the image")
+    return None
+
+
+def _refuse_degenerate(proj: np.ndarray, who: str, values: str,
+                       params: Sequence[tuple[str, tuple[int, int], bool]]) -> None:
+    """CameraArgumentError if `projection_fault` finds one, blaming a parameter.
+
+    `params`: (name, the projection entry it sets, whether that entry is a scale). The
+    culprit is the parameter whose entry is non-finite, else the most extreme one: a scale
+    (a focal length, the depth row's) farthest from 1 by orders of magnitude (0 is
+    infinitely far), an offset (principal point, skew) only if it is large (a centred
+    principal point legitimately gives 0).
+    """
+    fault = projection_fault(proj)
+    if fault is None:
+        return
+
+    def extremity(param: tuple[str, tuple[int, int], bool]) -> float:
+        v = abs(float(proj[param[1]]))
+        if not math.isfinite(v) or (param[2] and v == 0.0):
+            return math.inf
+        if v == 0.0:
+            return 0.0
+        mag = math.log10(v)
+        return abs(mag) if param[2] else max(mag, 0.0)
+
+    name, (i, j), _ = max(params, key=extremity)
+    raise CameraArgumentError(name, f"{who}: the projection of {values} {fault}; its most "
+                                    f"extreme entry is P[{i}, {j}] = {proj[i, j]:.3g}, set "
+                                    f"by {name}: use a less extreme {name}")
+
+
+def _check_lens_range(fov_y: float, near: float, far: float, aspect: float | None = None,
+                      who: str = "look_at", values: str | None = None) -> None:
+    """`_refuse_degenerate` for a perspective lens (checked floats) at `aspect`. None: a
+    look_at camera, whose projection changes with the image: checked at aspect 1 (the
+    field of view and the depth range are what can break). `values`: the lens as the
+    message shows it (default fov_y, aspect, near, far)."""
+    if values is None:
+        values = (f"fov_y={fov_y}, near={near}, far={far} (at aspect 1)" if aspect is None
+                  else f"fov_y={fov_y}, aspect={aspect}, near={near}, far={far}")
+    _refuse_degenerate(_perspective(fov_y, 1.0 if aspect is None else aspect, near, far), who,
+                       values, [("fov_y", (1, 1), True), ("aspect", (0, 0), True),
+                                ("far", (2, 2), True), ("near", (2, 3), True)])
+
+
+def _direction(v: np.ndarray) -> np.ndarray:
+    """The unit vector along a finite non-zero `v`, whatever its length."""
+    v = v / np.abs(v).max()
+    return v / np.linalg.norm(v)
+
+
 def look_at_matrix(eye: npt.ArrayLike, target: npt.ArrayLike,
                    up: npt.ArrayLike) -> np.ndarray:
     """World → eye matrix as gluLookAt builds it: (4, 4) float64.
 
     The eye maps to the origin, ``target − eye`` to −Z, and `up` (projected onto the plane
-    orthogonal to the view direction) to +Y; +X = forward × up is right.
+    orthogonal to the view direction) to +Y; +X = forward × up is right. Only the
+    directions of ``target − eye`` and `up` matter: their lengths may be anything float64
+    holds, 1e-320 or 1e300.
 
     Raises:
         ValueError: non-finite or wrong-shaped inputs, ``eye == target``, `up` zero or
-            parallel to the view direction.
+            parallel to the view direction. `CameraArgumentError` (a ValueError) naming
+            ``"eye"`` or ``"target"`` where finite inputs overflow float64: ``target − eye``
+            (the one farther from the origin is named) or the translation ``−R·eye`` (eye).
     """
     eye = _vec3(eye, "eye")
     target = _vec3(target, "target")
     up = _vec3(up, "up")
-    fwd = target - eye
-    dist = float(np.linalg.norm(fwd))
-    if dist == 0.0 or not math.isfinite(dist):
-        raise ValueError(f"eye and target must differ (both are {eye.tolist()}): the view "
-                         f"direction is target − eye")
-    fwd /= dist
-    up_len = float(np.linalg.norm(up))
-    if up_len == 0.0:
-        raise ValueError("up must be a non-zero vector, e.g. (0, 1, 0)")
-    side = np.cross(fwd, up / up_len)
+    if np.array_equal(eye, target):   # (IEEE subtraction of distinct floats is never 0)
+        raise CameraArgumentError("target", f"eye and target must differ (both are "
+                                            f"{eye.tolist()}): the view direction is "
+                                            f"target − eye")
+    with np.errstate(over="ignore"):
+        fwd = target - eye
+    if not np.all(np.isfinite(fwd)):
+        name = "target" if np.abs(target).max() > np.abs(eye).max() else "eye"
+        raise CameraArgumentError(name, f"{name} overflows: target − eye, from eye "
+                                        f"{eye.tolist()} to target {target.tolist()}, exceeds "
+                                        f"float64's range (1.8e308); bring {name} closer to "
+                                        f"the origin")
+    # Only the directions of fwd and up matter: each is scaled to a largest component of 1
+    # before it is normalised, so that its length (1e300 or 1e-320, or 1e200 for up) is not
+    # squared into an overflow or underflow and taken for an infinite or a zero vector.
+    fwd = _direction(fwd)
+    up_max = float(np.abs(up).max())
+    if up_max == 0.0:
+        raise CameraArgumentError("up", "up must be a non-zero vector, e.g. (0, 1, 0)")
+    up_dir = _direction(up)
+    side = np.cross(fwd, up_dir)
     side_len = float(np.linalg.norm(side))
     if side_len < _PARALLEL_SIN:
-        raise ValueError(f"up {up.tolist()} is parallel to the view direction "
-                         f"{fwd.tolist()}; choose an up vector that is not")
+        raise CameraArgumentError("up", f"up {up.tolist()} is parallel to the view direction "
+                                        f"{fwd.tolist()}; choose an up vector that is not")
     side /= side_len
     true_up = np.cross(side, fwd)
     view = np.eye(4)
     view[0, :3] = side
     view[1, :3] = true_up
     view[2, :3] = -fwd
-    view[:3, 3] = -view[:3, :3] @ eye
+    with np.errstate(over="ignore", invalid="ignore"):
+        view[:3, 3] = -view[:3, :3] @ eye
+    if not np.all(np.isfinite(view)):
+        raise CameraArgumentError("eye", f"eye {eye.tolist()} overflows: the view matrix's "
+                                         f"translation −R·eye exceeds float64's range "
+                                         f"(1.8e308); move the scene's origin near the camera")
     return view
 
 
@@ -131,18 +266,26 @@ def perspective_matrix(fov_y: float, aspect: float, near: float, far: float) -> 
         aspect: width / height of the viewport, > 0.
         near, far: distances to the clip planes, 0 < near < far. Eye-space z = −near maps
             to NDC z = −1, z = −far to +1.
+
+    Raises:
+        ValueError: an argument out of its range or not finite. `CameraArgumentError`
+            (``argument`` naming fov_y, aspect, near or far) where the matrix is one
+            `projection_fault` refuses (not invertible in float64 or float32, e.g. fov_y =
+            1e-20).
     """
     fov_y, near, far = _check_lens(fov_y, near, far)
     aspect = float(aspect)
     if not (math.isfinite(aspect) and aspect > 0.0):
         raise ValueError(f"aspect must be finite and > 0, got {aspect}")
+    _check_lens_range(fov_y, near, far, aspect, "perspective_matrix")
     return _perspective(fov_y, aspect, near, far)
 
 
 def _perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
     """`perspective_matrix` of already checked floats: a look_at camera's, every frame
     (its lens was checked when it was made; the checks cost more than the matrix)."""
-    f = 1.0 / math.tan(math.radians(fov_y) / 2.0)
+    t = math.tan(math.radians(fov_y) / 2.0)
+    f = 1.0 / t if t > 0.0 else math.inf   # tan = 0 below fov_y ~3e-322°: refused there
     return np.array([[f / aspect, 0.0, 0.0, 0.0], [0.0, f, 0.0, 0.0],
                      [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
                      [0.0, 0.0, -1.0, 0.0]])
@@ -184,6 +327,12 @@ def intrinsics_projection(K: npt.ArrayLike, width: int, height: int, near: float
         width, height: the image K belongs to.
         near, far: clip-plane distances along the optical axis, 0 < near < far.
 
+    Raises:
+        ValueError: a bad K (`Camera.from_intrinsics`), size, near or far.
+            `CameraArgumentError` (``argument`` naming fx, fy, near, far, skew, cx or cy)
+            where the matrix is one `projection_fault` refuses: not invertible in float64
+            or float32 (fx = 5e-324 gives P[0, 0] = 0 and a blank frame) or beyond float32.
+
     Derivation. clraster samples pixel (i, j) (row 0 on top) at window coordinates
     (i + 0.5, j + 0.5), with ``x_w = (x_ndc + 1)·W/2`` and ``y_w = (1 − y_ndc)·H/2``. So
     the point seen at image coordinates (u, v) must reach ``x_w = u + 0.5``,
@@ -217,14 +366,20 @@ def intrinsics_projection(K: npt.ArrayLike, width: int, height: int, near: float
     fx, s, cx = k[0]
     fy, cy = k[1, 1], k[1, 2]
     proj = np.zeros((4, 4))
-    proj[0, 0] = 2.0 * fx / width
-    proj[0, 1] = -2.0 * s / width
-    proj[0, 2] = 1.0 - 2.0 * (cx + 0.5) / width
-    proj[1, 1] = 2.0 * fy / height
-    proj[1, 2] = 2.0 * (cy + 0.5) / height - 1.0
+    with np.errstate(over="ignore"):   # an fx of 1e308 overflows: refused just below
+        proj[0, 0] = 2.0 * fx / width
+        proj[0, 1] = -2.0 * s / width
+        proj[0, 2] = 1.0 - 2.0 * (cx + 0.5) / width
+        proj[1, 1] = 2.0 * fy / height
+        proj[1, 2] = 2.0 * (cy + 0.5) / height - 1.0
     proj[2, 2] = (far + near) / (near - far)
     proj[2, 3] = 2.0 * far * near / (near - far)
     proj[3, 2] = -1.0
+    _refuse_degenerate(proj, "intrinsics", f"fx={fx}, fy={fy}, s={s}, cx={cx}, cy={cy}, "
+                                           f"near={near}, far={far} ({width}×{height})",
+                       [("fx", (0, 0), True), ("fy", (1, 1), True), ("far", (2, 2), True),
+                        ("near", (2, 3), True), ("skew", (0, 1), False),
+                        ("cx", (0, 2), False), ("cy", (1, 2), False)])
     return proj
 
 
@@ -326,10 +481,24 @@ class Camera:
         Raises:
             ValueError: any input non-finite or of the wrong shape, ``eye == target``,
                 `up` zero or parallel to the view direction, fov_y outside (0, 180),
-                ``near <= 0`` or ``far <= near``.
+                ``near <= 0`` or ``far <= near``. `CameraArgumentError` (a ValueError,
+                ``argument`` naming the culprit) where finite inputs overflow: ``target −
+                eye`` beyond float64 (eye or target), the view's translation −R·eye beyond
+                float32, the renderer's precision (eye), or a lens whose projection (at
+                aspect 1) `projection_fault` refuses: fov_y, near or far so extreme that it
+                is not invertible in float64 or float32 (e.g. fov_y = 1e-20).
         """
         lens = _check_lens(fov_y, near, far)
-        return cls(look_at_matrix(eye, target, up), lens=lens)
+        _check_lens_range(*lens)
+        view = look_at_matrix(eye, target, up)
+        if np.any(np.abs(view) > _F32_MAX):   # only the translation −R·eye can be large
+            dist = math.hypot(*view[:3, 3].tolist())
+            raise CameraArgumentError("eye", f"eye {np.asarray(eye).tolist()} is {dist:.3g} "
+                                             f"from the origin: the view matrix's translation "
+                                             f"overflows float32, the precision the renderer "
+                                             f"draws in (3.4e38); move the scene's origin "
+                                             f"near the camera")
+        return cls(view, lens=lens)
 
     @classmethod
     def from_matrices(cls, view: npt.ArrayLike, projection: npt.ArrayLike) -> Camera:
@@ -379,6 +548,8 @@ class Camera:
         aspect = float(aspect)
         if not (math.isfinite(aspect) and aspect > 0.0):
             raise ValueError(f"aspect must be finite and > 0, got {aspect}")
+        # (before dividing by tan(fov_y/2) below; the depth range is checked by look_at)
+        _check_lens_range(fov_y, 1.0, 2.0, None, "framing", f"fov_y={fov_y}")
         centre = (lo + hi) / 2.0
         radius = float(np.linalg.norm(hi - lo)) / 2.0
         if radius == 0.0:  # a single point: frame a small neighbourhood of it
@@ -435,7 +606,9 @@ class Camera:
         Raises:
             ValueError: K not a (3, 3) upper-triangular matrix with K[2, 2] = 1 and fx, fy
                 > 0; a bad size, near/far, pose (not 4×4, not affine, singular) or
-                convention.
+                convention; intrinsics whose projection is not invertible in float64 or
+                float32 (`intrinsics_projection`: a `CameraArgumentError` naming the
+                parameter).
         """
         proj = intrinsics_projection(K, width, height, near, far)
         pose_gl = _check_pose(pose, convention)
@@ -539,7 +712,12 @@ class Camera:
         far = float(tcam.z_far) if far is None else far
         near, far = _check_near_far(near, far)
         proj = perspective_matrix(float(fov[1]), 1.0, near, far)
-        proj[0, 0] = 1.0 / math.tan(math.radians(float(fov[0])) / 2.0)
+        t = math.tan(math.radians(float(fov[0])) / 2.0)
+        proj[0, 0] = 1.0 / t if t > 0.0 else math.inf   # refused just below
+        _refuse_degenerate(proj, "from_trimesh", f"fov={fov.tolist()}, z_near={near}, "
+                                                 f"z_far={far}",
+                           [("fov_x", (0, 0), True), ("fov_y", (1, 1), True),
+                            ("far", (2, 2), True), ("near", (2, 3), True)])
         if pose is None:
             pose = scene_pose
         pose_gl = _check_pose(pose, "opengl")
@@ -552,65 +730,123 @@ class Camera:
 
         Duck-typed on pyrender's documented attributes (pyrender itself is not needed):
 
-        * ``IntrinsicsCamera``: ``fx, fy, cx, cy, znear, zfar``. pyrender's matrix has no
-          half-pixel shift (its cx, cy are measured from the image's corner, so a centred
-          camera has cx = W/2); this reproduces pyrender's image. The same numbers in
-          :meth:`from_intrinsics` (OpenCV's convention) land half a pixel away.
-        * ``PerspectiveCamera``: ``yfov`` (radians), ``znear``, ``zfar``, ``aspectRatio``
-          (None: ``width / height``).
-        * ``OrthographicCamera``: ``xmag, ymag, znear, zfar``.
+        * ``IntrinsicsCamera``: ``fx, fy, cx, cy, znear, zfar``, fx, fy > 0 (pixels).
+          pyrender's matrix has no half-pixel shift (its cx, cy are measured from the
+          image's corner, so a centred camera has cx = W/2); this reproduces pyrender's
+          image. The same numbers in :meth:`from_intrinsics` (OpenCV's convention) land
+          half a pixel away.
+        * ``PerspectiveCamera``: ``yfov`` (radians, in (0, π)), ``znear``, ``zfar``,
+          ``aspectRatio`` (> 0; None: ``width / height``).
+        * ``OrthographicCamera``: ``xmag, ymag, znear, zfar`` (xmag, ymag > 0, half the
+          view's width and height in world units). As pyrender's renderer does (it passes
+          the viewport to ``get_projection_matrix``, which then replaces xmag by
+          ``width / height · ymag``), xmag is ignored: the view is ymag high and square
+          pixels give its width. An xmag(1), ymag(1) camera at 640×480 has P[0, 0] = 0.75.
 
-        ``zfar=None`` is pyrender's infinite far plane (kept: nothing is far-clipped).
+        ``znear`` > 0; ``zfar`` > znear, or None for pyrender's infinite far plane (kept:
+        nothing is far-clipped; an OrthographicCamera needs a finite one).
 
         Args:
             camera: the pyrender camera (or any object with those attributes).
             pose: (4, 4) camera → world of the camera's node, OpenGL axes (pyrender's).
             width, height: the viewport; the camera is tied to it.
+
+        Raises:
+            ValueError: not a pyrender camera; `CameraArgumentError` (a ValueError,
+                ``argument`` naming the attribute) for an attribute that is not a finite
+                number in its range, or that makes a projection `projection_fault` refuses
+                (not invertible in float64 or float32; e.g. fx = 5e-324); a bad pose.
         """
         width, height = check_size(width, height)
-
-        def attr(name: str):
-            v = getattr(camera, name)
-            return None if v is None else float(v)
-
-        try:
-            znear = attr("znear")
-            zfar = attr("zfar")
-        except AttributeError:
+        kind = type(camera).__name__
+        if not (hasattr(camera, "znear") and hasattr(camera, "zfar")):
             raise ValueError(f"from_pyrender expects a pyrender camera (with znear, zfar), "
-                             f"got {type(camera).__name__}") from None
-        if znear is None or not (math.isfinite(znear) and znear > 0.0):
-            raise ValueError(f"pyrender camera znear must be > 0, got {znear}")
-        if zfar is not None:
-            znear, zfar = _check_near_far(znear, zfar)
+                             f"got {kind}")
+
+        def attr(name: str) -> float:
+            v = getattr(camera, name)
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                raise CameraArgumentError(name, f"pyrender camera ({kind}) {name} must be a "
+                                                f"real number, got {v!r}") from None
+            if not math.isfinite(f):
+                raise CameraArgumentError(name, f"pyrender camera ({kind}) {name} must be "
+                                                f"finite, got {f}")
+            return f
+
+        def positive(name: str, meaning: str) -> float:
+            f = attr(name)
+            if not f > 0.0:
+                raise CameraArgumentError(name, f"pyrender camera ({kind}) {name} is {meaning} "
+                                                f"and must be > 0, got {f}")
+            return f
+
+        znear = positive("znear", "the distance to the near plane")
+        zfar = None if camera.zfar is None else attr("zfar")
+        if zfar is not None and not zfar > znear:
+            raise CameraArgumentError("zfar", f"pyrender camera ({kind}) zfar must be > znear "
+                                              f"(or None: an infinite far plane), got "
+                                              f"znear={znear}, zfar={zfar}")
         proj = np.zeros((4, 4))
+        # (name, entry it sets, a scale?) for _refuse_degenerate to blame
+        params: list[tuple[str, tuple[int, int], bool]]
         if all(hasattr(camera, a) for a in ("fx", "fy", "cx", "cy")):
             # pyrender.IntrinsicsCamera.get_projection_matrix
-            proj[0, 0] = 2.0 * attr("fx") / width
-            proj[1, 1] = 2.0 * attr("fy") / height
-            proj[0, 2] = 1.0 - 2.0 * attr("cx") / width
-            proj[1, 2] = 2.0 * attr("cy") / height - 1.0
+            fx = positive("fx", "the focal length in pixels")
+            fy = positive("fy", "the focal length in pixels")
+            cx, cy = attr("cx"), attr("cy")
+            values = f"fx={fx}, fy={fy}, cx={cx}, cy={cy}"
+            proj[0, 0] = 2.0 * fx / width
+            proj[1, 1] = 2.0 * fy / height
+            proj[0, 2] = 1.0 - 2.0 * cx / width
+            proj[1, 2] = 2.0 * cy / height - 1.0
             proj[3, 2] = -1.0
+            params = [("fx", (0, 0), True), ("fy", (1, 1), True), ("cx", (0, 2), False),
+                      ("cy", (1, 2), False)]
         elif hasattr(camera, "xmag") and hasattr(camera, "ymag"):
-            # pyrender.OrthographicCamera.get_projection_matrix
+            # pyrender.OrthographicCamera.get_projection_matrix(width, height), as its
+            # renderer calls it: xmag replaced by the viewport's aspect times ymag
             if zfar is None:
-                raise ValueError("a pyrender OrthographicCamera needs a finite zfar")
-            proj[0, 0] = 1.0 / attr("xmag")
-            proj[1, 1] = 1.0 / attr("ymag")
+                raise CameraArgumentError("zfar", "a pyrender OrthographicCamera needs a "
+                                                  "finite zfar > znear, got None")
+            positive("xmag", "half the view's width (pyrender's renderer ignores it)")
+            ymag = positive("ymag", "half the view's height in world units")
+            values = f"ymag={ymag} (xmag ignored)"
+            xmag = width / height * ymag
+            # a tiny ymag may make xmag 0 and 1/xmag inf (refused below), not a
+            # ZeroDivisionError
+            proj[0, 0] = 1.0 / xmag if xmag > 0.0 else math.inf
+            proj[1, 1] = 1.0 / ymag
             proj[2, 2] = 2.0 / (znear - zfar)
             proj[2, 3] = (zfar + znear) / (znear - zfar)
             proj[3, 3] = 1.0
+            params = [("ymag", (1, 1), True), ("ymag", (0, 0), True), ("zfar", (2, 2), True)]
         elif hasattr(camera, "yfov"):
             # pyrender.PerspectiveCamera.get_projection_matrix
-            aspect = getattr(camera, "aspectRatio", None)
-            a = width / height if aspect is None else float(aspect)
-            t = math.tan(attr("yfov") / 2.0)
-            proj[0, 0] = 1.0 / (a * t)
-            proj[1, 1] = 1.0 / t
+            yfov = attr("yfov")
+            if not 0.0 < yfov < math.pi:
+                hint = (f" (that is {math.degrees(yfov):.6g}°; given in degrees? pyrender's "
+                        f"yfov is in radians)" if yfov >= math.pi else "")
+                raise CameraArgumentError("yfov", f"pyrender camera ({kind}) yfov is the "
+                                                  f"vertical field of view in radians and "
+                                                  f"must be in (0, π), got {yfov}{hint}")
+            if getattr(camera, "aspectRatio", None) is None:
+                a = width / height
+            else:
+                a = positive("aspectRatio", "the field of view's width / height")
+            values = f"yfov={yfov}, aspectRatio={a}"
+            t = math.tan(yfov / 2.0)
+            # numpy division: a tiny yfov (or a·t) may round to 0, giving inf here (refused
+            # below) where Python's float division raises ZeroDivisionError
+            with np.errstate(over="ignore", divide="ignore", under="ignore"):
+                proj[0, 0] = np.float64(1.0) / (np.float64(a) * t)
+                proj[1, 1] = np.float64(1.0) / np.float64(t)
             proj[3, 2] = -1.0
+            params = [("yfov", (1, 1), True), ("aspectRatio", (0, 0), True)]
         else:
-            raise ValueError(f"from_pyrender: {type(camera).__name__} has none of pyrender's "
-                             f"camera attributes (fx/fy/cx/cy, xmag/ymag, yfov)")
+            raise ValueError(f"from_pyrender: {kind} has none of pyrender's camera "
+                             f"attributes (fx/fy/cx/cy, xmag/ymag, yfov)")
         if proj[3, 2] != 0.0:   # perspective: pyrender's depth rows
             if zfar is None:
                 proj[2, 2] = -1.0
@@ -618,8 +854,10 @@ class Camera:
             else:
                 proj[2, 2] = (zfar + znear) / (znear - zfar)
                 proj[2, 3] = 2.0 * zfar * znear / (znear - zfar)
-        if not np.all(np.isfinite(proj)):
-            raise ValueError("pyrender camera parameters give a non-finite projection")
+                params.append(("zfar", (2, 2), True))
+            params.append(("znear", (2, 3), True))
+        _refuse_degenerate(proj, f"from_pyrender ({kind}, {width}×{height})",
+                           f"{values}, znear={znear}, zfar={zfar}", params)
         pose_gl = _check_pose(pose, "opengl")
         return cls(_view_from_pose(pose_gl), projection=proj, size=(width, height),
                    origin="from_pyrender")

@@ -16,6 +16,11 @@ no file written; ``--allow-empty`` writes the empty image and exits 0), or with 
 views failed (a summary line on stderr says how many and where their messages are); 2 bad
 command-line arguments (argparse's usage message); 130 interrupted (Ctrl-C).
 
+Output paths are checked before the mesh is loaded: two options naming one file (after
+resolving ``./``, ``..``, links and hard links), a name longer than the file system allows,
+a missing or read-only folder, a folder where a file is expected, are refused (exit 1). The
+files of one image are then written all or none (`_write_all`).
+
 Vectors (``--eye``, ``--target``, ``--up``) are three numbers, ``--eye 1 -2 3``; the older
 one-word form ``--eye 1,-2,3`` (or ``--eye=-1,2,3``) is accepted too. A user clip plane
 (``--clip-plane A B C D``, repeatable up to 8 times) is four numbers the same way.
@@ -25,7 +30,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import os
+import secrets
+import stat
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -120,16 +128,64 @@ def _join_vectors(argv: list[str]) -> list[str]:
     return out
 
 
+def _kind(path: Path, option: str, shown: Path) -> str | None:
+    """What `path` is, following links: "folder", "file" (anything else), or None where
+    nothing is or can be (a missing name, a file used as a folder, a name too long for the
+    file system). Any other error (a folder that cannot be searched, a link loop) is a
+    ValueError naming `option` and the path the user gave (`shown`)."""
+    try:
+        st = path.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            return None   # cannot exist; the caller says which name is too long
+        raise ValueError(f"{option} {str(shown)!r} cannot be used: {exc.strerror or exc} "
+                         f"({str(path)!r})") from None
+    return "folder" if stat.S_ISDIR(st.st_mode) else "file"
+
+
+def _check_names(names: Sequence[str], folder: Path, option: str, shown: Path) -> None:
+    """Refuse a name in `names` (to be made in `folder`, or below it) longer than the file
+    system allows (``NAME_MAX`` bytes, `clraster.atomic.name_max`): the write would fail
+    only after the render."""
+    from .atomic import name_max
+
+    limit = name_max(folder)
+    for name in names:
+        size = len(os.fsencode(name))
+        if size > limit:
+            raise ValueError(f"{option} {str(shown)!r}: the name {_clip(name)!r} is {size} "
+                             f"bytes, longer than the {limit} bytes a name may have on that "
+                             f"file system; give a shorter name")
+
+
+def _clip(name: str, keep: int = 40) -> str:
+    return name if len(name) <= keep else f"{name[:keep // 2]}...{name[-keep // 2:]}"
+
+
 def _output_file(path: Path, option: str, suffixes: tuple[str, ...] | None = None) -> None:
     """Refuse an output path before rendering (not after): a folder, a missing or
-    read-only folder, a read-only file, no or the wrong suffix (without ``suffixes``: one
-    imageio does not know as an image format)."""
-    if path.is_dir():
+    read-only folder, a read-only file, a name longer than the file system allows (bytes,
+    ``PC_NAME_MAX``), no or the wrong suffix (without ``suffixes``: one imageio does not
+    know as an image format). A link is checked where it points: the file is written
+    there (`_write_all`)."""
+    target = Path(os.path.realpath(path))
+    folder = target.parent
+    shown_folder = folder if os.path.islink(path) else path.parent
+    kind = _kind(folder, option, path)
+    if kind is None:
+        _check_names(folder.parts[1:], Path(folder.anchor or "."), option, path)
+        raise ValueError(f"{option} {str(path)!r}: folder {str(shown_folder)!r} does not "
+                         f"exist")
+    if kind != "folder":
+        raise ValueError(f"{option} {str(path)!r}: {str(shown_folder)!r} is a file, not a "
+                         f"folder")
+    _check_names([target.name], folder, option, path)
+    if _kind(target, option, path) == "folder":
         raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
-    if not path.parent.is_dir():
-        raise ValueError(f"{option} {str(path)!r}: folder {str(path.parent)!r} does not exist")
-    if not os.access(path.parent, os.W_OK | os.X_OK) or (
-            path.exists() and not os.access(path, os.W_OK)):
+    if not os.access(folder, os.W_OK | os.X_OK) or (
+            target.exists() and not os.access(target, os.W_OK)):
         raise ValueError(f"{option} {str(path)!r} cannot be written (permission denied)")
     suffix = path.suffix.lower()
     if suffixes is None:
@@ -144,6 +200,94 @@ def _output_file(path: Path, option: str, suffixes: tuple[str, ...] | None = Non
     elif suffixes and suffix not in suffixes:   # (): the caller checks the suffix
         raise ValueError(f"{option} {str(path)!r} must end in {' or '.join(suffixes)} "
                          f"(it is written as a NumPy array file)")
+
+
+def check_output_folder(path: Path, option: str, *, parents: bool = False) -> None:
+    """Refuse, before any work, a folder for output files that cannot be used: an existing
+    file, a missing parent folder (with `parents`, missing folders are made: the nearest
+    existing one must be a folder), a name longer than the file system allows, no
+    permission to write in it (or to make it). (``clraster render --views``, ``clraster
+    demo``.)"""
+    folder = Path(os.path.realpath(path))
+    kind = _kind(folder, option, path)
+    if kind == "folder":
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(f"{option} {str(path)!r}: cannot write in that folder "
+                             f"(permission denied)")
+        return
+    if kind is not None:
+        raise ValueError(f"{option} {str(path)!r} is a file; give a folder")
+    missing = [folder.name]   # the folders to make, outermost last
+    parent = folder.parent
+    while (kind := _kind(parent, option, path)) is None and parent != parent.parent:
+        if not parents:
+            break
+        missing.append(parent.name)
+        parent = parent.parent
+    if kind is None:
+        _check_names(parent.parts[1:], Path(parent.anchor or "."), option, path)
+        raise ValueError(f"{option} {str(path)!r}: folder {str(parent)!r} does not exist")
+    if kind != "folder":
+        raise ValueError(f"{option} {str(path)!r}: {str(parent)!r} is a file, not a folder")
+    _check_names(missing[::-1], parent, option, path)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {str(path)!r}: cannot make the folder in {str(parent)!r} "
+                         f"(permission denied)")
+
+
+def _distinct_outputs(outputs: Sequence[tuple[str, Path]]) -> None:
+    """Refuse two options naming one file (one would silently overwrite the other): the
+    same path after resolving ``.``/``..``, the current folder and links, or, for files
+    that exist, two hard links to one file (`os.path.samefile`)."""
+    seen: list[tuple[str, Path, str]] = []
+    for option, path in outputs:
+        real = os.path.normcase(os.path.realpath(path))
+        for other_option, other, other_real in seen:
+            same = real == other_real
+            if not same:
+                with contextlib.suppress(OSError):   # either missing: not a hard link
+                    same = os.path.samefile(path, other)
+            if same:
+                raise ValueError(f"{other_option} {str(other)!r} and {option} {str(path)!r} "
+                                 f"are the same file, so one would overwrite the other; give "
+                                 f"each output its own file")
+        seen.append((option, path, real))
+
+
+def _write_all(writes: Sequence[tuple[Path, Callable[[Path], object]]]) -> None:
+    """Write every output or none. Each ``write(tmp)`` writes a temporary file beside its
+    output (the same folder, so that the rename is atomic; the output's extension, which
+    names the format), and only when all are written are they renamed onto the outputs
+    (where a link points, so a link stays a link). A failure on the way (an EXR without a
+    plugin, ids beyond a 16-bit PNG, a full disk) leaves every output as it was and no
+    temporary file behind. The temporary names are short, so an output name as long as
+    the file system allows works."""
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, write in writes:
+            target = Path(os.path.realpath(path))
+            tmp = _temporary_beside(target, path.suffix)
+            staged.append((tmp, target))
+            write(tmp)
+        for tmp, target in staged:
+            os.replace(tmp, target)
+    except BaseException:
+        for tmp, _ in staged:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+
+
+def _temporary_beside(target: Path, suffix: str) -> Path:
+    """A new empty file ``.clraster-<random>.part<suffix>`` in `target`'s folder (made
+    with the umask's permissions, as the output would be)."""
+    while True:
+        tmp = target.parent / f".clraster-{secrets.token_hex(6)}.part{suffix}"
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return tmp
 
 
 def _positive(text: str) -> float:
@@ -195,7 +339,10 @@ def _render_views(args: argparse.Namespace) -> int:
     from .batch import render_views
     from .renderer import Renderer
 
-    if args.out.exists() and not args.out.is_dir():
+    if args.scheduler is None:
+        check_output_folder(args.out, "--out")
+    elif args.out.exists() and not args.out.is_dir():
+        # a remote cluster's workers see --out; this host may not, so check no more here
         raise ValueError(f"--out {str(args.out)!r} is a file; with --views give a folder")
     if args.mesh == EXAMPLE:
         from .examples import example_mesh
@@ -383,6 +530,9 @@ def _render(args: argparse.Namespace) -> int:
                 check_output_path(path, what)
             except ValueError as exc:
                 raise ValueError(f"{option}: {exc}") from None
+    _distinct_outputs([(option, path) for option, path in
+                       (("--out", args.out), ("--depth", args.depth), ("--ids", args.ids))
+                       if path is not None])
     if args.mesh == EXAMPLE:
         from .examples import example_mesh
 
@@ -438,11 +588,13 @@ def _render(args: argparse.Namespace) -> int:
                            depth_bias=args.wireframe_bias, clip_planes=args.clip_planes)
         image = overlay(image, lines, (20, 20, 20))
         info(f"wireframe: {len(edges):,} edges, {int(lines.mask.sum()):,} pixels drawn")
-    iio.imwrite(args.out, image)
+    writes: list[tuple[Path, Callable[[Path], object]]] = [
+        (args.out, lambda tmp: iio.imwrite(tmp, image))]
     if args.depth is not None:
-        write_output(args.depth, frame, "depth")
+        writes.append((args.depth, lambda tmp: write_output(tmp, frame, "depth")))
     if args.ids is not None:
-        write_output(args.ids, frame, "ids")
+        writes.append((args.ids, lambda tmp: write_output(tmp, frame, "ids")))
+    _write_all(writes)   # all or none: no --out left behind by a failing --ids
 
     info(frame.stats)
     line = f"frame time: {times[0]:.1f} ms (first frame"

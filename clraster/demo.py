@@ -106,16 +106,27 @@ def world_mesh(scene: Scene) -> Mesh:
     return Mesh(np.concatenate(verts), np.concatenate(faces))
 
 
-def depth_picture(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
-    """RGB (H, W, 3) uint8: eye distance (metres, from the window depth through the
+def depth_picture(depth: Any, projection: np.ndarray, *, reversed_z: bool | None = None
+                  ) -> np.ndarray:
+    """RGB (H, W, 3) uint8: eye distance (metres, from the depth buffer through the
     projection's z rows) on a log scale between the nearest and farthest covered pixel,
-    with a colour bar; background black."""
-    d = np.asarray(depth, np.float64)
-    covered = d < 1.0
+    with a colour bar; background black.
+
+    `depth` is a `clraster.Frame` (read by its own ``reversed_z``) or a bare (H, W) buffer
+    whose convention `reversed_z` gives: None/False standard window depth ``(z/w + 1)/2``
+    (covered where < 1), True reversed-Z ``(1 − z/w)/2`` (covered where > 0); as
+    `clraster.shade.depth_image`, which raises ValueError for a flag contradicting the
+    frame."""
+    from .shade import _depth_buffer
+
+    d, rev = _depth_buffer(depth, reversed_z)
+    finite = np.isfinite(d)
+    covered = finite & (d > 0.0) if rev else finite & (d < 1.0)
     out = np.zeros(d.shape + (3,), np.uint8)
     if not covered.any():
         return out
-    zn = 2.0 * d[covered] - 1.0
+    # NDC z from each convention directly (1 − 2d keeps reversed-Z's far precision)
+    zn = 1.0 - 2.0 * d[covered] if rev else 2.0 * d[covered] - 1.0
     p22, p23, p32 = projection[2, 2], projection[2, 3], projection[3, 2]
     # perspective: z_ndc = (p22·z + p23) / (p32·z) at eye-space z; the distance is −z
     dist = np.maximum(p23 / (p22 - p32 * zn), 1e-6)
@@ -302,10 +313,13 @@ def _triangles(text: str) -> int:
 def _run(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
+    from .cli import check_output_folder
     from .renderer import Renderer
     from .scenes import EYE_HEIGHT, plant, plant_inside_camera
     from .shade import shade
 
+    # before the plant is built and rendered (minutes at a million triangles), not after
+    check_output_folder(args.out, "--out", parents=True)
     w, h = args.size
     occlusion = not args.no_occlusion
     t0 = time.perf_counter()
@@ -350,7 +364,7 @@ def _run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     world = world_mesh(scene)
     shaded = shade(frame, world)
-    depth = depth_picture(frame.depth, cam.projection(w, h))
+    depth = depth_picture(frame, cam.projection(w, h))
     over, top = overdraw_picture(cast(np.ndarray, frame.overdraw))   # overdraw=True
     floor_y = float(cam.eye[1]) - EYE_HEIGHT
     plane = inspector_plane(floor_y)

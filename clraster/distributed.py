@@ -18,7 +18,9 @@ per worker) at the end.
 The module has four layers, batch views and sort-last sitting on the same worker state:
 
 * **Client helpers**: `local_cluster` (a LocalCluster of worker processes whose PoCL thread
-  count keeps workers × threads <= cores), `pocl_thread_env`.
+  count keeps workers × threads <= cores), `pocl_thread_env`, `require_workers` (every
+  Dask call here fails with `NoWorkersError` on a cluster with no workers, rather than
+  waiting for one forever).
 * **Worker side**: `worker_renderer` (one `Renderer` per (width, height, config) per worker
   process, made lazily in that process and never pickled), `worker_target` (a scene file
   loaded once per process), `worker_info`. These are module-level dicts guarded by the pid:
@@ -59,11 +61,11 @@ from .frame import Frame
 from .mesh import Mesh
 from .scene import Scene
 
-__all__ = ["POCL_THREAD_VARS", "ChunkRecord", "Part", "ScatteredParts", "SortLastFutures",
-           "ViewsSummary", "WorkerRate", "kd_split", "local_cluster", "partition",
-           "pocl_thread_env", "render_sort_last", "render_views", "scatter_parts",
-           "submit_sort_last", "usable_cores", "worker_info", "worker_renderer",
-           "worker_target"]
+__all__ = ["POCL_THREAD_VARS", "WORKER_WAIT_S", "ChunkRecord", "NoWorkersError", "Part",
+           "ScatteredParts", "SortLastFutures", "ViewsSummary", "WorkerRate", "kd_split",
+           "local_cluster", "partition", "pocl_thread_env", "render_sort_last",
+           "render_views", "require_workers", "scatter_parts", "submit_sort_last",
+           "usable_cores", "worker_info", "worker_renderer", "worker_target"]
 
 log = logging.getLogger(__name__)
 
@@ -101,15 +103,61 @@ def local_cluster(n_workers: int = 2, *, threads_per_worker: int = 1,
     Returns:
         The LocalCluster (``processes=True``); connect with ``dask.distributed.Client(c)``
         and close both when done (they are context managers).
+
+    Raises:
+        ValueError: ``n_workers`` or ``threads_per_worker`` not a positive integer (Dask
+            would start a cluster with no workers, on which every task waits forever).
     """
     from dask.distributed import LocalCluster
 
+    for name, value in (("n_workers", n_workers), ("threads_per_worker", threads_per_worker)):
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"{name} must be a positive integer (at least 1), got {value!r}")
     if pocl_threads is None:
-        pocl_threads = max(1, usable_cores() // max(1, n_workers))
+        pocl_threads = max(1, usable_cores() // n_workers)
     env = {**pocl_thread_env(pocl_threads), **kwargs.pop("env", {})}
     kwargs.setdefault("dashboard_address", None)
     return LocalCluster(n_workers=n_workers, threads_per_worker=threads_per_worker,
                         processes=True, env=env, **kwargs)
+
+
+#: seconds a Dask call of this module waits for a first worker when the client has none (a
+#: cluster still starting, `dask worker` processes still connecting) before it gives up
+WORKER_WAIT_S = 10.0
+
+
+class NoWorkersError(ValueError):
+    """The Dask client has no workers (none joined within `WORKER_WAIT_S` seconds).
+
+    Dask would accept the tasks and wait for a worker forever; clraster refuses instead."""
+
+
+def require_workers(client, timeout: float | None = None) -> int:
+    """Number of workers of ``client``'s cluster, waiting up to ``timeout`` seconds (default
+    `WORKER_WAIT_S`) for a first one when there are none yet.
+
+    Raises:
+        NoWorkersError: still no worker after ``timeout`` seconds.
+    """
+    import asyncio
+
+    # nthreads lists every worker the scheduler knows (paused ones too: they come back)
+    n = len(client.nthreads())
+    if n:
+        return n
+    wait_s = WORKER_WAIT_S if timeout is None else float(timeout)
+    try:
+        client.wait_for_workers(1, timeout=max(wait_s, 1e-3))   # 0 would mean "forever"
+    # Dask's WorkerStartTimeoutError is a TimeoutError (older Dask: asyncio's, a separate
+    # class before Python 3.11)
+    except (TimeoutError, asyncio.TimeoutError):
+        address = getattr(client.scheduler, "address", None)
+        raise NoWorkersError(
+            f"the Dask cluster (scheduler {address}) has no workers: none joined in "
+            f"{wait_s:g} s, and its tasks would wait forever. Start workers (`dask worker "
+            f"{address}`) or make the cluster with n_workers >= 1 "
+            f"(clraster.distributed.local_cluster)") from None
+    return max(1, len(client.nthreads()))
 
 
 # -- worker side: per-process state ----------------------------------------------------------
@@ -289,6 +337,10 @@ def partition(target: Mesh | Scene, parts: int) -> list[Part]:
     culling keeps working inside a part). Clusters with a NaN/Inf vertex have no box and go
     to part 0 (their bad triangles are dropped and counted there, as in one frame).
 
+    Always ``parts`` parts: with fewer (bounded) clusters than parts, or an empty scene,
+    some parts are empty (an empty `Scene`, ``n_faces == 0``); they render as background,
+    which compositing leaves out, so the frame is still the whole scene's.
+
     Every triangle of the scene is in exactly one part. A part renders exactly its
     triangles: its own culling (frustum, cones, occlusion) is conservative like the whole
     scene's, and each triangle's depth and barycentrics depend only on the triangle, its
@@ -325,7 +377,9 @@ def partition(target: Mesh | Scene, parts: int) -> list[Part]:
     for p in range(parts):
         keys = np.flatnonzero(labels == p)           # ascending: grouped by instance
         insts, starts = np.unique(inst_of_key[keys], return_index=True)
-        ends = np.append(starts[1:], keys.size)
+        # one end per start; a part with no cluster (more parts than clusters, an empty
+        # scene) has none and becomes an empty Scene, which renders as background
+        ends = np.append(starts[1:], keys.size)[:starts.size]
         part_scene = Scene()
         ids = []
         for i, s, e in zip(insts.tolist(), starts.tolist(), ends.tolist(), strict=True):
@@ -364,8 +418,14 @@ class ScatteredParts:
 
 def scatter_parts(client, target: Mesh | Scene, parts: int) -> ScatteredParts:
     """`partition` ``target`` on the client and scatter the parts to the workers (spread
-    over them, one copy each); pass the result to `render_sort_last` as its target."""
+    over them, one copy each); pass the result to `render_sort_last` as its target.
+
+    Raises:
+        ValueError: a bad ``target`` or ``parts`` (`partition`); NoWorkersError: the client
+            has no workers (`require_workers`: Dask's scatter would wait for one forever).
+    """
     ps = partition(target, parts)
+    require_workers(client)
     futs = client.scatter(ps, hash=False)
     return ScatteredParts(tuple(futs), sum(p.n_faces for p in ps))
 
@@ -435,18 +495,23 @@ def submit_sort_last(target, camera, client, *, parts: int | None = None, width:
     if isinstance(target, (str, os.PathLike)):
         if parts is None:
             raise ValueError("parts is needed when the target is a file")
+        if not isinstance(parts, int) or isinstance(parts, bool) or parts < 1:
+            raise ValueError(f"parts must be a positive integer, got {parts!r}")
         path = str(Path(target).resolve())
         if not Path(path).is_file():
             raise FileNotFoundError(f"scene file not found: {path!r}")
+        require_workers(client)   # else the tasks below wait for a worker forever
         level = [client.submit(_render_part_from_path, path, parts, i, camera, width, height,
                                config, render_kwargs, pure=False) for i in range(parts)]
     else:
         if not isinstance(target, ScatteredParts):
             if parts is None:
                 raise ValueError("parts is needed (how many parts to split the scene into)")
-            target = scatter_parts(client, target, parts)
-        elif parts is not None and parts != len(target.futures):
-            raise ValueError(f"the scattered parts are {len(target.futures)}, not {parts}")
+            target = scatter_parts(client, target, parts)   # checks for workers
+        else:
+            if parts is not None and parts != len(target.futures):
+                raise ValueError(f"the scattered parts are {len(target.futures)}, not {parts}")
+            require_workers(client)
         level = [client.submit(_render_part, f, camera, width, height, config,
                                render_kwargs, pure=False) for f in target.futures]
     rendered = tuple(level)
@@ -486,6 +551,11 @@ def render_sort_last(target, camera, client, *, parts: int | None = None, width:
         whole scene would). Stats: counts added over the parts
         (`clraster.composite.merge_stats`); timings_ms adds "part render (wall)" and
         "composite" (worker milliseconds, summed over the tasks).
+
+    Raises:
+        ValueError: bad parts, size or keywords; NoWorkersError (a ValueError): the client
+            has no workers, after waiting `WORKER_WAIT_S` seconds for one
+            (`require_workers`); FileNotFoundError: a scene file that is not there.
     """
     futs = submit_sort_last(target, camera, client, parts=parts, width=width, height=height,
                             config=config, **render_kwargs)
@@ -494,11 +564,6 @@ def render_sort_last(target, camera, client, *, parts: int | None = None, width:
 
 
 # -- batch views on Dask ---------------------------------------------------------------------
-
-#: temporary files `clraster.batch` writes before renaming them into place
-#: (``.{final name}.{pid}.tmp``); one left behind is a writer that died (a lost worker)
-_TMP_GLOBS = (".view_*.tmp", ".failures.json.*.tmp")
-
 
 @dataclass(frozen=True)
 class ChunkRecord:
@@ -569,7 +634,7 @@ class ViewsSummary(RenderSummary):
 
 def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tuple[str, ...],
                   width: int, height: int, config: RasterConfig | None,
-                  render_kwargs: dict[str, Any]) -> ChunkRecord:
+                  render_kwargs: dict[str, Any], overwrite: bool = False) -> ChunkRecord:
     """Worker task: `clraster.batch.render_views` of one chunk of cameras with this process's
     Renderer; the files are written here (atomic renames, views already complete skipped),
     so running it twice — Dask recomputing it after a worker was lost — writes every file
@@ -583,7 +648,8 @@ def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tupl
         target = worker_target(target)
     s = batch_render_views(target, cameras, out_dir, outputs,
                            renderer=worker_renderer(width, height, config), start=start,
-                           progress=False, failures_file=False, **render_kwargs)
+                           progress=False, failures_file=False, overwrite=overwrite,
+                           **render_kwargs)
     return ChunkRecord(start, s.views, s.rendered, s.skipped, s.failures,
                        time.perf_counter() - t0, get_worker().address, os.getpid())
 
@@ -591,8 +657,9 @@ def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tupl
 def _finish_out_dir(out_dir: str, failures: list[ViewFailure]) -> int:
     """Run on every worker at the end of `render_views`: write (or remove) the merged
     ``failures.json`` and delete temporary files a dead writer left (every task is finished
-    by then, so no live writer owns one). Returns the files deleted."""
-    from .batch import FAILURES_FILE, write_failures
+    by then, so no live writer owns one: all of `clraster.batch`'s temporaries go, those of
+    other machines too). Returns the files deleted."""
+    from .batch import FAILURES_FILE, remove_temporaries, write_failures
 
     out = Path(out_dir)
     if not out.is_dir():   # a worker on a machine that does not see out_dir
@@ -601,12 +668,22 @@ def _finish_out_dir(out_dir: str, failures: list[ViewFailure]) -> int:
         write_failures(out / FAILURES_FILE, failures)
     else:
         (out / FAILURES_FILE).unlink(missing_ok=True)
-    gone = 0
-    for pattern in _TMP_GLOBS:
-        for p in out.glob(pattern):
-            p.unlink(missing_ok=True)
-            gone += 1
-    return gone
+    return remove_temporaries(out, any_writer=True)
+
+
+def _prepare_out_dir(out_dir: str, settings: dict[str, Any], overwrite: bool) -> bool:
+    """Run on every worker before the chunks of `render_views`: make ``out_dir``, refuse
+    one rendered with other settings (`clraster.batch.prepare_out_dir`:
+    OutDirMismatchError, raised by ``client.run`` on the client) and record this run's.
+    False on a worker that does not see the folder's parent."""
+    from .batch import prepare_out_dir
+
+    out = Path(out_dir)
+    if not out.parent.is_dir() or (out.exists() and not out.is_dir()):
+        return False   # not seen from here, or not a folder: the chunk tasks say which
+    out.mkdir(exist_ok=True)
+    prepare_out_dir(out, settings, overwrite=overwrite)
+    return True
 
 
 def _chunk_size(n_views: int, n_workers: int) -> int:
@@ -619,7 +696,8 @@ def _chunk_size(n_views: int, n_workers: int) -> int:
 def render_views(target, cameras, client, out_dir: str | os.PathLike,
                  outputs=("depth", "ids"), *, chunk: int | None = None,
                  size: tuple[int, int] = (640, 480), config: RasterConfig | None = None,
-                 progress: bool | None = None, **render_kwargs: Any) -> ViewsSummary:
+                 progress: bool | None = None, overwrite: bool = False,
+                 **render_kwargs: Any) -> ViewsSummary:
     """Render many views of one scene on the workers of ``client``, each writing its views'
     files; what `clraster.batch.render_views` does on one machine, with the same files.
 
@@ -639,7 +717,11 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     cannot render fails its own view with a recorded message (``summary.failures`` and
     ``out_dir/failures.json``); the batch goes on. Errors that are not one view's fault (a
     folder that cannot be written) stop the batch: the task's exception is raised here.
-    Re-running the same call skips every view already written.
+    Re-running the same call skips every view already written. What rendered the files is
+    recorded in ``out_dir`` as on one machine (`clraster.batch`): a folder rendered with
+    another size or other image options is refused (`clraster.batch.OutDirMismatchError`,
+    before the scene is sent) unless ``overwrite``; a view whose camera changed is rendered
+    again.
 
     Args:
         target: a `clraster.Mesh` or `clraster.Scene`, or the path of a scene file that
@@ -659,6 +741,8 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
             changes the images).
         progress: Dask's own progress bar (`dask.distributed.progress`, on stdout) over the
             chunk tasks; default only when stdout is a terminal.
+        overwrite: render every view again and record this run's settings over the
+            folder's (`clraster.batch.render_views`).
         render_kwargs: `Renderer.render`'s keywords (cull, frustum, cones, occlusion, ...).
 
     Returns:
@@ -668,9 +752,13 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
         was lost reports the views that worker had already written as skipped.
 
     Raises:
-        ValueError / TypeError: bad outputs, target, chunk or keywords, before anything is
-            submitted; CameraFileError: a camera list file that is not a list of entries;
-            FileNotFoundError: a scene file that is not there.
+        ValueError / TypeError: bad outputs, target, chunk, keywords or keyword values
+            (the checks `Renderer.render` makes), before anything is submitted;
+            OutDirMismatchError (a ValueError): ``out_dir`` holds views of another size or
+            other options; CameraFileError: a camera list file that is not a list of entries;
+            FileNotFoundError: a scene file that is not there; NoWorkersError (a
+            ValueError): the client has no workers, after waiting `WORKER_WAIT_S` seconds
+            for one (`require_workers`).
     """
     import functools
     import sys
@@ -679,9 +767,9 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     from dask.distributed import as_completed, wait
     from dask.distributed import progress as dask_progress
 
-    from .batch import FAILURES_FILE, check_outputs
+    from .batch import FAILURES_FILE, check_outputs, run_settings
     from .camera import Camera
-    from .inputs import check_size
+    from .inputs import check_flag, check_size
     from .renderer import Renderer
     from .views import check_render_kwargs, check_target, load_cameras
 
@@ -696,9 +784,12 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int)
                               or chunk < 1):
         raise ValueError(f"chunk must be a positive integer, got {chunk!r}")
-    # the keywords are checked against Renderer.render's signature, without a context
-    probe: Any = types.SimpleNamespace(render=functools.partial(cast(Any, Renderer.render), None))
+    # the keywords (names and values) are checked as Renderer.render would, without a context
+    probe: Any = types.SimpleNamespace(render=functools.partial(cast(Any, Renderer.render), None),
+                                       width=width, height=height)
     check_render_kwargs(probe, render_kwargs)
+    check_flag(overwrite, "overwrite")
+    settings = run_settings(width, height, render_kwargs)
     if isinstance(cameras, (str, os.PathLike)):
         cameras = load_cameras(cameras, strict=False)
     elif isinstance(cameras, (dict, Camera)):
@@ -706,18 +797,21 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
                          f"{type(cameras).__name__}; wrap it in a list")
     cams = list(cameras)
     out = os.path.abspath(out_dir)
-    n_workers = max(1, len(client.nthreads()))
+    n_workers = require_workers(client)   # none: the chunk tasks would wait forever
     step = chunk or _chunk_size(len(cams), n_workers)
     show = sys.stdout.isatty() if progress is None else bool(progress)
 
     t0 = time.perf_counter()
+    # the folder's record checked (and written) where the files go, before any work; an
+    # OutDirMismatchError on a worker is raised here
+    client.run(_prepare_out_dir, out, settings, overwrite)
     if isinstance(target, str):
         held = target
     else:
         # broadcast: every worker gets its copy now, not each task its own
         held = client.scatter(target, broadcast=True, hash=False)
     futures = [client.submit(_render_chunk, held, cams[s:s + step], s, out, outs, width,
-                             height, config, render_kwargs, pure=False)
+                             height, config, render_kwargs, overwrite, pure=False)
                for s in range(0, len(cams), step)]
     bar = None
     if show and futures:

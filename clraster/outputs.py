@@ -52,13 +52,13 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from .atomic import write_atomic
 from .mesh import Mesh
 from .scene import Scene
 
@@ -359,19 +359,9 @@ def _encode_points(pts: FramePoints, ext: str) -> bytes:
 
 
 def _write_atomic(path: Path, data: bytes) -> None:
-    """Write `data` to exactly `path` (temporary file in the same folder, then rename)."""
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    """Write `data` to exactly `path` (a temporary file in the same folder whose name fits
+    wherever `path`'s does, then a rename: `clraster.atomic.write_atomic`)."""
+    write_atomic(path, data)
 
 
 def write_output(path: str | os.PathLike, frame: Frame, what: str, *, target: Any = None,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 import os
 import threading
 import time
@@ -156,17 +157,13 @@ class Renderer:
             (`Scene.split_ids` splits them). Triangles with a NaN/Inf vertex are dropped
             and counted in ``stats.invalid``.
         """
-        check_cull(cull)
-        planes = check_clip_planes(clip_planes)
-        mask = cull_planes = None
-        if window is not None:   # the exact mask, and planes that cut work outside it
-            mask = window_mask(window, self.width, self.height)
+        planes, mask, bary = _check_options(
+            self.width, self.height, cull, clip_planes, window, outputs,
+            {"frustum": frustum, "cones": cones, "occlusion": occlusion,
+             "overdraw": overdraw, "fates": fates, "reversed_z": reversed_z})
+        cull_planes = None
+        if window is not None:   # planes that cut the work outside the window's mask
             cull_planes = window_planes_for(window, camera, self.width, self.height, planes)
-        for name, value in (("frustum", frustum), ("cones", cones), ("occlusion", occlusion),
-                            ("overdraw", overdraw), ("fates", fates),
-                            ("reversed_z", reversed_z)):
-            check_flag(value, name)
-        bary = check_render_outputs(outputs)
         check_process(self._pid)
         with self._lock:
             return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
@@ -181,7 +178,8 @@ class Renderer:
                 entry dicts, or objects with ``view_projection(width, height)``; or the path
                 of a camera list file (JSON; format and checks in `clraster.views`).
             render_kwargs: `render`'s keywords (cull, frustum, cones, occlusion, overdraw,
-                fates, outputs), the same for every view; unknown ones raise TypeError at once.
+                fates, outputs), the same for every view; unknown ones raise TypeError and
+                bad values ValueError at once (`check_render_options`), not at a view.
 
         Each frame is exactly what ``render(target, camera, **render_kwargs)`` returns in a
         loop on this renderer (with occlusion=True, each view's history is the view before
@@ -269,6 +267,39 @@ class Renderer:
             events = []
         verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h, zoff)
         return verdict, event_ms([*events, ev] if ev else events)
+
+
+def _check_options(width: int, height: int, cull: Any, clip_planes: Any, window: Any,
+                   outputs: Any, flags: dict[str, Any]
+                   ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
+    """The checks `Renderer.render` makes on its options' values, whatever the camera:
+    (clip planes float64 (K, 4) or None, window mask bool (height, width) or None, whether
+    barycentrics are made). ValueError naming the option otherwise."""
+    check_cull(cull)
+    planes = check_clip_planes(clip_planes)
+    mask = None if window is None else window_mask(window, width, height)
+    for name, value in flags.items():
+        check_flag(value, name)
+    return planes, mask, check_render_outputs(outputs)
+
+
+def check_render_options(width: int, height: int, options: dict[str, Any]) -> None:
+    """Check ``options`` (`Renderer.render`'s keywords, e.g. ``{"cull": "none"}``) once, as
+    `Renderer.render` would for a ``width`` × ``height`` image, so that a batch of views
+    refuses a bad value before its first view instead of failing every view with it.
+
+    Raises:
+        TypeError: a keyword `Renderer.render` does not take.
+        ValueError: a bad value (cull not "back"/"front"/"none", a clip plane with a zero
+            normal, a flag that is not a bool, a broken window polygon, ...), naming it.
+    """
+    sig = inspect.signature(Renderer.render)
+    bound = sig.bind(None, None, None, **options)
+    bound.apply_defaults()
+    a = bound.arguments
+    # the yes/no options are those whose default is a bool (a new one is checked too)
+    flags = {name: a[name] for name, p in sig.parameters.items() if isinstance(p.default, bool)}
+    _check_options(width, height, a["cull"], a["clip_planes"], a["window"], a["outputs"], flags)
 
 
 def _check_frame_fits(dev: cl.Device, width: int, height: int, config: RasterConfig) -> None:

@@ -30,6 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from .inputs import check_flag
 from .mesh import Mesh
 from .scene import Instance, Scene
 from .textures import (
@@ -534,6 +535,46 @@ class _FixedViewCamera:
         return self.matrix
 
 
+def _scaled_window(window: Any, k: int) -> Any:
+    """`window` (any `clraster.clip2d.as_polygon` form, in output pixels) in the pixels of
+    the k× frame: every vertex times k, so the k × k samples of an output pixel are inside
+    it exactly where their positions, in output pixels, are inside the window given."""
+    from .clip2d import Polygon2D, as_polygon
+    from .window import WINDOW_MAX_COORD
+
+    what = "render_kwargs['window']"
+    try:
+        poly = as_polygon(window)
+    except ValueError as exc:
+        raise ValueError(f"{what}: {exc}") from None
+    limit = WINDOW_MAX_COORD / k
+    if max(float(np.abs(r).max()) for r in poly.rings) > limit:
+        raise ValueError(f"{what}: with ssaa={k} the window is drawn at {k}x its pixel "
+                         f"coordinates, which must then lie within ±{WINDOW_MAX_COORD:.0f}; "
+                         f"keep the window's coordinates within ±{limit:g} output pixels "
+                         f"(clip it to the image) or lower ssaa")
+    # a uniform positive scale keeps the rings simple, oriented and nested as as_polygon
+    # checked them: no need to validate them again (O(n²) per ring)
+    return Polygon2D._trusted(poly.exterior * k, [h * k for h in poly.holes])
+
+
+#: ``render`` keywords given in output pixels, and how `render_shaded` scales each by k for
+#: the k× frame. `Renderer.render` has one (the window polygon); the others are not in
+#: pixels and pass as given: clip_planes are world-space planes, the rest flags and names.
+_PIXEL_RENDER_KWARGS: dict[str, Callable[[Any, int], Any]] = {"window": _scaled_window}
+
+
+def _scaled_render_kwargs(render_kwargs: dict[str, Any] | None, k: int) -> dict[str, Any]:
+    """A copy of `render_kwargs` for the k× frame: the pixel-space ones
+    (`_PIXEL_RENDER_KWARGS`) scaled by k, the others as given (the caller's dict untouched)."""
+    out = dict(render_kwargs or {})
+    if k > 1:
+        for name, scale in _PIXEL_RENDER_KWARGS.items():
+            if out.get(name) is not None:
+                out[name] = scale(out[name], k)
+    return out
+
+
 #: Supersampling renderers made by `render_shaded`, per user renderer and size.
 _SCALED: weakref.WeakKeyDictionary[Any, dict[tuple[int, int], Any]] = (
     weakref.WeakKeyDictionary())
@@ -584,7 +625,11 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
         camera: the camera, e.g. :class:`clraster.Camera`.
         ssaa: samples per pixel along each axis, 1..`MAX_SSAA`.
         width, height: output size; default the renderer's.
-        render_kwargs: keywords for ``renderer.render`` (cull, occlusion, ...).
+        render_kwargs: keywords for ``renderer.render`` (cull, occlusion, window, ...), in
+            the terms of the width × height output: a ``window`` polygon is in output
+            pixels and is scaled by k for the k× frame, so every ssaa draws the same
+            region, its edge pixels blended (anti-aliased like the mesh's); world-space
+            ``clip_planes`` and the flags pass as given. The dict is not modified.
         smooth, colors, texture, per_instance_colors, background, alpha, light_dir, light,
             two_sided: as in `shade`.
 
@@ -593,7 +638,9 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
 
     Raises:
         ValueError: `ssaa` not an integer in 1..`MAX_SSAA`, no size for a factory, a
-            supersampled size beyond the renderer's limit, and `shade`'s errors.
+            supersampled size beyond the renderer's limit, a ``window`` that is not a valid
+            polygon or whose coordinates times k exceed
+            `clraster.window.WINDOW_MAX_COORD`, and `shade`'s errors.
     """
     if isinstance(ssaa, bool) or not isinstance(ssaa, (int, np.integer)) or not (
             1 <= ssaa <= MAX_SSAA):
@@ -613,6 +660,7 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
         raise ValueError("with a renderer factory, give width and height")
     else:
         w, h = int(width), int(height)
+    kwargs = _scaled_render_kwargs(render_kwargs, k)   # refuse a bad window before rendering
     res = _resolve(target, colors, texture)
     if is_renderer and (renderer.width, renderer.height) == (k * w, k * h):
         r = renderer
@@ -625,29 +673,75 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
         vp = np.asarray(camera.view_projection(w, h), np.float64)
         if not np.array_equal(vp, np.asarray(camera.view_projection(k * w, k * h))):
             cam = _FixedViewCamera(vp)
-    frame = r.render(res.geometry, cam, **(render_kwargs or {}))
+    frame = r.render(res.geometry, cam, **kwargs)
     return _compose(frame, res, k, smooth=smooth, per_instance_colors=per_instance_colors,
                     background=background, alpha=alpha, light=light_vec, two_sided=two_sided)
 
 
-def depth_image(depth: npt.ArrayLike) -> np.ndarray:
-    """Greyscale view of a window-depth buffer: (H, W) uint8, near = dark.
+def _depth_buffer(depth: Any, reversed_z: Any, what: str = "depth"
+                  ) -> tuple[np.ndarray, bool]:
+    """(float64 (H, W) depth buffer, whether it is reversed-Z) from a frame or an array.
 
-    Covered pixels (``depth < 1.0``; the buffer is cleared to 1.0) are mapped linearly from
-    the nearest (0) to the farthest covered depth (235); background pixels are 255. When
-    all covered pixels share one depth they are 0; an all-background buffer is all 255.
-    Non-finite depths count as background.
+    A frame (anything with ``depth`` that is not an array, e.g. a `clraster.Frame`) says
+    its own convention by its ``reversed_z``; `reversed_z` may repeat it but never
+    contradict it (raises ValueError). A bare array has none: `reversed_z` says it, None
+    meaning standard window depth (``(z/w + 1)/2``, the renderers' default).
+    """
+    if reversed_z is not None:
+        reversed_z = check_flag(reversed_z, "reversed_z")
+    buf = depth
+    if not isinstance(depth, np.ndarray) and hasattr(depth, "depth"):
+        buf = depth.depth
+        own = getattr(depth, "reversed_z", None)
+        if own is not None:
+            own = bool(own)
+            if reversed_z is not None and reversed_z != own:
+                raise ValueError(
+                    f"reversed_z={reversed_z} contradicts the frame, which was rendered "
+                    f"{'with' if own else 'without'} reversed-Z (frame.reversed_z={own}); "
+                    f"leave reversed_z out when passing a frame")
+            reversed_z = own
+    try:
+        d = np.asarray(buf, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be an (H, W) array of window depths or a frame with "
+                         f"a depth buffer (e.g. a clraster.Frame), got "
+                         f"{type(depth).__name__}") from None
+    if d.ndim != 2:
+        raise ValueError(f"{what} must be an (H, W) array, got shape {d.shape}")
+    return d, bool(reversed_z)
+
+
+def depth_image(depth: Any, *, reversed_z: bool | None = None) -> np.ndarray:
+    """Greyscale view of a depth buffer: (H, W) uint8, near = dark, background white.
+
+    Covered pixels are mapped linearly from the nearest (0) to the farthest covered depth
+    (235); background pixels are 255. When all covered pixels share one depth they are 0;
+    an all-background buffer is all 255. Non-finite depths count as background. The picture
+    is the same for a frame rendered with reversed-Z as for the same frame rendered with
+    standard depth (up to float32 rounding, at most one grey level).
 
     Args:
-        depth: (H, W) window depth ``(z/w + 1) / 2`` in [0, 1], e.g. ``Frame.depth``.
+        depth: a frame (`clraster.Frame`, or anything with ``depth`` and ``reversed_z``):
+            its depth buffer is read by its own convention. Or a bare (H, W) array of
+            depths, whose convention `reversed_z` gives.
+        reversed_z: the convention of a bare array: False or None (the default) for
+            standard window depth ``(z/w + 1)/2`` in [0, 1], covered where ``< 1.0`` (the
+            buffer is cleared to 1.0); True for reversed-Z ``(1 − z/w)/2``, 1 at the near
+            plane, covered where ``> 0.0`` (cleared to 0.0). With a frame, leave it out (or
+            give the frame's own value).
+
+    Raises:
+        ValueError: not an (H, W) buffer, `reversed_z` not True/False/None, or `reversed_z`
+            contradicting the frame's ``reversed_z``.
     """
-    d = np.asarray(depth, dtype=np.float64)
-    if d.ndim != 2:
-        raise ValueError(f"depth must be an (H, W) array, got shape {d.shape}")
-    covered = np.isfinite(d) & (d < 1.0)
+    d, rev = _depth_buffer(depth, reversed_z)
+    finite = np.isfinite(d)
+    # reversed-Z: larger is nearer; negate so that "nearest" is the minimum in both
+    covered = finite & (d > 0.0) if rev else finite & (d < 1.0)
     out = np.full(d.shape, 255, dtype=np.uint8)
     if covered.any():
-        vals = d[covered]
+        vals = -d[covered] if rev else d[covered]
         lo, hi = vals.min(), vals.max()
         scale = _DEPTH_FAR / (hi - lo) if hi > lo else 0.0
         out[covered] = np.clip(np.rint((vals - lo) * scale), 0, _DEPTH_FAR).astype(np.uint8)

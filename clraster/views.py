@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .camera import Camera
+from .camera import Camera, projection_fault
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -173,22 +173,25 @@ def camera_from_entry(entry: Any, index: int) -> Camera:
         raise ViewError(index, "target", f"must differ from eye (both are {eye.tolist()})")
     try:
         return Camera.look_at(eye, target, up, fov_y=fov_y, near=near, far=far)
-    except ValueError as exc:   # up zero or parallel to the view direction
-        raise ViewError(index, "up", str(exc)) from None
+    except ValueError as exc:   # CameraArgumentError names the field: up zero or parallel
+        # to the view direction, eye/target overflowing, a lens beyond float32
+        raise ViewError(index, getattr(exc, "argument", "up"), str(exc)) from None
 
 
 def check_projection(proj: np.ndarray, index: int, field: str = "projection") -> None:
-    """Refuse a projection (float64 (4, 4), finite) that cannot make an image: singular, or
-    a perspective / orthographic one whose near plane is not in front of its far plane.
+    """Refuse a projection (float64 (4, 4), finite) that cannot make an image: singular in
+    float64 or float32, or beyond float32 (`clraster.camera.projection_fault`, which the
+    camera constructors apply too), or a perspective one whose near plane is not in front of
+    its far plane.
 
     For OpenGL's perspective (last row 0 0 −1 0) the planes are at the distances
     n = P23 / (P22 − 1) and f = P23 / (P22 + 1) (where NDC z is −1 and +1). Other
     projections are only checked for being invertible: an orthographic one with its planes
     swapped is a legitimate reversed depth range (the identity is one).
     """
-    if abs(np.linalg.det(proj)) == 0.0 or not np.linalg.cond(proj) < 1e15:
-        raise ViewError(index, field, "is singular (not invertible): it maps space onto a "
-                                      "plane, so no depth can be made")
+    fault = projection_fault(proj)
+    if fault is not None:
+        raise ViewError(index, field, fault)
     if not np.array_equal(proj[3], (0.0, 0.0, -1.0, 0.0)):
         return
     n, f = proj[2, 3] / (proj[2, 2] - 1.0), proj[2, 3] / (proj[2, 2] + 1.0)
@@ -248,16 +251,27 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True
             entry; False: keep a `BrokenCamera` in its place and go on.
 
     Raises:
-        CameraFileError: the file is not JSON, or not a list of entries (nor an object with
-            a ``"cameras"`` list). OSError: it cannot be read.
+        CameraFileError: the file is not UTF-8 JSON (nested too deeply for Python's
+            reader counts as not JSON), or not a list of entries (nor an object with a
+            ``"cameras"`` list); its message names the file. OSError: it cannot be read.
     """
     p = Path(path)
-    text = p.read_text(encoding="utf-8")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise CameraFileError(f"{p}: not a UTF-8 text file (byte {exc.start}: {exc.reason}); "
+                              f"a camera list is JSON in UTF-8") from None
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise CameraFileError(f"{p}: not valid JSON: {exc.msg} at line {exc.lineno} column "
                               f"{exc.colno}") from None
+    except RecursionError:   # Python's JSON reader recurses once per [ or {
+        raise CameraFileError(f"{p}: JSON nested too deeply to read (a camera list needs 4 "
+                              f"levels: list, entry, matrix, row)") from None
+    except ValueError as exc:   # the rest of the reader's refusals, e.g. an integer of
+        # more than 4300 digits (sys.set_int_max_str_digits)
+        raise CameraFileError(f"{p}: not valid JSON: {exc}") from None
     if isinstance(doc, dict):
         if set(doc) - {"cameras"} or not isinstance(doc.get("cameras"), list):
             raise CameraFileError(f"{p}: expected a list of camera entries or an object "
@@ -279,11 +293,17 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True
 
 
 def check_render_kwargs(renderer: Renderer, render_kwargs: dict) -> None:
-    """TypeError now (not at the first view) for keywords `Renderer.render` does not take."""
+    """TypeError now (not at the first view) for keywords `Renderer.render` does not take,
+    and ValueError for values it would refuse on every view (``cull="sideways"``, a clip
+    plane with a zero normal, ``reversed_z="yes"``...: `clraster.renderer.
+    check_render_options`, the renderer's own checks, for ``renderer``'s width × height)."""
+    from .renderer import check_render_options
+
     try:
         inspect.signature(renderer.render).bind(None, None, **render_kwargs)
     except TypeError as exc:
         raise TypeError(f"render_many: {exc}") from None
+    check_render_options(renderer.width, renderer.height, render_kwargs)
 
 
 def check_target(target: Any) -> None:

@@ -448,7 +448,8 @@ def test_render_views_survives_a_lost_worker(client, one_machine, tmp_path):
     assert summary.views == n and not summary.failures
     assert summary.rendered + summary.skipped == n
     names = sorted(p.name for p in out_dir.iterdir())
-    assert names == sorted(f"view_{k:05d}_{o}.npy" for k in range(n) for o in ("depth", "ids"))
+    assert names == sorted([f"view_{k:05d}_{o}.npy" for k in range(n) for o in ("depth", "ids")]
+                           + [f".view_{k:05d}.key" for k in range(n)] + ["render_views.json"])
     one_machine_views(bunny, cams, tmp_path / "one", ("depth", "ids"), renderer=one_machine)
     assert folder_bytes(out_dir) == folder_bytes(tmp_path / "one")
     client.wait_for_workers(2, timeout=60)   # the Nanny's restart, for the tests after this
@@ -478,7 +479,8 @@ def test_cli_views_on_workers(client, tmp_path):
     assert main(common + ["--out", str(tmp_path / "remote"), "--scheduler",
                           client.scheduler.address]) == 1
     one = folder_bytes(tmp_path / "one")
-    assert len(one) == 3 * 3 + 1 and "failures.json" in one
+    # 3 views' files, their keys, failures.json and the run's record (clraster.batch)
+    assert len(one) == 3 * 3 + 3 + 1 + 1 and "failures.json" in one
     assert folder_bytes(tmp_path / "local") == one
     assert folder_bytes(tmp_path / "remote") == one
     # a re-run skips everything it wrote; the Dask options need --views

@@ -159,6 +159,8 @@ def test_render_views_files(mesh, tmp_path):
     r = Renderer(W, H)
     expected = {f"view_{k:05d}_{o}{'.png' if o == 'shaded' else '.npy'}"
                 for k in range(5) for o in outs}
+    # plus what made them: the run's record and each view's key (clraster.batch)
+    expected |= {"render_views.json"} | {f".view_{k:05d}.key" for k in range(5)}
     assert {p.name for p in (tmp_path / "out").iterdir()} == expected   # no temp files left
     for k, cam in enumerate(cams):
         fr = r.render(mesh, cam)
