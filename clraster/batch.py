@@ -430,7 +430,7 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
     if isinstance(cameras, (str, os.PathLike)):
         from .views import load_cameras
 
-        cameras = load_cameras(cameras, strict=False)
+        cameras = load_cameras(cameras, strict=False, size=(renderer.width, renderer.height))
     cams = cameras if isinstance(cameras, Sequence) else list(cameras)
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = _Progress(sys.stderr, len(cams)) if show else None

@@ -43,12 +43,14 @@ import numpy as np
 
 from .camera import CONVENTIONS, Camera
 
-__all__ = ["CameraFileError", "common_size", "read_colmap", "read_nerf", "read_npz"]
+__all__ = ["CameraFileError", "common_size", "nerf_cameras", "read_colmap", "read_nerf",
+           "read_npz"]
 
 
 class CameraFileError(ValueError):
-    """A camera file that cannot be read as cameras: the message names the file and, where
-    there is one, the line, frame or array at fault."""
+    """A camera file that cannot be read as cameras at all: the message names the file and,
+    where there is one, the line, frame or array at fault. (Broken entries of a JSON camera
+    list are `clraster.views.ViewError` instead.)"""
 
 
 #: COLMAP camera models: parameter names in file order (colmap/src/colmap/sensor/models.h).
@@ -267,8 +269,16 @@ def read_nerf(path: str | os.PathLike, *, width: int | None = None, height: int 
     p = Path(path)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+    except (UnicodeDecodeError, RecursionError, ValueError) as exc:
         raise CameraFileError(f"{p}: not a JSON file ({type(exc).__name__})") from None
+    return nerf_cameras(doc, p, width=width, height=height, near=near, far=far,
+                        drop_distortion=drop_distortion)
+
+
+def nerf_cameras(doc: Any, p: Path, *, width: int | None = None, height: int | None = None,
+                 near: float | None = None, far: float | None = None,
+                 drop_distortion: bool = False) -> tuple[list[Camera], list[str]]:
+    """`read_nerf` of an already parsed document ``doc`` read from ``p``."""
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list):
         raise CameraFileError(f"{p}: a transforms.json is an object with a \"frames\" list")
     near, far = _clip_range(near, far, f"{p} (NeRF transforms)")

@@ -309,10 +309,13 @@ def _outputs(text: str) -> tuple[str, ...]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+#: image size of `clraster render` when neither --size nor a camera file gives one
+_DEFAULT_SIZE = (1280, 720)
+
 #: single-view options that mean nothing with --views (dest → option)
-_SINGLE_VIEW = {"eye": "--eye", "target": "--target", "near": "--near", "far": "--far",
-                "depth": "--depth", "ids": "--ids", "wireframe": "--wireframe",
-                "reference": "--reference", "allow_empty": "--allow-empty"}
+_SINGLE_VIEW = {"eye": "--eye", "target": "--target", "depth": "--depth", "ids": "--ids",
+                "wireframe": "--wireframe", "reference": "--reference",
+                "allow_empty": "--allow-empty"}
 
 
 def _dask_client(args: argparse.Namespace, stack: contextlib.ExitStack):
@@ -335,6 +338,23 @@ def _dask_client(args: argparse.Namespace, stack: contextlib.ExitStack):
     return stack.enter_context(Client(cluster))
 
 
+def _view_cameras(args: argparse.Namespace) -> tuple[list, tuple[int, int]]:
+    """The cameras of --views and the size to render them at: the cameras' own (a COLMAP,
+    NeRF or intrinsics file), which --size may repeat but not contradict; else --size, else
+    1280x720."""
+    from .camera_files import common_size
+    from .views import load_cameras
+
+    cameras = load_cameras(args.views, strict=False, size=args.size, near=args.near,
+                           far=args.far, drop_distortion=args.drop_distortion)
+    own = common_size(cameras)
+    if own is not None and args.size is not None and own != tuple(args.size):
+        raise ValueError(f"--size {args.size[0]}x{args.size[1]} differs from the "
+                         f"{own[0]}x{own[1]} images of the cameras in {args.views}; leave "
+                         f"--size out to render at theirs")
+    return cameras, own or args.size or _DEFAULT_SIZE
+
+
 def _render_views(args: argparse.Namespace) -> int:
     from .batch import render_views
     from .renderer import Renderer
@@ -350,8 +370,9 @@ def _render_views(args: argparse.Namespace) -> int:
         mesh = example_mesh()
     else:
         mesh = Mesh.load(args.mesh)
-    width, height = args.size
+    cameras, (width, height) = _view_cameras(args)
     print(f"mesh: {args.mesh} ({mesh.n_vertices:,} vertices, {mesh.n_faces:,} triangles)")
+    print(f"cameras: {len(cameras):,} from {args.views}, {width}x{height}")
     config = RasterConfig(tile_log2=args.tile_log2)
     summary: Any   # a Dask ViewsSummary or a RenderSummary: both have .failures
     if args.workers is not None or args.scheduler is not None:
@@ -359,17 +380,19 @@ def _render_views(args: argparse.Namespace) -> int:
 
         with contextlib.ExitStack() as stack:
             client = _dask_client(args, stack)
-            summary = dask_render_views(mesh, args.views, client, args.out, args.outputs,
+            summary = dask_render_views(mesh, cameras, client, args.out, args.outputs,
                                         chunk=args.chunk, size=(width, height), config=config,
                                         progress=True if args.progress else None,
-                                        cull=args.cull, reversed_z=args.reversed_z,
+                                        overwrite=args.overwrite, cull=args.cull,
+                                        reversed_z=args.reversed_z,
                                         clip_planes=args.clip_planes)
         print(summary)
         print(f"wrote {', '.join(args.outputs)} per view to {args.out}")
     else:
         renderer = Renderer(width, height, config=config)
-        summary = render_views(mesh, args.views, args.out, args.outputs, renderer=renderer,
-                               progress=True if args.progress else None, cull=args.cull,
+        summary = render_views(mesh, cameras, args.out, args.outputs, renderer=renderer,
+                               progress=True if args.progress else None,
+                               overwrite=args.overwrite, cull=args.cull,
                                reversed_z=args.reversed_z, clip_planes=args.clip_planes)
         print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
     if summary.failures:
@@ -396,8 +419,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("mesh", metavar="MESH",
                    help=f"mesh file trimesh can read (PLY, OBJ, STL, ...), or "
                         f"'{EXAMPLE}' for the built-in example scene")
-    r.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
-                   help="image size in pixels (default 1280x720)")
+    r.add_argument("--size", type=parse_size, metavar="WxH",
+                   help="image size in pixels (default 1280x720; with --views, the camera "
+                        "file's own size where it has one)")
     r.add_argument("--out", type=Path, required=True, metavar="PNG",
                    help="shaded image to write (any format imageio writes); with --views, "
                         "the folder the views' files go to (created if missing)")
@@ -406,8 +430,16 @@ def _parser() -> argparse.ArgumentParser:
                       "(look-at or matrices entries; see clraster.views) into the --out "
                       "folder: view_00000_depth.npy, view_00000_ids.npy, ... A re-run skips "
                       "views whose files all exist; a broken camera fails only its view.")
-    many.add_argument("--views", type=Path, metavar="JSON",
-                      help="camera list file; --out is then a folder")
+    many.add_argument("--views", type=Path, metavar="FILE",
+                      help="camera file: a JSON camera list (look-at, matrices or K + pose "
+                           "entries), a COLMAP text model folder, a NeRF transforms.json or "
+                           "an .npz of K and poses; --out is then a folder")
+    many.add_argument("--drop-distortion", action="store_true",
+                      help="render the pinhole part of COLMAP / NeRF cameras with lens "
+                           "distortion (refused otherwise)")
+    many.add_argument("--overwrite", action="store_true",
+                      help="re-render views whose files were made with other settings "
+                           "(size, cull, clip planes...) instead of refusing the folder")
     many.add_argument("--outputs", type=_outputs, default=("depth", "ids"),
                       metavar="LIST", help="comma-separated outputs per view out of depth, "
                                            "ids, bary, shaded (default depth,ids)")
@@ -437,9 +469,11 @@ def _parser() -> argparse.ArgumentParser:
     cam.add_argument("--fov", type=float, default=45.0, metavar="DEG",
                      help="vertical field of view in degrees (default 45)")
     cam.add_argument("--near", type=_positive, metavar="N",
-                     help="near-plane distance (default: from the bounding sphere)")
+                     help="near-plane distance (default: from the bounding sphere; with "
+                          "--views, for COLMAP / NeRF / .npz cameras, which carry none)")
     cam.add_argument("--far", type=_positive, metavar="F",
-                     help="far-plane distance (default: from the bounding sphere)")
+                     help="far-plane distance (default: from the bounding sphere; with "
+                          "--views, as --near)")
     r.add_argument("--cull", choices=("back", "front", "none"), default="back",
                    help="face culling; counter-clockwise is front (default back)")
     r.add_argument("--depth", type=Path, metavar="FILE",
@@ -519,7 +553,7 @@ def _render(args: argparse.Namespace) -> int:
     from .outputs import check_output_path, write_output
     from .shade import shade
 
-    width, height = args.size
+    width, height = args.size or _DEFAULT_SIZE
     # --quiet: nothing on stdout; warnings and errors still go to stderr
     info: Callable[..., None] = _silent if args.quiet else print
     _output_file(args.out, "--out")
@@ -682,10 +716,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         return run_guarded("clraster", lambda: _render_views(args))
     if (args.progress or args.outputs != ("depth", "ids") or args.workers is not None
-            or args.scheduler is not None or args.chunk is not None):
+            or args.scheduler is not None or args.chunk is not None or args.overwrite
+            or args.drop_distortion):
         parser.print_usage(sys.stderr)
-        print("clraster: error: --outputs, --progress, --workers, --scheduler and --chunk "
-              "need --views (one image: --out, --depth, --ids)", file=sys.stderr)
+        print("clraster: error: --outputs, --progress, --workers, --scheduler, --chunk, "
+              "--overwrite and --drop-distortion need --views (one image: --out, --depth, "
+              "--ids)", file=sys.stderr)
         return 2
     return run_guarded("clraster", lambda: _render(args))
 

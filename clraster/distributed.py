@@ -791,7 +791,7 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     check_flag(overwrite, "overwrite")
     settings = run_settings(width, height, render_kwargs)
     if isinstance(cameras, (str, os.PathLike)):
-        cameras = load_cameras(cameras, strict=False)
+        cameras = load_cameras(cameras, strict=False, size=(width, height))
     elif isinstance(cameras, (dict, Camera)):
         raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
                          f"{type(cameras).__name__}; wrap it in a list")

@@ -19,7 +19,22 @@ Camera list file (JSON, UTF-8): either a bare list of entries or an object
   ``clip = projection @ view @ [x, y, z, 1]``; the projection is used as it is whatever the
   image size, so it carries its own aspect ratio.
 
-An optional ``"name"`` (a string) is allowed in either kind and ignored by the renderer.
+* intrinsics (as `clraster.Camera.from_intrinsics`)::
+
+      {"K": [[fx, s, cx], [0, fy, cy], [0, 0, 1]], "pose": [[...], ...],
+       "convention": "opencv", "near": 0.1, "far": 100.0, "width": 640, "height": 480}
+
+  ``K`` in pixels with OpenCV's pixel centres (pixel (i, j)'s centre at (u, v) = (i, j));
+  ``pose`` the 4×4 camera → world matrix (default identity) in ``convention``'s camera
+  axes (``"opencv"``, the default: +y down, +z forward; ``"opengl"``: +y up, looking down
+  −z); ``near`` and ``far`` are required (no default suits a metric scene); ``width`` and
+  ``height`` (both or neither) are the image K belongs to, default the size rendered at.
+
+An optional ``"name"`` (a string) is allowed in any kind and ignored by the renderer.
+
+`load_cameras` also reads the camera files of other tools (`clraster.camera_files`): a
+COLMAP text model (a folder), a NeRF / instant-ngp ``transforms.json`` (a JSON object with
+``"frames"``) and an ``.npz`` with ``K`` and ``poses``.
 Any other key is an error (a misspelt ``"fovy"`` must not silently become the default).
 Python's JSON reader accepts ``NaN`` and ``Infinity``; such values are reported as broken.
 
@@ -45,7 +60,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .camera import Camera, projection_fault
+from .camera import CONVENTIONS, Camera, projection_fault
+from .camera_files import CameraFileError, nerf_cameras, read_colmap, read_npz
 
 if TYPE_CHECKING:
     from .frame import Frame
@@ -56,6 +72,7 @@ __all__ = ["BrokenCamera", "CameraFileError", "ViewError", "camera_from_entry",
 
 _LOOK_AT_KEYS = ("eye", "target", "up", "fov_y", "near", "far")
 _MATRIX_KEYS = ("view", "projection")
+_INTRINSICS_KEYS = ("K", "pose", "convention", "near", "far", "width", "height")
 _LOOK_AT_DEFAULTS: dict[str, Any] = {"up": (0.0, 1.0, 0.0), "fov_y": 45.0, "near": 0.1,
                                      "far": 100.0}
 
@@ -75,11 +92,6 @@ class ViewError(ValueError):
         # pickle by the three fields: the default would call __init__ with the formatted
         # message alone, and a BrokenCamera in a camera list travels to Dask workers
         return (type(self), (self.index, self.field, self.message))
-
-
-class CameraFileError(ValueError):
-    """A camera list file that cannot be read as a list of entries at all (not JSON, or not
-    a list / ``{"cameras": [...]}``). Broken entries are `ViewError` instead."""
 
 
 @dataclass(frozen=True)
@@ -118,8 +130,9 @@ def _array(entry: dict, key: str, index: int, shape: tuple[int, ...]) -> np.ndar
     return a
 
 
-def camera_from_entry(entry: Any, index: int) -> Camera:
-    """A `Camera` from one camera-list entry (the module docstring's format).
+def camera_from_entry(entry: Any, index: int, size: tuple[int, int] | None = None) -> Camera:
+    """A `Camera` from one camera-list entry (the module docstring's format); ``size``
+    (width, height): the image size rendered at, for intrinsics entries without their own.
 
     Raises:
         ViewError: naming ``index`` and the field at fault.
@@ -129,13 +142,17 @@ def camera_from_entry(entry: Any, index: int) -> Camera:
                                      f"'view'/'projection' (matrices), got "
                                      f"{type(entry).__name__} {entry!r:.60}")
     keys = set(entry) - {"name"}
-    unknown = sorted(str(k) for k in keys - set(_LOOK_AT_KEYS) - set(_MATRIX_KEYS))
+    unknown = sorted(str(k) for k in keys - set(_LOOK_AT_KEYS) - set(_MATRIX_KEYS)
+                     - set(_INTRINSICS_KEYS))
     if unknown:
         raise ViewError(index, unknown[0],
-                        f"unknown field; a look-at entry has {', '.join(_LOOK_AT_KEYS)} and a "
-                        f"matrices entry has {', '.join(_MATRIX_KEYS)}")
+                        f"unknown field; a look-at entry has {', '.join(_LOOK_AT_KEYS)}, a "
+                        f"matrices entry {', '.join(_MATRIX_KEYS)} and an intrinsics entry "
+                        f"{', '.join(_INTRINSICS_KEYS)}")
     if "name" in entry and not isinstance(entry["name"], str):
         raise ViewError(index, "name", f"must be a string, got {entry['name']!r}")
+    if "K" in keys:
+        return _intrinsics_entry(entry, index, size)
     look, mats = keys & set(_LOOK_AT_KEYS), keys & set(_MATRIX_KEYS)
     if look and mats:
         raise ViewError(index, sorted(mats)[0],
@@ -178,6 +195,48 @@ def camera_from_entry(entry: Any, index: int) -> Camera:
         raise ViewError(index, getattr(exc, "argument", "up"), str(exc)) from None
 
 
+def _intrinsics_entry(entry: dict, index: int, size: tuple[int, int] | None) -> Camera:
+    """An intrinsics entry (K, pose, convention, near, far, width, height)."""
+    others = sorted((set(entry) - {"name"}) & (set(_LOOK_AT_KEYS) | set(_MATRIX_KEYS))
+                    - set(_INTRINSICS_KEYS))
+    if others:
+        raise ViewError(index, others[0], "an intrinsics entry (K) takes K, pose, convention, "
+                                          "near, far, width and height only")
+    for key in ("near", "far"):
+        if key not in entry:
+            raise ViewError(index, key, "missing (an intrinsics entry needs near and far, "
+                                        "in the scene's units)")
+    k = _array(entry, "K", index, (3, 3))
+    pose = _array(entry, "pose", index, (4, 4)) if "pose" in entry else None
+    near, far = _number(entry, "near", index), _number(entry, "far", index)
+    conv = entry.get("convention", "opencv")
+    if conv not in CONVENTIONS:
+        raise ViewError(index, "convention", f"must be one of {list(CONVENTIONS)}, got "
+                                             f"{conv!r}")
+    if ("width" in entry) != ("height" in entry):
+        raise ViewError(index, "width" if "width" not in entry else "height",
+                        "missing (give both width and height, or neither)")
+    if "width" in entry:
+        dims = []
+        for key in ("width", "height"):
+            v = entry[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+                raise ViewError(index, key, f"must be a positive integer, got {v!r}")
+            dims.append(v)
+        width, height = dims
+    elif size is not None:
+        width, height = size
+    else:
+        raise ViewError(index, "K", "an intrinsics entry without width and height needs the "
+                                    "image size to render at")
+    try:
+        return Camera.from_intrinsics(k, width, height, pose=pose, near=near, far=far,
+                                      convention=conv)
+    except ValueError as exc:
+        field = getattr(exc, "argument", None)
+        raise ViewError(index, field if field in entry else "K", str(exc)) from None
+
+
 def check_projection(proj: np.ndarray, index: int, field: str = "projection") -> None:
     """Refuse a projection (float64 (4, 4), finite) that cannot make an image: singular in
     float64 or float32, or beyond float32 (`clraster.camera.projection_fault`, which the
@@ -204,6 +263,10 @@ def check_projection(proj: np.ndarray, index: int, field: str = "projection") ->
 def _check_camera(cam: Any, index: int, width: int, height: int) -> Any:
     """``cam`` if it can make a view-projection matrix for this image, else ViewError."""
     if isinstance(cam, Camera):
+        if cam.image_size is not None and cam.image_size != (width, height):
+            w, h = cam.image_size
+            raise ViewError(index, None, f"the camera is for {w}x{h} images (its K is in their "
+                                         f"pixels), not the {width}x{height} rendered")
         if cam.fov_y is None:   # from_matrices: its projection was never checked
             check_projection(np.asarray(cam.projection(width, height), np.float64), index)
         return cam
@@ -227,7 +290,7 @@ def iter_cameras(cameras: Iterable[Any] | str | os.PathLike, width: int, height:
     (`load_cameras`), or an iterable of `Camera` objects, entry dicts, objects with
     ``view_projection`` or `BrokenCamera`s. Lazy: a generator is read one camera at a time."""
     if isinstance(cameras, (str, os.PathLike)):
-        cameras = load_cameras(cameras, strict=False)
+        cameras = load_cameras(cameras, strict=False, size=(width, height))
     elif isinstance(cameras, (dict, Camera)):
         raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
                          f"{type(cameras).__name__}; wrap it in a list")
@@ -236,26 +299,49 @@ def iter_cameras(cameras: Iterable[Any] | str | os.PathLike, width: int, height:
             yield index, entry
             continue
         try:
-            cam = camera_from_entry(entry, index) if isinstance(entry, dict) else entry
+            cam = (camera_from_entry(entry, index, (width, height)) if isinstance(entry, dict)
+                   else entry)
             yield index, _check_camera(cam, index, width, height)
         except ViewError as exc:
             yield index, BrokenCamera(exc)
 
 
-def load_cameras(path: str | os.PathLike, *, strict: bool = True
+def load_cameras(path: str | os.PathLike, *, strict: bool = True,
+                 size: tuple[int, int] | None = None, near: float | None = None,
+                 far: float | None = None, drop_distortion: bool = False
                  ) -> list[Camera | BrokenCamera]:
-    """Read a camera list file (format: the module docstring).
+    """Read a camera file: a camera list (JSON, the module docstring's format), a COLMAP
+    text model (a folder with cameras.txt and images.txt, or sparse/0 below it), a NeRF /
+    instant-ngp ``transforms.json`` (a JSON object with ``"frames"``) or an ``.npz`` with
+    ``K`` and ``poses`` (`clraster.camera_files` has each format's conventions).
 
     Args:
         strict: raise `ViewError` (naming the entry's index and field) for the first broken
-            entry; False: keep a `BrokenCamera` in its place and go on.
+            entry of a camera list; False: keep a `BrokenCamera` in its place and go on.
+            (The other formats are read whole or refused.)
+        size: (width, height) rendered at: for intrinsics entries and files without a size
+            of their own. Cameras of a file with a size are tied to it (`Camera.image_size`;
+            `clraster.camera_files.common_size`).
+        near, far: clip planes for the formats that carry none (COLMAP, NeRF, an .npz
+            without them); refused for a camera list, whose entries carry their own.
+        drop_distortion: render the pinhole part of a COLMAP / NeRF camera with lens
+            distortion (else refused, naming the model).
 
     Raises:
         CameraFileError: the file is not UTF-8 JSON (nested too deeply for Python's
             reader counts as not JSON), or not a list of entries (nor an object with a
-            ``"cameras"`` list); its message names the file. OSError: it cannot be read.
+            ``"cameras"`` list, nor a transforms.json), or a COLMAP / NeRF / NPZ file that
+            cannot be read; its message names the file. OSError: it cannot be read.
     """
     p = Path(path)
+    width, height = size if size is not None else (None, None)
+    if p.is_dir():
+        return list(read_colmap(p, near=near, far=far, drop_distortion=drop_distortion)[0])
+    if p.suffix.lower() == ".npz":
+        if drop_distortion:
+            raise CameraFileError(f"{p}: an .npz holds pinhole cameras; drop_distortion does "
+                                  f"not apply")
+        return list(read_npz(p, width=width, height=height, near=near, far=far))
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as exc:
@@ -272,6 +358,14 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True
     except ValueError as exc:   # the rest of the reader's refusals, e.g. an integer of
         # more than 4300 digits (sys.set_int_max_str_digits)
         raise CameraFileError(f"{p}: not valid JSON: {exc}") from None
+    if isinstance(doc, dict) and "frames" in doc:
+        return list(nerf_cameras(doc, p, width=width, height=height, near=near, far=far,
+                                 drop_distortion=drop_distortion)[0])
+    given = [k for k, v in (("near", near), ("far", far), ("drop_distortion", drop_distortion))
+             if v not in (None, False)]
+    if given:
+        raise CameraFileError(f"{p}: a camera list gives each entry's own clip planes and "
+                              f"lens; {', '.join(given)} cannot be given for it")
     if isinstance(doc, dict):
         if set(doc) - {"cameras"} or not isinstance(doc.get("cameras"), list):
             raise CameraFileError(f"{p}: expected a list of camera entries or an object "
@@ -284,7 +378,7 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True
     out: list[Camera | BrokenCamera] = []
     for index, entry in enumerate(doc):
         try:
-            out.append(camera_from_entry(entry, index))
+            out.append(camera_from_entry(entry, index, size))
         except ViewError as exc:
             if strict:
                 raise ViewError(exc.index, exc.field, f"{exc.message} (in {p})") from None

@@ -304,3 +304,83 @@ def test_common_size_refuses_mixed_sizes():
     assert common_size([Camera.look_at([0, 0, 1], [0, 0, 0])]) is None
     with pytest.raises(ValueError, match="8x6, 9x6"):
         common_size([a, b])
+
+
+# --- through load_cameras, render_views and the CLI -----------------------------------------
+
+def test_load_cameras_reads_every_format(tmp_path):
+    from clraster.views import load_cameras
+
+    _write_colmap(tmp_path / "colmap", extra_images=1)
+    assert len(load_cameras(tmp_path / "colmap", near=NEAR, far=FAR)) == 2
+    pose = _gl_pose()
+    (tmp_path / "transforms.json").write_text(json.dumps(
+        {"camera_angle_x": 1.0, "frames": [{"transform_matrix": pose.tolist()}]}))
+    cams = load_cameras(tmp_path / "transforms.json", size=(W, H), near=NEAR, far=FAR)
+    assert cams[0].image_size == (W, H)
+    np.savez(tmp_path / "c.npz", K=np.array([[50.0, 0, 30], [0, 50, 23], [0, 0, 1]]),
+             poses=_cv_pose()[None], near=NEAR, far=FAR)
+    assert load_cameras(tmp_path / "c.npz", size=(W, H))[0].image_size == (W, H)
+    # a camera list carries its own clip planes: near/far for it are refused, not ignored
+    (tmp_path / "list.json").write_text(json.dumps([{"eye": [0, 0, 5], "target": [0, 0, 0]}]))
+    with pytest.raises(CameraFileError, match="near, far cannot be given"):
+        load_cameras(tmp_path / "list.json", near=NEAR, far=FAR)
+
+
+def test_camera_list_intrinsics_entries(tmp_path):
+    """{"K", "pose", "near", "far"} entries, with and without their own size, OpenCV and
+    OpenGL poses, against the OpenCV projection on the image."""
+    from clraster.views import ViewError, load_cameras
+
+    k = np.array([[50.0, 0, 30.4], [0, 52.0, 22.6], [0, 0, 1]])
+    pose = _cv_pose()
+    entries = [{"K": k.tolist(), "pose": pose.tolist(), "near": NEAR, "far": FAR},
+               {"K": k.tolist(), "pose": (pose @ np.diag([1, -1, -1, 1.0])).tolist(),
+                "convention": "opengl", "near": NEAR, "far": FAR, "width": W, "height": H,
+                "name": "gl"}]
+    f = tmp_path / "cams.json"
+    f.write_text(json.dumps(entries))
+    for cam in load_cameras(f, size=(W, H)):
+        _check(cam, _project_cv(k, pose), 0.0)
+    with pytest.raises(ViewError, match="camera 0: field 'K'.*image size"):
+        load_cameras(f)
+    bad = [{"K": k.tolist(), "near": NEAR},
+           {"K": k.tolist(), "near": 1, "far": 2, "eye": [0, 0, 1]},
+           {"K": k.tolist(), "near": 1, "far": 2, "width": 4},
+           {"K": k.tolist(), "near": 1, "far": 2, "convention": "dx"},
+           {"K": [[1, 2], [3, 4]], "near": 1, "far": 2, "width": 4, "height": 4}]
+    fields = ["far", "eye", "height", "convention", "K"]
+    f.write_text(json.dumps(bad))
+    broken = load_cameras(f, strict=False, size=(W, H))
+    assert [b.error.field for b in broken] == fields
+
+
+def test_cli_views_from_a_colmap_model(tmp_path):
+    """`clraster render MESH --views COLMAP_DIR --near --far`: the size comes from the model;
+    the ids written equal the ones COLMAP's projection predicts."""
+    from clraster.cli import main
+
+    pose = _write_colmap(tmp_path / "model")
+    import trimesh
+
+    trimesh.Trimesh(TRIS.reshape(-1, 3), np.arange(9).reshape(3, 3), process=False).export(
+        tmp_path / "tris.ply")
+    out = tmp_path / "out"
+    code = main(["render", str(tmp_path / "tris.ply"), "--views", str(tmp_path / "model"),
+                 "--near", str(NEAR), "--far", str(FAR), "--cull", "none", "--out", str(out),
+                 "--outputs", "ids"])
+    assert code == 0
+    ids = np.load(out / "view_00000_ids.npy")
+    assert ids.shape == (H, W)
+    want, unsure = _expected_ids(_project_cv(
+        np.array([[52.0, 0, 29.3], [0, 49.0, 24.1], [0, 0, 1]]), pose), 0.5)
+    assert not ((ids != want) & ~unsure).any()
+    # --size may repeat the model's size, not contradict it; near/far are needed
+    assert main(["render", str(tmp_path / "tris.ply"), "--views", str(tmp_path / "model"),
+                 "--near", str(NEAR), "--far", str(FAR), "--size", f"{W + 1}x{H}",
+                 "--out", str(tmp_path / "o2")]) == 1
+    assert main(["render", str(tmp_path / "tris.ply"), "--views", str(tmp_path / "model"),
+                 "--out", str(tmp_path / "o3")]) == 1
+    assert not (tmp_path / "o2").exists() or not any((tmp_path / "o2").iterdir())
+    # options of the many-view path alone
+    assert main(["render", "example", "--drop-distortion", "--out", str(tmp_path / "a.png")]) == 2
