@@ -89,12 +89,16 @@ def pin_pocl_threads() -> bool:
 def platforms() -> list:
     """``cl.get_platforms()``, with PoCL's workers pinned where `pin_pocl_threads` says so.
 
-    PoCL starts its worker threads when the platforms are first listed in a process, so
-    this is the call that decides; a later call changes nothing. While pinning, the
-    environment also bounds PoCL's worker count to the CPU count from both sides (PoCL
-    falls back to a fixed count where it cannot read the machine's topology, and a worker
-    beyond the CPUs would abort the process); all of it is restored when PoCL has started.
-    A process started by another thread during that call inherits those variables."""
+    PoCL reads these variables and starts its worker threads when its devices are first
+    listed in a process, so this call lists them; a later call changes nothing. (Listing
+    the platforms alone was not enough: pyopencl's ICD loader queried the platforms'
+    devices itself only where there were several, so Debian's PoCL 3.1 as the only ICD
+    started its workers at the context's first device query, after the environment was
+    restored, and they ran unpinned.) While pinning, the environment also bounds PoCL's
+    worker count to the CPU count from both sides (PoCL falls back to a fixed count where it
+    cannot read the machine's topology, and a worker beyond the CPUs would abort the
+    process); all of it is restored when PoCL has started. A process started by another
+    thread during that call inherits those variables."""
     with _platforms_lock:
         saved = {}
         if pin_pocl_threads():
@@ -104,7 +108,15 @@ def platforms() -> list:
             saved = {k: os.environ.get(k) for k in pinned}
             os.environ.update(pinned)
         try:
-            return cl.get_platforms()
+            found = cl.get_platforms()
+            if saved:
+                for plat in found:
+                    if "portable computing" in plat.name.lower():
+                        try:
+                            plat.get_devices()   # PoCL starts its workers here
+                        except cl.Error:   # none here: _default_context skips it
+                            pass
+            return found
         finally:
             for k, v in saved.items():
                 if v is None:

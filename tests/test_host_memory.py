@@ -205,15 +205,21 @@ def test_pool_positions_must_be_in_cluster_order():
         stage.upload_pool(queue, shuffled)
 
 
-def test_frame_after_an_interrupted_pass_is_right():
+def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
     """Ctrl-C in the middle of a pass leaves its kernels running on the chain's buffers
     (the host-mode draw records among them): the chain keeps itself alive until they are
     done, and the next pass waits for them before the host writes anything, so the next
-    frame — other draws, other sizes — is the one an untouched renderer makes."""
+    frame — other draws, other sizes — is the one an untouched renderer makes.
+
+    Deterministic on any machine and runtime: the pass's work is held back by a user event
+    (a barrier on the renderer's queue), the interrupt arrives as the pass's first wait
+    hands over to its waiter (the work is certainly enqueued and unfinished), and the event
+    is completed just before the next frame, so that frame starts while the abandoned work
+    runs. (The interrupt used to be timed from one timed frame, and sometimes arrived after
+    the frame had ended: "DID NOT RAISE KeyboardInterrupt".)"""
     import _thread
     import gc
     import threading
-    import time
 
     from clraster.scenes import plant, plant_overview_camera
 
@@ -225,19 +231,35 @@ def test_frame_after_an_interrupted_pass_is_right():
     want = Renderer(w, h).render(small, small_cam, cull="none")
     r = Renderer(w, h)
     r.render(big, big_cam, frustum=False, cones=False)   # kernels built, buffers grown
-    t0 = time.perf_counter()
-    r.render(big, big_cam, frustum=False, cones=False)
-    took = time.perf_counter() - t0
-    timer = threading.Timer(0.3 * took, _thread.interrupt_main)
-    timer.start()
+
+    handed_over = device._waiter
+    interrupted: list[bool] = []
+
+    def interrupt_in_the_wait():   # a Ctrl-C while the pass waits for its work
+        if not interrupted:
+            interrupted.append(True)
+            _thread.interrupt_main()
+        return handed_over()
+
+    complete = cl.command_execution_status.COMPLETE
+    gate = cl.UserEvent(r.context)
+    # a pass that cannot wait (a blocking call) would hang: the gate opens after 60 s
+    fallback = threading.Timer(60.0, gate.set_status, (complete,))
+    fallback.start()
     try:
+        cl.enqueue_barrier(r.queue, wait_for=[gate])
+        monkeypatch.setattr(device, "_waiter", interrupt_in_the_wait)
         with pytest.raises(KeyboardInterrupt):
             r.render(big, big_cam, frustum=False, cones=False)
-            time.sleep(10 * took)   # (should the frame end first, the interrupt lands here)
+        monkeypatch.undo()
+        assert fallback.is_alive(), "the pass waited for its work in an uninterruptible call"
+        assert r.chain._pending   # the work of the pass is abandoned, and kept alive:
+        assert any(keep is r.chain for _, keep in device._in_flight)
+        assert device.device_busy()
     finally:
-        timer.cancel()
-    if r.chain._pending:   # the interrupt landed in a wait of the pass (most runs)
-        assert any(keep is r.chain for _, keep in device._in_flight) or not device.device_busy()
+        fallback.cancel()
+        if gate.command_execution_status != complete:
+            gate.set_status(complete)   # the abandoned work runs from here on
     gc.collect()
     got = r.render(small, small_cam, cull="none")
     assert not r.chain._pending
