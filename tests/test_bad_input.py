@@ -14,6 +14,27 @@
 | PYOPENCL_CTX: the Oclgrind simulator / nothing | SimulatorWarning / NoDeviceError |
 | CLI: --ids/--depth not .npy, a folder, no extension | exit 1 before rendering |
 | CLI: out of memory, Ctrl-C | one line, exit 1 / exit 130 (tests/test_processes.py) |
+| CLI: two outputs naming one file (`--out a.png --depth a.png`, `./`, `..`, links) | exit 1 before loading, naming both options; nothing written |
+| CLI: an output or folder name over NAME_MAX, a parent that is a file | exit 1 before rendering; nothing written |
+| CLI: a later output fails while writing | exit 1; every output as it was (all-or-none) |
+| CLI / load_cameras: a camera file nested 100,000 levels, not UTF-8, a 5000-digit integer | CameraFileError naming the file; CLI exit 1, one line |
+| output names of 250 bytes (any writer) | written; temporary names fit NAME_MAX |
+| `render_sort_last` with more parts than clusters, an empty mesh or scene | empty parts render as background; the frame equals one machine's bit for bit |
+| `local_cluster(0)`, `(-1)`, `(1.5)`, `(True)` | ValueError: a positive integer |
+| Dask calls on a client with no workers | NoWorkersError (a ValueError) within WORKER_WAIT_S |
+| `render_views` into a folder made with another size or options | OutDirMismatchError listing the differences, before any view (or `overwrite=True`) |
+| `render_views` re-run with one camera changed | that view re-rendered; the others skipped |
+| `render_views(cull="sideways")`, a zero-normal plane, `reversed_z="yes"` | one ValueError before any view (one machine and Dask) |
+| a batch writer SIGKILLed mid-file | the next run removes its temporary (dead pid, same host) |
+| `render_shaded(ssaa=k, render_kwargs={"window": w})` | the window scaled by k: the same region as ssaa=1 |
+| `depth_image` / `depth_picture` of a reversed-Z frame; a contradicting flag | read by the frame's own convention; ValueError |
+| `Camera.from_pyrender`: orthographic xmag at another aspect; yfov/aspect/xmag/fx ≤ 0, yfov ≥ π | pyrender's aspect-corrected xmag; CameraArgumentError naming the attribute |
+| `Camera.look_at` with an eye 1e300 away; in a camera file | CameraArgumentError / ViewError naming eye (overflow), not "must differ" / up |
+| `from_intrinsics(fx=5e-324)`, projections singular in float32 | CameraArgumentError naming the parameter |
+| a polygon window of 10⁵–10⁶ vertices | validated in O(n log n) (tests/test_reliability_clip2d.py) |
+
+The cases added with the reliability issue live in tests/test_reliability_*.py (one file per
+area: cli, views, dask, shade, camera, clip2d, device) and tests/test_camera_files.py.
 
 A renderer that refused an input still renders correctly afterwards. Threads, fork and leaks:
 tests/test_processes.py.
