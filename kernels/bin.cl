@@ -26,8 +26,7 @@
  * three from that word alone, bin_count without a branch on the first two (random from
  * slot to slot on a dense mesh) and without reading the 96-byte records; walked pieces over
  * at most 2 x 2 tiles (clipped ones) test each tile (products) instead of finding runs
- * (divisions). Dragon 871K at 1080p: bin 0.80x (bench/proc_ab.py, loaded machine); the
- * 2 x 2 masks from setup: see setup.cl.
+ * (divisions); the 2 x 2 masks from setup: see setup.cl.
  *
  * Piece index space: 0..m-1 are the unclipped slots (Piece at pieces[t]); m + j is clipped
  * piece j (clip_pieces[j]). A clipped triangle's pieces stay at its position in the stream.
@@ -162,7 +161,7 @@ __kernel void bin_count(__global const uchar *restrict status,
     __global int *row = counts + (size_t)chunk * n_tiles;
     for (int i = 0; i < n_tiles; ++i) row[i] = 0;
     /* four histograms taken in turn: with one, runs of equal statuses made a chain of
-     * dependent increments of one counter (15% of the kernel's perf samples) */
+     * dependent increments of one counter */
     int h[4][8] = {{0}};
     CHUNK_SLOTS
     uint u = s0;

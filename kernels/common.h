@@ -26,6 +26,7 @@
 #include "layout.h"   /* generated from clraster/layout.py: SUBPIXEL_BITS, OC_*, ST_*, PF_*... */
 
 #define TILE_SIZE (1 << TILE_LOG2)
+#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define SUB_ONE (1 << SUBPIXEL_BITS)          /* 256: one pixel in 24.8 fixed point */
 #define SUB_HALF (1 << (SUBPIXEL_BITS - 1))   /* pixel centres sit at +0.5 */
 
@@ -57,9 +58,9 @@
 
 /* Round to nearest, ties to even (rint). On PoCL, __builtin_rintf is LLVM's rint intrinsic,
  * one roundss on x86; PoCL's OpenCL rint() is a software routine that is not inlined and
- * cost the vertex stage half its time (13.0 -> 6.5 ms on the dragon at 1080p). Other
- * platforms (Oclgrind's interpreter has no llvm.rint) are built with -DCLRASTER_PORTABLE
- * (clraster.device.program) and use rint(). Both round the same, bit for bit. */
+ * was half the vertex stage's time. Other platforms (Oclgrind's interpreter has no
+ * llvm.rint) are built with -DCLRASTER_PORTABLE (clraster.device.program) and use rint().
+ * Both round the same, bit for bit. */
 #ifdef CLRASTER_PORTABLE
 #define RINTF(x) rint(x)
 #else
@@ -67,8 +68,7 @@
 #endif
 
 /* Index of the lowest set bit of x != 0 (uint). PoCL's clz() is a call into its library,
- * not inlined (perf of a dragon render loop: _cl_clz 0.3% of the samples, beside the
- * raster's call sites); clang's builtin is one tzcnt. Other platforms: OpenCL 1.2's clz. */
+ * not inlined; clang's builtin is one tzcnt. Other platforms: OpenCL 1.2's clz. */
 #ifdef CLRASTER_PORTABLE
 #define CTZ(x) (31 - clz((x) & -(x)))
 #else
@@ -97,17 +97,12 @@
 
 /* A helper PoCL must inline. Its inliner left some larger helpers called once per triangle
  * or vertex as real calls (perf shows them as symbols of their own in the kernel's .so:
- * make_piece, value_planes, rect_outside, row_span and the vertex stage's double transform,
- * since written per lane in vertex.cl), their struct and double4
- * arguments passed through the stack. Forced inline on the dragon at 1080p
- * (bench/kernel_ab.py, 14 rounds, medians): setup 12.1 -> 10.6 ms, vertex 5.3 -> 5.0, bin
- * 6.5 -> 6.1, frame 0.95x. */
+ * make_piece, value_planes, rect_outside, row_span), their struct and double4 arguments
+ * passed through the stack. */
 #define ALWAYS_INLINE __attribute__((always_inline)) inline
 
 /* Integer min/max and a finiteness test written out: PoCL's OpenCL min(), max() and
- * isfinite() are calls into its builtin library that are not inlined (perf on the dragon at
- * 1080p: _cl_max + _cl_min 2.1% of the frame's samples in setup alone, _cl_isfinite 1.1% in
- * the vertex stage). */
+ * isfinite() are calls into its builtin library that are not inlined. */
 inline int imin(int a, int b) { return a < b ? a : b; }
 inline int imax(int a, int b) { return a > b ? a : b; }
 inline bool finite_f(float x) { return (as_uint(x) & 0x7f800000u) != 0x7f800000u; }
@@ -141,19 +136,27 @@ inline double user_dist(__global const double *q, float px, float py, float pz)
     return MAT_ROW(q, 0, (double)px, (double)py, (double)pz);
 }
 
-/* The classic 6-bit frustum outcode of a clip-space point: bit k set iff the signed distance
- * to plane k is negative (the clipper's plane_dist expressions). The sign of a rounded sum
- * is the sign of the exact sum, so float and double outcodes of one point agree. */
+/* The classic 6-bit frustum outcode of clip coordinates x, y, z, w: bit k set iff the
+ * signed distance to plane k is negative (the clipper's plane_dist expressions), compared
+ * with `zero` of their type. One body for every variant: float (frustum_outcode), double
+ * (frustum_outcode_d: the line clipper's recomputed endpoints) and the vertex stage's
+ * float8 lanes; BIT(test, bit) makes one test's bit in the result's type (OC_BIT: bit or 0).
+ * The sign of a rounded sum is the sign of the exact sum, so float and double outcodes of
+ * one point agree. */
+#define FRUSTUM_OUTCODE(x, y, z, w, zero, BIT)                                              \
+    (BIT((x) + (w) < (zero), OC_X_NEG) | BIT((w) - (x) < (zero), OC_X_POS)                   \
+     | BIT((y) + (w) < (zero), OC_Y_NEG) | BIT((w) - (y) < (zero), OC_Y_POS)                 \
+     | BIT((z) + (w) < (zero), OC_Z_NEG) | BIT((w) - (z) < (zero), OC_Z_POS))
+#define OC_BIT(test, bit) ((test) ? (bit) : 0)
+
 inline uint frustum_outcode(float4 c)
 {
-    uint oc = 0;
-    oc |= (c.x + c.w < 0.0f) ? OC_X_NEG : 0;
-    oc |= (c.w - c.x < 0.0f) ? OC_X_POS : 0;
-    oc |= (c.y + c.w < 0.0f) ? OC_Y_NEG : 0;
-    oc |= (c.w - c.y < 0.0f) ? OC_Y_POS : 0;
-    oc |= (c.z + c.w < 0.0f) ? OC_Z_NEG : 0;
-    oc |= (c.w - c.z < 0.0f) ? OC_Z_POS : 0;
-    return oc;
+    return FRUSTUM_OUTCODE(c.x, c.y, c.z, c.w, 0.0f, OC_BIT);
+}
+
+inline uint frustum_outcode_d(double4 c)
+{
+    return FRUSTUM_OUTCODE(c.x, c.y, c.z, c.w, 0.0, OC_BIT);
 }
 
 /* The viewport transform of clip x, y, z given iw = 1/w (floats or float vectors): window x
@@ -180,10 +183,9 @@ inline WinVert viewport_vertex(float4 c, float hw, float hh)
     return v;
 }
 
-/* The window position of a WinVert as the vertex stream holds it: an int2 (x, y), not a
- * struct of two ints, which PoCL loaded and stored field by field (the same 8 bytes as a
- * struct gained nothing; as int2, dragon 1080p vertex 3.54 -> 2.97 ms, setup 8.93 -> 8.72,
- * against the 16-byte WinVert: bench/README.md, session 17). */
+/* The window position of a WinVert as the vertex stream holds it: an int2 (x, y), half the
+ * bytes of a WinVert (setup reads x and y only), and not a struct of two ints, which PoCL
+ * loads and stores field by field. */
 inline int2 win_xy(WinVert v)
 {
     return (int2)(v.x, v.y);
@@ -206,7 +208,8 @@ inline long edge_bias(int ax, int ay, int bx, int by)
     return (dy < 0 || (dy == 0 && dx > 0)) ? 0 : 1;
 }
 
-/* floor(a / d) for d > 0, exact in 64 bits (bin.cl, raster.cl) (C division truncates towards zero). */
+/* floor(a / d) for d > 0, exact in 64 bits (bin.cl, raster.cl; C division truncates towards
+ * zero). */
 inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) / d); }
 
 /* Does the frame's bin list (summary from bin.cl bin_scan_tiles: [0] its length, [1] set
@@ -217,6 +220,77 @@ inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) /
 
 inline int bb_x(int packed) { return packed & 0xFFFF; }
 inline int bb_y(int packed) { return packed >> 16; }
+
+/* A piece's three edge functions, set up at one pixel centre to be walked pixel by pixel.
+ * Edge i is the edge opposite vertex i (v1 -> v2, v2 -> v0, v0 -> v1), so E_i / area is
+ * vertex i's screen-space weight. e[i]: E_i at the centre minus the edge's top-left bias
+ * (edge_bias), so that a centre is inside edge i iff its e[i] >= 0; sx[i] / sy[i]: what one
+ * pixel right / down adds (-dy·256, dx·256). All exact in 64 bits. Setup's coverage bits of
+ * small boxes, the raster and the occlusion queries set up their edges here, so they take
+ * exactly the same centres. */
+typedef struct { long e[3], sx[3], sy[3]; } PieceEdges;
+
+ALWAYS_INLINE void set_edge(PieceEdges *E, int i, int ax, int ay, int bx, int by, int px,
+                            int py)
+{
+    E->e[i] = edge_fn(ax, ay, bx, by, px, py) - edge_bias(ax, ay, bx, by);
+    E->sx[i] = -(long)(by - ay) << SUBPIXEL_BITS;
+    E->sy[i] = (long)(bx - ax) << SUBPIXEL_BITS;
+}
+
+/* The edges of the piece with 24.8 vertices (X0, Y0), (X1, Y1), (X2, Y2) at the centre of
+ * pixel (x, y). */
+ALWAYS_INLINE void piece_edges(int X0, int Y0, int X1, int Y1, int X2, int Y2, int x, int y,
+                               PieceEdges *E)
+{
+    int px = (x << SUBPIXEL_BITS) + SUB_HALF, py = (y << SUBPIXEL_BITS) + SUB_HALF;
+    set_edge(E, 0, X1, Y1, X2, Y2, px, py);
+    set_edge(E, 1, X2, Y2, X0, Y0, px, py);
+    set_edge(E, 2, X0, Y0, X1, Y1, px, py);
+}
+
+/* Is the centre k pixels right of and j pixels below the set-up one inside all three edges?
+ * 0 or 1, the three tests combined with & (no branches). */
+ALWAYS_INLINE int edges_inside(const PieceEdges *E, long k, long j)
+{
+    return (E->e[0] + k * E->sx[0] + j * E->sy[0] >= 0)
+           & (E->e[1] + k * E->sx[1] + j * E->sy[1] >= 0)
+           & (E->e[2] + k * E->sx[2] + j * E->sy[2] >= 0);
+}
+
+/* Move the set-up centre j pixels down. */
+ALWAYS_INLINE void edges_down(PieceEdges *E, long j)
+{
+    E->e[0] += j * E->sy[0];
+    E->e[1] += j * E->sy[1];
+    E->e[2] += j * E->sy[2];
+}
+
+/* A piece's depth plane (setup.cl value_planes, from the unsnapped vertices): window depth
+ * z0 at its reference pixel (x0, y0), the first column and row of its pixel box; dzdx, dzdy
+ * per pixel; zlo, its nearest vertex's depth. */
+typedef struct { float z0, dzdx, dzdy, zlo; int x0, y0; } DepthPlane;
+
+ALWAYS_INLINE void depth_plane(__global const Piece *pc, DepthPlane *P)
+{
+    P->z0 = pc->z0; P->dzdx = pc->dzdx; P->dzdy = pc->dzdy; P->zlo = pc->zlo;
+    P->x0 = bb_x(pc->bb_min); P->y0 = bb_y(pc->bb_min);
+}
+
+/* A fragment's depth in two steps, in this order wherever a fragment is depth-tested (the
+ * raster's lanes, raster.cl depth_block8, too; and clraster/reference/raster.py): the
+ * plane's value at the start of row y, then at column x of that row, raised to zlo: a
+ * covered centre up to 1/512 px outside the unsnapped triangle must not extrapolate past
+ * its nearest vertex (the tile Hi-Z and the Hi-Z test rely on it). */
+ALWAYS_INLINE float depth_row(const DepthPlane *P, int y)
+{
+    return P->z0 + P->dzdy * (float)(y - P->y0);
+}
+
+ALWAYS_INLINE float depth_at(const DepthPlane *P, float zrow, int x)
+{
+    return maxf(zrow + P->dzdx * (float)(x - P->x0), P->zlo);
+}
 
 /* Can edge a->b (with its top-left bias) be satisfied by some pixel centre of the pixel
  * rectangle [x0, x1] × [y0, y1]? The edge function is linear, so its maximum over the

@@ -80,19 +80,6 @@ inline float4 seg_clip(__global const float *mvp, __global const float *p)
     return clip_transform(mvp, p[0], p[1], p[2]);   /* common.h, as for triangle vertices */
 }
 
-/* frustum_outcode (common.h) in double, for the clipper's recomputed endpoints. */
-inline uint outcode_d(double4 c)
-{
-    uint oc = 0;
-    oc |= (c.x + c.w < 0.0) ? OC_X_NEG : 0;
-    oc |= (c.w - c.x < 0.0) ? OC_X_POS : 0;
-    oc |= (c.y + c.w < 0.0) ? OC_Y_NEG : 0;
-    oc |= (c.w - c.y < 0.0) ? OC_Y_POS : 0;
-    oc |= (c.z + c.w < 0.0) ? OC_Z_NEG : 0;
-    oc |= (c.w - c.z < 0.0) ? OC_Z_POS : 0;
-    return oc;
-}
-
 /* Signed distance to plane k of LPLANE_BIT, >= 0 inside. */
 inline double lplane_dist(int k, double4 v)
 {
@@ -134,8 +121,8 @@ inline int clip_segment(float4 *a, float4 *b, uint oa, uint ob)
         double din = lplane_dist(k, pin), dout = lplane_dist(k, pout);
         double t = din / (din - dout);
         double4 r = on_plane(k, pin + t * (pout - pin));
-        if (move0) { p0 = r; oa = outcode_d(r); }
-        else { p1 = r; ob = outcode_d(r); }
+        if (move0) { p0 = r; oa = frustum_outcode_d(r); }
+        else { p1 = r; ob = frustum_outcode_d(r); }
     }
     if (oa & ob) return 0;
     *a = convert_float4(p0);

@@ -63,8 +63,7 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
          * first level in float8 lanes, sixteen source texels of a row at a time split into
          * even and odd columns, the same comparisons in the same order as far4 (so the
          * same bits), and level 0 copied from the same loads. The scalar loops below
-         * (clamped indices, a separate copy) were the pyramid's time: 10M plant first
-         * person at 1080p, pyramid_reduce 2.2 ms a frame. */
+         * (clamped indices, a separate copy) are for the other blocks. */
         for (int j = 0; j < lh; ++j) {
             int ya = 2 * (gy0 + j), yb = imin(ya + 1, hs - 1);
             size_t oa = (size_t)ya * ws + 2 * gx0, ob = (size_t)yb * ws + 2 * gx0;
@@ -202,10 +201,8 @@ __kernel void hiz_test_boxes(__global const float *boxes, const int n_pad,
      * corner and every point inside (A is monotone in each |p_c|). */
     float8 ax = fmax(fabs(lo0), fabs(hi0)), ay = fmax(fabs(lo1), fabs(hi1));
     float8 az = fmax(fabs(lo2), fabs(hi2));
-    float8 ex = HIZ_EPS * (((am[0] * ax + am[1] * ay) + am[2] * az) + am[3]);
-    float8 ey = HIZ_EPS * (((am[4] * ax + am[5] * ay) + am[6] * az) + am[7]);
-    float8 ez = HIZ_EPS * (((am[8] * ax + am[9] * ay) + am[10] * az) + am[11]);
-    float8 ew = HIZ_EPS * (((am[12] * ax + am[13] * ay) + am[14] * az) + am[15]);
+    float8 ex = HIZ_EPS * MAT_ROW(am, 0, ax, ay, az), ey = HIZ_EPS * MAT_ROW(am, 1, ax, ay, az);
+    float8 ez = HIZ_EPS * MAT_ROW(am, 2, ax, ay, az), ew = HIZ_EPS * MAT_ROW(am, 3, ax, ay, az);
     float8 exw = ex + ew, eyw = ey + ew, ezw = ez + ew;
     int8 zero = (int8)0, one = (int8)1;
     float8 inf = (float8)INFINITY;
@@ -226,11 +223,9 @@ __kernel void hiz_test_boxes(__global const float *boxes, const int n_pad,
     float8 yh = (float8)(-INFINITY), zl = (float8)INFINITY;
     for (int k = 0; k < 8; ++k) {
         float8 px = (k & 1) ? hi0 : lo0, py = (k & 2) ? hi1 : lo1, pz = (k & 4) ? hi2 : lo2;
-        /* same expression and order as kernels/vertex.cl */
-        float8 cx = ((m[0] * px + m[1] * py) + m[2] * pz) + m[3];
-        float8 cy = ((m[4] * px + m[5] * py) + m[6] * pz) + m[7];
-        float8 cz = ((m[8] * px + m[9] * py) + m[10] * pz) + m[11];
-        float8 cw = ((m[12] * px + m[13] * py) + m[14] * pz) + m[15];
+        /* common.h MAT_ROW, as the vertex stage transforms vertices */
+        float8 cx = MAT_ROW(m, 0, px, py, pz), cy = MAT_ROW(m, 1, px, py, pz);
+        float8 cz = MAT_ROW(m, 2, px, py, pz), cw = MAT_ROW(m, 3, px, py, pz);
         bad = select(one, bad, fabs(cx) < inf);
         bad = select(one, bad, fabs(cy) < inf);
         bad = select(one, bad, fabs(cz) < inf);

@@ -18,7 +18,6 @@
  */
 #include "common.h"
 
-#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
 /* BOX_TRIS (12, clraster/layout.py): box b is faces BOX_TRIS·b .. BOX_TRIS·b + 11. */
 
@@ -72,36 +71,27 @@ __kernel void query_tiles(__global const int *tile_start, __global const Piece *
         if (lx0 > lx1 || ly0 > ly1) continue;
         rx0 = min(rx0, lx0); rx1 = max(rx1, lx1);
         ry0 = min(ry0, ly0); ry1 = max(ry1, ly1);
-        /* coverage and depth exactly as raster_tiles (kernels/raster.cl): the same exact
-         * edge values at each pixel centre and the same float32 depth expression; walked in
-         * branch-free spans of SPAN columns, lanes outside [lx0, lx1] masked */
-        int X0 = pc->x[0], X1 = pc->x[1], X2 = pc->x[2];
-        int Y0 = pc->y[0], Y1 = pc->y[1], Y2 = pc->y[2];
-        long b0 = edge_bias(X1, Y1, X2, Y2), b1 = edge_bias(X2, Y2, X0, Y0);
-        long b2 = edge_bias(X0, Y0, X1, Y1);
-        int px = (tx0 << SUBPIXEL_BITS) + SUB_HALF, py = ((ty0 + ly0) << SUBPIXEL_BITS) + SUB_HALF;
-        long r0 = edge_fn(X1, Y1, X2, Y2, px, py);
-        long r1 = edge_fn(X2, Y2, X0, Y0, px, py);
-        long r2 = edge_fn(X0, Y0, X1, Y1, px, py);
-        long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
-        long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
-        long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
-        float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy, zlo = pc->zlo;
-        /* depth plane relative to the piece's reference pixel, as raster_tiles */
-        int qx0 = bb_x(pc->bb_min) - tx0, qy0 = bb_y(pc->bb_min);
+        /* coverage and depth exactly as raster_tiles (kernels/raster.cl): the same edges
+         * (common.h piece_edges, set up at the tile's first column of row ly0) and the same
+         * float32 depth (depth_row, depth_at) at each pixel centre; walked in branch-free
+         * spans of SPAN columns, lanes outside [lx0, lx1] masked */
+        PieceEdges E;
+        piece_edges(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2], tx0,
+                    ty0 + ly0, &E);
+        DepthPlane P;
+        depth_plane(pc, &P);
         for (int ly = ly0; ly <= ly1; ++ly) {
             int row = ly << TILE_LOG2;
-            float zrow = z0 + dzdy * (float)(ty0 + ly - qy0);
+            float zrow = depth_row(&P, ty0 + ly);
             for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN)
             for (int j = 0; j < SPAN; ++j) {
                 int lx = cx + j;
-                long w0 = r0 + lx * sx0, w1 = r1 + lx * sx1, w2 = r2 + lx * sx2;
-                bool in = lx >= lx0 && lx <= lx1 && w0 >= b0 && w1 >= b1 && w2 >= b2;
-                float z = maxf(zrow + dzdx * (float)(lx - qx0), zlo);   /* as raster_tiles */
+                bool in = lx >= lx0 && lx <= lx1 && edges_inside(&E, lx, 0);
+                float z = depth_at(&P, zrow, tx0 + lx);
                 int i = row + lx;
                 hit[i] |= (uchar)(in && z < zt[i]);   /* LESS: equal depth does not pass */
             }
-            r0 += sy0; r1 += sy1; r2 += sy2;
+            edges_down(&E, 1);
         }
     }
 }

@@ -17,20 +17,23 @@
  */
 #include "common.h"
 
-#define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
 #if TILE_SIZE < 8
 #error "the raster works in blocks of eight columns of a tile row: TILE_LOG2 >= 3"
 #endif
-#define WIDE_RUN 8   /* pieces at least this many columns wide in a tile find their runs */
-#define TRIM_ROWS 4  /* pieces over more rows of a tile than this first narrow their rows */
+/* Tunables of the edge-function path (speed only: any value gives the same fragments).
+ * WIDE_RUN: a piece whose columns in a tile span more than WIDE_RUN (x1 - x0 >= WIDE_RUN)
+ * finds each row's run by division (edge_columns); a narrower one tests its edges in lanes.
+ * TRIM_ROWS: a piece over more than TRIM_ROWS rows of a tile first narrows its rows. */
+#define WIDE_RUN 8
+#define TRIM_ROWS 4
 #define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
 
 /* Counting the true lanes (-1) of int8 masks: LANE_COUNTER(c) declares counter c,
  * COUNT_LANES(c, mask) adds a mask's, LANE_TOTAL(c) is the int total. On PoCL an int8 of
- * per-lane counts, summed once per piece (a count through memory per block: plant raster
- * 1.05x). Oclgrind (CLRASTER_PORTABLE) evaluates the vector form wrong — every true lane
- * counted 255 (its zero-extension of an i1 vector, by all appearances) — so there the
- * mask goes through memory. */
+ * per-lane counts, summed once per piece (cheaper than a count through memory per block).
+ * Oclgrind (CLRASTER_PORTABLE) evaluates the vector form wrong — every true lane counted
+ * 255 (its zero-extension of an i1 vector, by all appearances) — so there the mask goes
+ * through memory. */
 #ifdef CLRASTER_PORTABLE
 #define LANE_COUNTER(c) int c = 0
 #define COUNT_LANES(c, mask)                                                              \
@@ -53,26 +56,26 @@ inline int lane_sum(int8 v)
     return v2.x + v2.y;
 }
 
-/* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value
- * r + lx·s is >= bias. The value is linear in lx: if both ends of the run are inside
- * (outside), all of it is; otherwise the edge crosses the run (so s != 0) and the bound is
- * one exact integer division, which lies inside the run. */
-inline void edge_columns(long r, long s, long bias, int *lo, int *hi)
+/* Narrow [*lo, *hi] (tile-local columns) to the columns lx where the edge value (less its
+ * bias: PieceEdges) r + lx·s is >= 0. The value is linear in lx: if both ends of the run are
+ * inside (outside), all of it is; otherwise the edge crosses the run (so s != 0) and the
+ * bound is one exact integer division, which lies inside the run. */
+inline void edge_columns(long r, long s, int *lo, int *hi)
 {
-    bool in_lo = r + (long)*lo * s >= bias, in_hi = r + (long)*hi * s >= bias;
+    bool in_lo = r + (long)*lo * s >= 0, in_hi = r + (long)*hi * s >= 0;
     if (in_lo && in_hi) return;
     if (!in_lo && !in_hi) { *hi = *lo - 1; return; }
-    if (s > 0)   /* inside from lx = ceil((bias - r) / s) on */
-        *lo = (int)-floor_div(r - bias, s);
-    else         /* inside up to lx = floor((r - bias) / -s) */
-        *hi = (int)floor_div(r - bias, -s);
+    if (s > 0)   /* inside from lx = ceil(-r / s) on */
+        *lo = (int)-floor_div(r, s);
+    else         /* inside up to lx = floor(r / -s) */
+        *hi = (int)floor_div(r, -s);
 }
 
 /* Perspective-correct barycentrics of pixel (x, y) of piece pc, relative to its parent
  * triangle's vertices: screen-space weights from the unsnapped value planes (setup.cl),
- * weighted by the perspective ratios, one division (three chained divisions per pixel were
- * 30% of spot's raster samples, perf; the twin multiplies by the same reciprocal), then
- * through the clipped piece's parent barycentrics or its vertex swap. */
+ * weighted by the perspective ratios, one division (the reciprocal of their sum, not three
+ * chained divisions, whose latency was the resolve's cost; the twin multiplies by the same
+ * reciprocal), then through the clipped piece's parent barycentrics or its vertex swap. */
 ALWAYS_INLINE void resolve1(__global const Piece *pc, int x, int y,
                             __global const float *clip_bary, float *B0, float *B1, float *B2)
 {
@@ -177,9 +180,10 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
 
 /* The depth test of one block of eight columns of a tile row, pixels (row + b .. + 7) of
  * the tile's private buffers, lanes lx = b + 0..7 where `in` is set: fragment depth
- * maxf(zrow + dzdx·(lx − rx0), zlo) (the scalar expression per lane, so the same bits),
- * LESS with the lower id winning ties and nothing beating the clear value; winners store
- * their depth, id and entry k. Returns the lanes that passed. */
+ * common.h depth_at per lane, maxf(zrow + dzdx·(lx − rx0), zlo) (rx0: the plane's reference
+ * column in the tile; the same operations, so the same bits), LESS with the lower id
+ * winning ties and nothing beating the clear value; winners store their depth, id and
+ * entry k. Returns the lanes that passed. */
 ALWAYS_INLINE int8 depth_block8(float *zbuf, int *wid, int *win, int i, int8 lx, int8 in,
                                 float zrow, float dzdx, int rx0, float zlo, int id, int k)
 {
@@ -193,6 +197,17 @@ ALWAYS_INLINE int8 depth_block8(float *zbuf, int *wid, int *win, int i, int8 lx,
     *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
     *(int8 *)&win[i] = pass ? (int8)(k) : wk;
     return pass;
+}
+
+/* edges_inside (common.h) for the eight centres of columns b + 0..7 of the row E is set up
+ * at, as an int8 mask; sv[i] = lane·sx[i], the lane products made once per entry (64-bit
+ * vector multiplies are slow). */
+ALWAYS_INLINE int8 edges_inside8(const PieceEdges *E, const long8 *sv, int b)
+{
+    long8 in = ((long8)(E->e[0] + (long)b * E->sx[0]) + sv[0] >= (long8)(0))
+               & ((long8)(E->e[1] + (long)b * E->sx[1]) + sv[1] >= (long8)(0))
+               & ((long8)(E->e[2] + (long)b * E->sx[2]) + sv[2] >= (long8)(0));
+    return __builtin_convertvector(in, int8);
 }
 
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
@@ -242,10 +257,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
      * zmax. tzmax is that farthest depth, attained at pixel zarg. Depths only decrease,
      * so once tzmax is known, zbuf[zarg] <= farthest <= tzmax: a piece not behind
      * zbuf[zarg] is not skipped with no more work, and only one behind it finds the
-     * farthest depth again (when zbuf[zarg] has fallen below tzmax). Every decision is thus the exact
-     * "zlo > farthest depth now", whatever the order of work, and the twin takes the same
-     * decisions from the depth history (clraster/reference/raster.py hiz_skipped). Pixels
-     * outside the image hold -inf so they never count as the farthest. */
+     * farthest depth again (when zbuf[zarg] has fallen below tzmax). Every decision is thus
+     * the exact "zlo > farthest depth now", whatever the order of work, and the twin takes
+     * the same decisions from the depth history (clraster/reference/raster.py hiz_skipped).
+     * Pixels outside the image hold -inf so they never count as the farthest. */
     for (int y = ty1 - ty0 + 1; y < TILE_SIZE; ++y)
         for (int x = 0; x < TILE_SIZE; ++x) zbuf[(y << TILE_LOG2) + x] = -INFINITY;
     for (int y = 0; y <= ty1 - ty0; ++y)
@@ -257,9 +272,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
 
     for (int k = e0; k < e1; ++k) {
         __global const Piece *pc = &entries[k];
-        /* the record eight entries on (1.5 lines of 64 bytes): its first loads were
-         * cache misses (perf: 8% of raster_tile's samples on the dragon at 1080p);
-         * prefetched, dragon raster 6.72 -> 6.42 ms (bench/proc_ab.py, 11 rounds) */
+        /* the record eight entries on (1.5 lines of 64 bytes): the first loads of each
+         * record, written non-temporally by bin_scatter, were cache misses */
         PREFETCH(pc + 8);
         PREFETCH((__global const char *)(pc + 8) + 64);
         int x0 = imax(bb_x(pc->bb_min), tx0), x1 = imin(bb_x(pc->bb_max), tx1);
@@ -269,8 +283,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             float zlo = pc->zlo, za = zbuf[zarg];
             if (zlo > za) {
                 if (!known || za != tzmax) {
-                    /* the farthest depth, in float8 lanes (a scalar loop is not
-                     * vectorized: dragon raster 1.05x against 1.02x) */
+                    /* the farthest depth, in float8 lanes (LLVM does not vectorize the
+                     * scalar loop) */
                     float8 m8 = ((float8 *)zbuf)[0];
                     for (int j = 1; j < TILE_PIXELS / 8; ++j) {
                         float8 v = ((float8 *)zbuf)[j];
@@ -290,11 +304,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         if (cover) {
             /* a box of at most 2 x 2 pixel centres, whose coverage setup found
              * (layout.py COVER_KNOWN; most entries of a dense mesh): the same fragments
-             * and depths as the edge-function loop below, without its edge set-up and
-             * its mispredicted per-pixel edge branches (perf: the hottest spot of the
-             * dragon's raster at 1080p) */
-            float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy, zlo = pc->zlo;
-            int bx = bb_x(pc->bb_min), by = bb_y(pc->bb_min), id = pc->id;
+             * and depths as the edge-function blocks below, without their edge set-up and
+             * lane masks for at most four centres */
+            DepthPlane P;
+            depth_plane(pc, &P);
+            int bx = P.x0, by = P.y0, id = pc->id;
             /* the covered centres inside this tile: columns bx, bx + 1 are bits 0, 1 of
              * each row's pair, rows by, by + 1 the pairs */
             int cols = (x0 <= bx ? 5 : 0) | (x1 > bx ? 10 : 0);
@@ -302,8 +316,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             for (int m = cover & cols & rows; m; m &= m - 1) {
                 int b = CTZ((uint)m);   /* lowest set bit */
                 int x = bx + (b & 1), y = by + (b >> 1);
-                float zrow = z0 + dzdy * (float)(y - by);
-                float z = maxf(zrow + dzdx * (float)(x - bx), zlo);   /* see below */
+                float z = depth_at(&P, depth_row(&P, y), x);
                 int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
                 float zb = zbuf[i];
                 int wd = wid[i];
@@ -316,24 +329,12 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             }
             continue;
         }
-        int X0 = pc->x[0], X1 = pc->x[1], X2 = pc->x[2];
-        int Y0 = pc->y[0], Y1 = pc->y[1], Y2 = pc->y[2];
-        /* edge i is opposite vertex i, so E_i / area is vertex i's screen-space weight */
-        long b0 = edge_bias(X1, Y1, X2, Y2), b1 = edge_bias(X2, Y2, X0, Y0);
-        long b2 = edge_bias(X0, Y0, X1, Y1);
-        /* edge values at the tile's first column of row y0 */
-        int px = (tx0 << SUBPIXEL_BITS) + SUB_HALF, py = (y0 << SUBPIXEL_BITS) + SUB_HALF;
-        long r0 = edge_fn(X1, Y1, X2, Y2, px, py);
-        long r1 = edge_fn(X2, Y2, X0, Y0, px, py);
-        long r2 = edge_fn(X0, Y0, X1, Y1, px, py);
-        /* stepping one pixel right adds -dy·256, one pixel down adds dx·256 */
-        long sx0 = -(long)(Y2 - Y1) << SUBPIXEL_BITS, sy0 = (long)(X2 - X1) << SUBPIXEL_BITS;
-        long sx1 = -(long)(Y0 - Y2) << SUBPIXEL_BITS, sy1 = (long)(X0 - X2) << SUBPIXEL_BITS;
-        long sx2 = -(long)(Y1 - Y0) << SUBPIXEL_BITS, sy2 = (long)(X1 - X0) << SUBPIXEL_BITS;
-        /* depth plane from the unsnapped vertices (setup.cl value_planes), relative to the
-         * piece's reference pixel (its box's first column and row) */
-        float z0 = pc->z0, dzdx = pc->dzdx, dzdy = pc->dzdy, zlo = pc->zlo;
-        int rx0 = bb_x(pc->bb_min) - tx0, ry0 = bb_y(pc->bb_min);
+        /* the edges at the tile's first column of row y0 */
+        PieceEdges E;
+        piece_edges(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2], tx0, y0, &E);
+        DepthPlane P;
+        depth_plane(pc, &P);
+        int rx0 = P.x0 - tx0;   /* the plane's reference column in the tile */
         int id = pc->id;
         int lx0 = x0 - tx0, lx1 = x1 - tx0;
         /* Rows as aligned blocks of eight columns of the tile row, in int8/float8 lanes: a
@@ -342,76 +343,58 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * piece at least WIDE_RUN columns wide first finds the exact run of columns of
          * each row inside all three edges (edge_columns: a triangle meets a row in one
          * run) and masks by the run; a narrower one evaluates its three edges in 64-bit
-         * lanes. Both are the same exact set. History: masked spans for every piece were
-         * once slower than scalar code with branches (tile raster at 1080p: bunny 0.53x,
-         * dragon 0.71x, spot 0.70x: a 1-pixel piece paid 8 lanes of four per-pixel
-         * arrays); with the 2 x 2 boxes on their own path (cover above), blocks for the
-         * rest replaced the scalar loops, whose remainder iterations and mispredicted
-         * edge branches were the raster's hottest code: the run loop's scalar remainder
-         * 17% of the plant's raster samples, the narrow loop's branches the dragon's
-         * (bench/kernel_ab.py, 11 rounds: plant raster 16.5 -> 14.5 ms, then dragon
-         * 6.1 -> 5.0, bunny 3.7 -> 3.4). */
-        /* In every path: a fragment's depth is never nearer than the piece's nearest
-         * vertex (maxf with zlo: a covered centre up to 1/512 px outside the unsnapped
-         * triangle must not extrapolate past it; Hi-Z relies on it). The test is LESS; on
-         * equal depth the lower triangle id wins, which is "first drawn wins" for
-         * triangles submitted in id order, whatever order culling or clustering actually
-         * submits them in. Nothing beats the clear value (wid INT_MAX). */
+         * lanes. Both are the same exact set. Masked blocks rather than scalar loops:
+         * those had a scalar remainder per run and mispredicted per-pixel edge branches.
+         * In every path the test is LESS; on equal depth the lower triangle id wins, which
+         * is "first drawn wins" for triangles submitted in id order, whatever order
+         * culling or clustering actually submits them in. Nothing beats the clear value
+         * (wid INT_MAX). */
         bool wide = x1 - x0 >= WIDE_RUN;
         long8 lane8 = __builtin_convertvector(LANE8, long8);
-        long8 s0v = lane8 * (long8)(sx0), s1v = lane8 * (long8)(sx1);
-        long8 s2v = lane8 * (long8)(sx2);   /* lane·s per edge (narrow rows) */
+        long8 sv[3] = {lane8 * (long8)(E.sx[0]), lane8 * (long8)(E.sx[1]),
+                       lane8 * (long8)(E.sx[2])};   /* lane·sx per edge (narrow rows) */
         LANE_COUNTER(npass);   /* passed fragments of the masked blocks */
         LANE_COUNTER(ntest);   /* tested fragments of the narrow rows */
         /* Only the rows in which each edge can be met by some column of [lx0, lx1]: an
          * edge's best value over the columns is linear in the row, so edge_columns on it
          * narrows the rows (one division at most per edge and entry). The rows cut cover
-         * nothing. A thin triangle crossing a tile's box is most of the plant's list
-         * (first person, 1080p: 37% of the 3.7M rows of wide entries cover a pixel;
-         * this keeps 2.2M of them). */
+         * nothing. A thin triangle crossing a tile's box (most of the plant's list) covers
+         * nothing in most of the box's rows. */
         if (y1 - y0 >= TRIM_ROWS) {
             int k0 = 0, k1 = y1 - y0;
-            edge_columns(r0 + (long)(sx0 > 0 ? lx1 : lx0) * sx0, sy0, b0, &k0, &k1);
-            edge_columns(r1 + (long)(sx1 > 0 ? lx1 : lx0) * sx1, sy1, b1, &k0, &k1);
-            edge_columns(r2 + (long)(sx2 > 0 ? lx1 : lx0) * sx2, sy2, b2, &k0, &k1);
+            for (int i = 0; i < 3; ++i)
+                edge_columns(E.e[i] + (long)(E.sx[i] > 0 ? lx1 : lx0) * E.sx[i], E.sy[i], &k0,
+                             &k1);
             if (k0 > k1) continue;
-            r0 += k0 * sy0; r1 += k0 * sy1; r2 += k0 * sy2;
+            edges_down(&E, k0);
             y1 = y0 + k1;
             y0 += k0;
         }
         for (int y = y0; y <= y1; ++y) {
             int row = (y - ty0) << TILE_LOG2;
-            float zrow = z0 + dzdy * (float)(y - ry0);
+            float zrow = depth_row(&P, y);
             int c0 = lx0, c1 = lx1;
             if (wide) {
-                edge_columns(r0, sx0, b0, &c0, &c1);
-                edge_columns(r1, sx1, b1, &c0, &c1);
-                edge_columns(r2, sx2, b2, &c0, &c1);
+                for (int i = 0; i < 3; ++i) edge_columns(E.e[i], E.sx[i], &c0, &c1);
                 /* the run is all covered */
                 for (int b = c0 & ~7; b <= c1; b += 8) {
                     int8 lx = (int8)(b) + LANE8;
                     int8 in = (lx >= (int8)(c0)) & (lx <= (int8)(c1));
-                    int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, dzdx, rx0,
-                                             zlo, id, k);
+                    int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, P.dzdx,
+                                             rx0, P.zlo, id, k);
                     COUNT_LANES(npass, pass);
                 }
                 if (want_overdraw)
                     for (int lx = c0; lx <= c1; ++lx) ++odc[row + lx];
                 tested += c1 >= c0 ? c1 - c0 + 1 : 0;
-                r0 += sy0; r1 += sy1; r2 += sy2;
+                edges_down(&E, 1);
                 continue;
             }
             for (int b = c0 & ~7; b <= c1; b += 8) {
                 int8 lx = (int8)(b) + LANE8;
-                /* the edges at the block's columns: r + (b + lane)·s, the lane products
-                 * made once per entry (64-bit vector multiplies are slow) */
-                long8 e_in = ((long8)(r0 + (long)b * sx0) + s0v >= (long8)(b0))
-                             & ((long8)(r1 + (long)b * sx1) + s1v >= (long8)(b1))
-                             & ((long8)(r2 + (long)b * sx2) + s2v >= (long8)(b2));
-                int8 in = __builtin_convertvector(e_in, int8) & (lx >= (int8)(c0))
-                          & (lx <= (int8)(c1));
-                int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, dzdx, rx0,
-                                         zlo, id, k);
+                int8 in = edges_inside8(&E, sv, b) & (lx >= (int8)(c0)) & (lx <= (int8)(c1));
+                int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, P.dzdx, rx0,
+                                         P.zlo, id, k);
                 COUNT_LANES(npass, pass);
                 COUNT_LANES(ntest, in);
                 if (want_overdraw) {
@@ -420,7 +403,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                     for (int j = 0; j < 8; ++j) odc[row + b + j] += m_[j] != 0;
                 }
             }
-            r0 += sy0; r1 += sy1; r2 += sy2;
+            edges_down(&E, 1);
         }
         passed += LANE_TOTAL(npass);
         tested += LANE_TOTAL(ntest);
@@ -429,9 +412,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     /* resolve: id and perspective-correct barycentrics of the winner, per pixel, a row at
      * a time into private arrays, then written out: a whole aligned tile row with
      * non-temporal stores (they skip reading each output line into the cache before
-     * overwriting it, half the memory traffic: with the empty-run clears, spot 1080p
-     * frame 0.82x, an empty frame 0.74x), other rows pixel by pixel. A later pass (load)
-     * leaves the earlier pass's pixels that nothing beat as they are. */
+     * overwriting it: half the memory traffic), other rows pixel by pixel. A later pass
+     * (load) leaves the earlier pass's pixels that nothing beat as they are. */
     int nx = tx1 - tx0 + 1;
     for (int y = ty0; y <= ty1; ++y) {
         /* aligned for the float8 copies below (OpenCL's vload8 is a library call on PoCL) */
@@ -527,15 +509,14 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
 }
 
 /* One work-item per segment of a row of tiles (work-item g is segment g % segs of row
- * g / segs; segs = global size / rows of tiles), walking its tiles left to right; seg_stats[2·g] and
- * [2·g + 1]: fragments tested and passed in it. Whole rows were too coarse: with the
- * work of a frame in a few rows (big occluders of the 10M plant), one core idled (its
- * raster took 1.4x the time of one work-item per tile). A run of empty tiles
- * (most of a typical frame) is cleared as one span per pixel row: clearing tile by tile, in
- * 16-pixel pieces of 48 rows of three arrays, cost ~4x the time of the same bytes written
- * in long runs (spot at 1080p: the clears were ~2/3 of the raster time). A later pass
- * (load) leaves the earlier pass's pixels of its empty tiles as they are. want_bary = 0:
- * barycentrics are neither computed nor written (bary_out is not touched). */
+ * g / segs; segs = global size / rows of tiles), walking its tiles left to right;
+ * seg_stats[2·g] and [2·g + 1]: fragments tested and passed in it. Whole rows were too
+ * coarse: with the work of a frame in a few rows (big occluders of the 10M plant), one core
+ * idled. A run of empty tiles (most of a typical frame) is cleared as one span per pixel
+ * row: clearing tile by tile, in 16-pixel pieces of 48 rows of three arrays, took several
+ * times as long as the same bytes written in long runs. A later pass (load) leaves the
+ * earlier pass's pixels of its empty tiles as they are. want_bary = 0: barycentrics are
+ * neither computed nor written (bary_out is not touched). */
 __kernel void raster_tiles(__global const float *clip_bary,
                            __global const int *tile_start, __global const Piece *entries,
                            const int width, const int height, const int tiles_x,

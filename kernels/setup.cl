@@ -1,8 +1,9 @@
 /* Triangle setup: trivial reject, clipping, back-face / zero-area cull, fixed-point snap.
  *
  * setup_triangles (one work-item per drawn triangle) writes, for every unclipped survivor,
- * one Piece at the triangle's slot in the frame's triangle stream, a status per triangle and, for triangles that need the
- * clipper, the number of pieces they make. The host scans those counts; setup_clipped then
+ * one Piece at the triangle's slot in the frame's triangle stream, and a status per
+ * triangle; setup_count_clipped, for the triangles that need the clipper, the number of
+ * pieces they make. The host scans those counts; setup_clipped then
  * re-runs the clipper for just those triangles and writes their pieces in order. Clipping is
  * rare, so recomputing it beats storing up to 14 pieces per triangle for everyone.
  *
@@ -22,18 +23,19 @@
  * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
  * cancels away more than the plane's own scale, and whole triangles vanished. Its inputs
  * are clip positions recomputed in double from the object-space vertices and the float32
- * matrix (vertex.cl, once per vertex in the vertex stage): the vertex stage's float32 clip positions are rounded by ~4e-3 at
- * |w| ~ 1e5, more than a near distance of 1e-3, and the near-plane crossing landed at
- * w <= 0. A polygon vertex that is one of the triangle's own (orig >= 0) is emitted as the
- * vertex stage's float32 position, so an edge shared with an unclipped neighbour stays
- * bit-identical; each new vertex is rounded to float once, at the end. */
+ * matrix (vertex.cl, once per vertex in the vertex stage): the vertex stage's float32 clip
+ * positions are rounded by ~4e-3 at |w| ~ 1e5, more than a near distance of 1e-3, and the
+ * near-plane crossing landed at w <= 0. A polygon vertex that is one of the triangle's own
+ * (orig >= 0) is emitted as the vertex stage's float32 position, so an edge shared with an
+ * unclipped neighbour stays bit-identical; each new vertex is rounded to float once, at the
+ * end. */
 typedef struct { double4 p; double r, b0, b1, b2; int orig; } ClipVert;
 
-/* A vertex in double from object space (the vertex stage's clip64 and rnum): clip position p, and r, the depth
- * numerator its value planes use instead of p.z: p.z itself for ordinary depth; for
- * reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row, formed in float64 on
- * the host) times the position, so r = w − z keeps its relative precision far away, where
- * it is a small difference of two large values. */
+/* A vertex in double from object space (the vertex stage's clip64 and rnum): clip position
+ * p, and r, the depth numerator its value planes use instead of p.z: p.z itself for
+ * ordinary depth; for reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row,
+ * formed in float64 on the host) times the position, so r = w − z keeps its relative
+ * precision far away, where it is a small difference of two large values. */
 typedef struct { double4 p; double r; } ClipIn;
 
 __constant uint PLANE_BIT[6] = {OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG,
@@ -69,12 +71,11 @@ inline double4 onto_plane(int p, double4 v, double kx, double ky)
 }
 
 /* The vertex stage's double clip position and depth numerator of vertex-stream vertex i
- * (vertex.cl): computed once per vertex there rather than once per
- * triangle corner here, which cost ~17 ms of setup on the dragon at 1080p. The numerator is
- * p.z unless the frame is reversed-Z (the kernel argument `reversed`, in scope wherever
- * this is used), and only then written by the vertex stage. A macro, not a
- * function returning the struct: inlining that (an sret pointer, noalias) emitted an
- * intrinsic Oclgrind cannot run. */
+ * (vertex.cl): computed once per vertex there rather than once per triangle corner here
+ * (each vertex is a corner of about six triangles). The numerator is p.z unless the frame
+ * is reversed-Z (the kernel argument `reversed`, in scope wherever this is used), and only
+ * then written by the vertex stage. A macro, not a function returning the struct: inlining
+ * that (an sret pointer, noalias) emitted an intrinsic Oclgrind cannot run. */
 #define clip_in(clip64, rnum, i) ((ClipIn){(clip64)[i], reversed ? (rnum)[i] : (clip64)[i].z})
 
 /* The clip position with z replaced by the depth numerator: what value_planes reads. */
@@ -107,10 +108,9 @@ inline int draw_cull(int cull, int flags)
  * exact in double and a triple product of finite floats can neither overflow nor underflow
  * there (3.4e38^3, 1.4e-45^3), so the sign is right at any scene scale. In float32 the
  * triple product underflowed for a mesh scaled by 1e-15 (5,711 of 5,856 faces "degenerate")
- * and overflowed to NaN for a projection times 1e13. Measured on the dragon (871K
- * triangles, 1920x1080): setup 10.7 -> 11.4 ms (median of 25); rescaling each vertex by a
- * power of two in float32 instead cost 9 -> 18 ms (the bit tricks defeat PoCL's
- * vectorizer), and doing so only for tiny or non-finite products +2 ms. */
+ * and overflowed to NaN for a projection times 1e13. Rescaling each vertex by a power of
+ * two in float32 instead was slower than the doubles (its bit operations defeat PoCL's
+ * vectorizer). */
 inline int facing(float4 a, float4 b, float4 c, int cull)
 {
     double4 da = convert_double4(a), db = convert_double4(b), dc = convert_double4(c);
@@ -206,30 +206,17 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     int cover = 0;   /* Piece.cover */
     if (px1 - px0 <= 1 && py1 - py0 <= 1) {
         /* A box of at most 2 x 2 pixel centres (most pieces of a dense mesh): test them
-         * here, exactly as the raster would (edge i opposite vertex i, top-left rule), and
-         * drop the piece if it covers none. On the dragon at 1080p 52K of 84K 1-centre
-         * boxes covered nothing and were set up, binned and rasterized for no fragment;
-         * with this, 32% fewer bin entries, frame 0.92x (bin 0.88x, raster 0.86x). */
-        long b0 = edge_bias(v1.x, v1.y, v2.x, v2.y), b1 = edge_bias(v2.x, v2.y, v0.x, v0.y);
-        long b2 = edge_bias(v0.x, v0.y, v1.x, v1.y);
-        int sx = (px0 << SUBPIXEL_BITS) + SUB_HALF, sy = (py0 << SUBPIXEL_BITS) + SUB_HALF;
-        long e0 = edge_fn(v1.x, v1.y, v2.x, v2.y, sx, sy) - b0;
-        long e1 = edge_fn(v2.x, v2.y, v0.x, v0.y, sx, sy) - b1;
-        long e2 = edge_fn(v0.x, v0.y, v1.x, v1.y, sx, sy) - b2;
-        /* one pixel right adds -dy·256, one down dx·256 (exact): no branches, the four
-         * centres' tests combined with & and | */
-        long x0s = -(long)(v2.y - v1.y) << SUBPIXEL_BITS;
-        long x1s = -(long)(v0.y - v2.y) << SUBPIXEL_BITS;
-        long x2s = -(long)(v1.y - v0.y) << SUBPIXEL_BITS;
-        long y0s = (long)(v2.x - v1.x) << SUBPIXEL_BITS;
-        long y1s = (long)(v0.x - v2.x) << SUBPIXEL_BITS;
-        long y2s = (long)(v1.x - v0.x) << SUBPIXEL_BITS;
+         * here, with the raster's edges (common.h piece_edges), and drop the piece if it
+         * covers none: on a dense mesh most 1-centre boxes cover nothing, and were set
+         * up, binned and rasterized for no fragment. No branches: the four centres'
+         * tests combined with & and |. */
+        PieceEdges E;
+        piece_edges(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, px0, py0, &E);
         bool two_x = px1 > px0, two_y = py1 > py0;
-        int c00 = (e0 >= 0) & (e1 >= 0) & (e2 >= 0);
-        int c10 = two_x & (e0 + x0s >= 0) & (e1 + x1s >= 0) & (e2 + x2s >= 0);
-        int c01 = two_y & (e0 + y0s >= 0) & (e1 + y1s >= 0) & (e2 + y2s >= 0);
-        int c11 = two_x & two_y & (e0 + x0s + y0s >= 0) & (e1 + x1s + y1s >= 0)
-                  & (e2 + x2s + y2s >= 0);
+        int c00 = edges_inside(&E, 0, 0);
+        int c10 = two_x & edges_inside(&E, 1, 0);
+        int c01 = two_y & edges_inside(&E, 0, 1);
+        int c11 = two_x & two_y & edges_inside(&E, 1, 1);
         cover = c00 | (c10 << 1) | (c01 << 2) | (c11 << 3);
         if (!cover) return ST_NO_SAMPLE;
         /* the raster reads these bits instead of evaluating the edges (layout.py
@@ -434,7 +421,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         } else if ((o_or & OC_NEEDS_CLIP) || (u_or & uclip)) {
             /* its pieces are counted by setup_count_clipped: the clipper's polygon arrays
              * (2 × POLY_MAX vertices of 72+ bytes) inlined here made every work-item of
-             * this kernel pay for them (dragon 1080p setup 1.4x with POLY_MAX 16 → 24) */
+             * this kernel pay for them */
             st = ST_CLIPPED;
             /* the host skips the clipper's count and scan when no triangle needs it */
             atomic_or(any_clipped, 1);
@@ -457,21 +444,17 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                 pc.id = id;
                 pc.flags = sw ? PF_SWAPPED : 0;
                 /* 96 aligned bytes, as three float8 stores. Ordinary stores, not
-                 * non-temporal ones: binning reads the records right after this stage,
-                 * and on this machine (Xeon VM, a large L3) it then finds them in the
-                 * cache (bench/kernel_ab.py, dragon at 1080p, 15 rounds: bin 4.3 -> 4.0
-                 * ms, setup 9.9 -> 9.7; non-temporal stores had been setup 0.96x on an
-                 * EPYC VM, when binning read the records later) */
+                 * non-temporal ones: binning reads the records right after this stage
+                 * and, with a large enough last-level cache, finds them there */
                 __global float8 *d8 = (__global float8 *)&pieces[t];
                 d8[0] = ((float8 *)&pc)[0];
                 d8[1] = ((float8 *)&pc)[1];
                 d8[2] = ((float8 *)&pc)[2];
                 /* the one tile of a piece whose pixel box lies in one tile (most pieces of
                  * a dense mesh), or the tiles of one over at most 2 x 2: binning counts
-                 * them from this word alone (common.h TILE1_*). Binning read the record
-                 * of every piece over several tiles, a cache miss each (the records were
-                 * stored non-temporally then, and their buffer is bigger than the cache):
-                 * 54% of bin_count's perf samples on the dragon at 1080p were that load. */
+                 * them from this word alone (common.h TILE1_*), without the record of
+                 * every piece over several tiles: a cache miss each when the slots'
+                 * buffer is bigger than the cache. */
                 int bx0 = bb_x(pc.bb_min), by0 = bb_y(pc.bb_min);
                 int bx1 = bb_x(pc.bb_max), by1 = bb_y(pc.bb_max);
                 int tx0 = bx0 >> TILE_LOG2, ty0 = by0 >> TILE_LOG2;
@@ -491,8 +474,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     status[t] = (uchar)st;
     /* clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
      * and nothing reads it for others (the scan and setup_clipped look at status first;
-     * binning reads it for clipped slots only). Writing 0 for every slot was 4 bytes a
-     * triangle (2.7 MB on the dragon at 1080p). */
+     * binning reads it for clipped slots only), which saves a 4-byte store per
+     * triangle. */
     tile1[t] = st == ST_CLIPPED ? TILE1_WALK : one;
 }
 

@@ -19,11 +19,11 @@
  * a full set of lanes without user clip planes also gets its outcodes, rounding and
  * stores in lanes (store_lanes), the rest per vertex. PoCL does not vectorize this kernel
  * across work-items itself (ARCHITECTURE.md, "Writing kernels for PoCL's CPU device"), so
- * the lanes are written out: dragon 871K at 1080p, vertex 5.10 -> 3.66 ms, frame 0.95x
- * (bench/proc_ab.py, 15 rounds). Outcodes as vector compares ORed into int8 masks came out
- * wrong on Oclgrind (tests/test_oclgrind.py), so they are per vertex. The host launches
- * CLUSTER_MAX / VERTEX_LANES work-items per draw (clraster/stages/vertex.py); VERTEX_LANES
- * (8, clraster/layout.py) must match the vector types below. */
+ * the lanes are written out. Outcodes as vector compares ORed into int8 masks came out
+ * wrong on Oclgrind (tests/test_oclgrind.py), so under CLRASTER_PORTABLE they are per
+ * vertex. The host launches CLUSTER_MAX / VERTEX_LANES work-items per draw
+ * (clraster/stages/vertex.py); VERTEX_LANES (8, clraster/layout.py) must match the vector
+ * types below. */
 typedef float8 fvec;
 typedef double8 dvec;
 #ifdef __clang__
@@ -50,9 +50,7 @@ typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
  * (the same compares; roundeven is rint in the default rounding mode), written as whole
  * vectors, the float4 and double4 positions interleaved from the lanes by shuffles. The
  * per-vertex loop (eight rounds of scalar compares, rounding and five stores from the
- * lanes spilled to private arrays) was most of the kernel: dragon 871K at 1080p, vertex
- * 2.6/2.8 -> 1.6/1.8 ms, plant 10M occlusion 1.1 -> 0.7 (bench/kernel_ab.py, min/median of
- * 9 and 7 rounds, outputs identical). Not under CLRASTER_PORTABLE
+ * lanes spilled to private arrays) was most of the kernel. Not under CLRASTER_PORTABLE
  * (Oclgrind has no roundeven, and its vector masks differed before: see above), which
  * keeps the loop. */
 #ifndef CLRASTER_PORTABLE
@@ -70,6 +68,9 @@ typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
         (d)[3] = PAIRS_HI(ZIP_HI(x, y), ZIP_HI(z, w));                                    \
     } while (0)
 
+/* One test's outcode bit per lane (common.h FRUSTUM_OUTCODE's BIT). */
+#define LANE_BIT(test, bit) ((test) ? (int8)(bit) : (int8)0)
+
 ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec ys,
                                dvec dx, dvec dy, dvec dz, dvec dw, dvec r, int flags,
                                float kx, float ky, int reversed,
@@ -83,13 +84,8 @@ ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec
                   & ((as_int8(cz) & exp_mask) != exp_mask)
                   & ((as_int8(cw) & exp_mask) != exp_mask);   /* finite_f, per lane */
     int8 o = (int8)0;
-    if (!(flags & DRAW_INSIDE)) {   /* common.h frustum_outcode, then the loop's bits */
-        o |= (cx + cw < 0.0f) ? (int8)OC_X_NEG : (int8)0;
-        o |= (cw - cx < 0.0f) ? (int8)OC_X_POS : (int8)0;
-        o |= (cy + cw < 0.0f) ? (int8)OC_Y_NEG : (int8)0;
-        o |= (cw - cy < 0.0f) ? (int8)OC_Y_POS : (int8)0;
-        o |= (cz + cw < 0.0f) ? (int8)OC_Z_NEG : (int8)0;
-        o |= (cw - cz < 0.0f) ? (int8)OC_Z_POS : (int8)0;
+    if (!(flags & DRAW_INSIDE)) {   /* common.h frustum_outcode per lane, then the loop's bits */
+        o |= FRUSTUM_OUTCODE(cx, cy, cz, cw, 0.0f, LANE_BIT);
         o |= (cx + kx * cw < 0.0f) ? (int8)OC_GB_X_NEG : (int8)0;
         o |= (kx * cw - cx < 0.0f) ? (int8)OC_GB_X_POS : (int8)0;
         o |= (cy + ky * cw < 0.0f) ? (int8)OC_GB_Y_NEG : (int8)0;
@@ -138,10 +134,8 @@ __kernel void vertex_transform(__global const float *restrict pos,
     if (lv0 >= ci.w) return;
     int n = imin(VERTEX_LANES, ci.w - lv0);
     /* The pool stores a cluster's positions side by side (clusters[c].z is the first):
-     * read in place, straight for a full set of lanes. Gathered through an index array
-     * (the identity; the kernel read it until session 17), vpgatherdd and vgatherdps
-     * completions were a fifth of this kernel's perf samples (dragon 1080p vertex 3.4 ->
-     * 3.0 ms, bench/kernel_ab.py median of 15). */
+     * read in place, straight for a full set of lanes, not gathered through an index
+     * array (the gathers' completions were a fifth of this kernel's time). */
     __global const float *p0 = pos + 3 * (ci.z + lv0);
     flanes px, py, pz;
     if (n == VERTEX_LANES) {
