@@ -34,8 +34,9 @@ MODES = ("nothing", "twin", "alloc", "sweep", "sleep")
 def run(mode: str, frames: int) -> str:
     import numpy as np
 
-    from clraster import Camera, Mesh, Renderer, device
-    from clraster import reference as twin
+    from clraster import Camera, Mesh, Renderer
+    from clraster.pipeline import device
+    from clraster.pipeline import reference as twin
 
     w, h = 1920, 1080
     mesh = Mesh.load(MESHES / "spot.ply")

@@ -17,10 +17,10 @@ import time
 
 import numpy as np
 
-import clraster.cull as cull
-from clraster.drawlist import PlanCache
-from clraster.inputs import view_projection
-from clraster.scenes import plant, plant_inside_camera
+import clraster.culling.cull as cull
+from clraster.base.checks import view_projection
+from clraster.pipeline.drawlist import PlanCache
+from clraster.world.generators import plant, plant_inside_camera
 
 #: switch → (module constant, value for A (off), value for B (on))
 SWITCHES = {"threads": ("THREAD_PAIRS", 1 << 62, cull.THREAD_PAIRS),

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import clraster
-from clraster.scenes import plant, plant_inside_camera
+from clraster.world.generators import plant, plant_inside_camera
 
 
 def main(argv: list[str] | None = None) -> int:

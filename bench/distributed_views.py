@@ -36,7 +36,7 @@ import tempfile
 from pathlib import Path
 
 import clraster
-from clraster.distributed import local_cluster, render_views, usable_cores
+from clraster.scale.distributed import local_cluster, render_views, usable_cores
 
 
 def orbit(mesh: clraster.Mesh, n: int, width: int, height: int) -> list[clraster.Camera]:
@@ -54,7 +54,7 @@ def orbit(mesh: clraster.Mesh, n: int, width: int, height: int) -> list[clraster
 def _warm(mesh: clraster.Mesh, cam: clraster.Camera, width: int, height: int,
           cull: str) -> int:
     """Worker task: one frame with this worker's Renderer (kernel builds, buffers)."""
-    from clraster.distributed import worker_renderer
+    from clraster.scale.distributed import worker_renderer
 
     worker_renderer(width, height).render(mesh, cam, cull=cull)
     return os.getpid()

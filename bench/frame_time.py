@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
     if a.mesh == "example":
-        from clraster.examples import example_mesh
+        from clraster.world.examples import example_mesh
         mesh = example_mesh()
     else:
         mesh = clraster.Mesh.load(a.mesh)

@@ -17,7 +17,7 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from clraster import device
+from clraster.pipeline import device
 
 SRC = ("__kernel void launch(" + ", ".join(f"__global int *a{i}" for i in range(12)) + ", "
        + ", ".join(f"const int s{i}" for i in range(10))

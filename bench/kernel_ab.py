@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import clraster
-import clraster.device as dev
-from clraster import layout
+import clraster.pipeline.device as dev
+from clraster.base import layout
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
     if a.plant:
-        from clraster.scenes import plant, plant_inside_camera
+        from clraster.world.generators import plant, plant_inside_camera
         target = plant(a.plant)
         cam = plant_inside_camera(target, w, h)
         kw = {"occlusion": True}

@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     from clraster import Camera, Mesh, Renderer
     kw = {}
     if a.scene == "plant10m":
-        from clraster.scenes import plant, plant_inside_camera
+        from clraster.world.generators import plant, plant_inside_camera
         target = plant(10_100_000)
         cam = plant_inside_camera(target, w, h)
         kw = {"occlusion": True}

@@ -36,10 +36,10 @@ import time
 import numpy as np
 
 from clraster import RasterConfig, Renderer
-from clraster.clusters import clusters_of
-from clraster.drawlist import PlanCache, key_boxes, plan_frame
-from clraster.occlusion import Occlusion, query
-from clraster.scenes import plant, plant_inside_camera
+from clraster.culling.clusters import clusters_of
+from clraster.pipeline.drawlist import PlanCache, key_boxes, plan_frame
+from clraster.pipeline.occlusion import Occlusion, query
+from clraster.world.generators import plant, plant_inside_camera
 
 
 def cluster_face_ids(scene, instance: np.ndarray, cluster: np.ndarray) -> list[np.ndarray]:

@@ -24,8 +24,8 @@ import time
 import numpy as np
 
 from clraster import Camera, RasterConfig, Renderer
-from clraster.cull import ViewCull
-from clraster.scenes import plant, plant_inside_camera
+from clraster.culling.cull import ViewCull
+from clraster.world.generators import plant, plant_inside_camera
 
 
 def main(argv: list[str] | None = None) -> int:

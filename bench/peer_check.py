@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         res["dragon"] = compare(mesh, cam, w, h, a.repeat, 1, {"cull": "back"})
         print("dragon", json.dumps(_summary(res["dragon"]), indent=1), flush=True)
     if a.plant:
-        from clraster.scenes import plant, plant_inside_camera
+        from clraster.world.generators import plant, plant_inside_camera
         scene = plant(a.plant)
         cam = plant_inside_camera(scene, w, h)
         res["plant"] = compare(scene, cam, w, h, a.repeat, 3, {"occlusion": True})

@@ -18,7 +18,7 @@ import statistics
 import sys
 import time
 
-from clraster import scenes
+from clraster.world import generators as scenes
 
 
 def stats(n: int, seed: int, repeat: int) -> dict[str, object]:

@@ -55,7 +55,7 @@ def scene(name):
     if name not in scenes:
         kw = {}
         if name.startswith("plant"):
-            from clraster.scenes import plant, plant_inside_camera
+            from clraster.world.generators import plant, plant_inside_camera
             t = plant(PLANTS[name.split(":")[0]])
             cam = plant_inside_camera(t, W, H)
             kw = ({"frustum": False, "cones": False} if name.endswith(":off")

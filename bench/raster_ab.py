@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 import clraster
-import clraster.device as dev
-from clraster.stages import chain as chain_mod
+import clraster.pipeline.device as dev
+from clraster.pipeline.stages import chain as chain_mod
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from kernel_ab import REPO, revision_source, warm_renderers  # noqa: E402  (bench/ is not a package)
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     w, h = (int(v) for v in a.size.lower().split("x"))
     kw: dict = {}
     if a.plant:
-        from clraster.scenes import plant, plant_inside_camera
+        from clraster.world.generators import plant, plant_inside_camera
         target = plant(a.plant)
         cam = plant_inside_camera(target, w, h)
         kw["occlusion"] = True

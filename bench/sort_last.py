@@ -33,8 +33,8 @@ import time
 import numpy as np
 
 import clraster
-from clraster.composite import composite, uncrop
-from clraster.distributed import local_cluster, scatter_parts, submit_sort_last
+from clraster.scale.composite import composite, uncrop
+from clraster.scale.distributed import local_cluster, scatter_parts, submit_sort_last
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
     if a.plant:
-        from clraster.scenes import plant, plant_inside_camera
+        from clraster.world.generators import plant, plant_inside_camera
 
         target = plant(a.plant)
         cam = plant_inside_camera(target, w, h)

@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=5)
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
-    from clraster.scenes import plant, plant_inside_camera, plant_overview_camera
+    from clraster.world.generators import plant, plant_inside_camera, plant_overview_camera
 
     mesh = clraster.Mesh.load(a.mesh)
     scene = plant(a.plant)

@@ -34,7 +34,7 @@ from clraster import Camera, Mesh, Renderer
 W, H = 1920, 1080
 kw = {}
 if scene == "plant":
-    from clraster.scenes import plant, plant_inside_camera
+    from clraster.world.generators import plant, plant_inside_camera
     target = plant(1_000_000); cam = plant_inside_camera(target, W, H); kw = {"occlusion": True}
 else:
     target = Mesh.load(scene); cam = Camera.framing(*target.bounds(), aspect=W / H)

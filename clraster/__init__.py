@@ -21,6 +21,14 @@ imported on first use, and so are the public submodules (``clraster.shade``,
 ``import clraster.shade`` first), so
 ``import clraster`` (and ``Mesh``, ``Camera``, ``RasterConfig``) works without touching
 OpenCL.
+
+The package is grouped by layer, each importing only the layers below it: `clraster.base`
+(config, kernel layout, input checks), `clraster.world` (meshes, scenes, cameras),
+`clraster.clip` (2-D polygons, windows), `clraster.culling`, `clraster.output` (frames,
+files, shading), `clraster.pipeline` (the frame driver, the OpenCL renderer and its NumPy
+twin), `clraster.scale` (many views, Dask); the command lines sit on top. The public
+modules keep their short names (``clraster.views`` is ``clraster.world.views``:
+`clraster._aliases`).
 """
 
 from __future__ import annotations
@@ -28,49 +36,51 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from .camera import Camera
-from .config import RasterConfig
-from .mesh import Mesh
+from . import _aliases
+from .base.config import RasterConfig
+from .world.camera import Camera
+from .world.mesh import Mesh
 
 if TYPE_CHECKING:
-    from . import reference
-    from .boxes import Occlusion
-    from .fates import ClusterFates
-    from .frame import Frame, FrameStats
-    from .lines import LineFrame, LineRenderer, render_lines
-    from .renderer import Renderer
-    from .scene import Instance, Scene, SceneWarning
+    from .culling.fates import ClusterFates
+    from .output.frame import Frame, FrameStats
+    from .pipeline import reference
+    from .pipeline.boxes import Occlusion
+    from .pipeline.lines import LineRenderer, render_lines
+    from .pipeline.renderer import Renderer
+    from .pipeline.segments import LineFrame
+    from .world.scene import Instance, Scene, SceneWarning
 
 __all__ = ["Camera", "ClusterFates", "Frame", "FrameStats", "Instance", "LineFrame",
            "LineRenderer", "Mesh", "Occlusion", "RasterConfig", "Renderer", "Scene",
            "SceneWarning", "reference", "render_lines"]
 __version__ = "0.1.0"
 
+_aliases.install()   # the public modules' short names (clraster.views, clraster.shade, ...)
+
 _LAZY: dict[str, tuple[str, str | None]] = {
-    "Renderer": (".renderer", "Renderer"),
-    "reference": (".reference", None),
-    "Frame": (".frame", "Frame"),
-    "FrameStats": (".frame", "FrameStats"),
-    "LineRenderer": (".lines", "LineRenderer"),
-    "LineFrame": (".lines", "LineFrame"),
-    "render_lines": (".lines", "render_lines"),
-    "Scene": (".scene", "Scene"),
-    "Instance": (".scene", "Instance"),
-    "SceneWarning": (".scene", "SceneWarning"),
-    "ClusterFates": (".fates", "ClusterFates"),
-    "Occlusion": (".boxes", "Occlusion"),
+    "Renderer": ("clraster.pipeline.renderer", "Renderer"),
+    "Frame": ("clraster.output.frame", "Frame"),
+    "FrameStats": ("clraster.output.frame", "FrameStats"),
+    "LineRenderer": ("clraster.pipeline.lines", "LineRenderer"),
+    "LineFrame": ("clraster.pipeline.segments", "LineFrame"),
+    "render_lines": ("clraster.pipeline.lines", "render_lines"),
+    "Scene": ("clraster.world.scene", "Scene"),
+    "Instance": ("clraster.world.scene", "Instance"),
+    "SceneWarning": ("clraster.world.scene", "SceneWarning"),
+    "ClusterFates": ("clraster.culling.fates", "ClusterFates"),
+    "Occlusion": ("clraster.pipeline.boxes", "Occlusion"),
 }
-# public submodules, importable as attributes (``clraster.shade.shade(frame, mesh)``)
-_LAZY.update((name, ("." + name, None)) for name in (
-    "batch", "composite", "distributed", "fates", "inputs", "lines", "occlusion", "scene",
-    "scenes", "shade", "views"))
+# public submodules by their short names, importable as attributes
+# (``clraster.shade.shade(frame, mesh)``, ``clraster.reference.render(...)``)
+_LAZY.update((old.rpartition(".")[2], (old, None)) for old in _aliases.OLD_PATHS)
 
 
 def __getattr__(name: str) -> Any:
     # PEP 562: load the OpenCL side only when it is asked for.
     if name in _LAZY:
         module_name, attr = _LAZY[name]
-        module = importlib.import_module(module_name, __name__)
+        module = importlib.import_module(module_name)
         value = module if attr is None else getattr(module, attr)
         globals()[name] = value
         return value

@@ -30,10 +30,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import os
 import secrets
-import stat
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -43,14 +41,14 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 
 from . import __version__
-from .camera import Camera
-from .config import RasterConfig
-from .device import NoDeviceError
-from .inputs import parse_positive_int, parse_size
-from .mesh import Mesh
+from .base.checks import parse_positive_int, parse_size
+from .base.config import RasterConfig
+from .cmdline import check_output_file, check_output_folder, run_guarded
+from .world.camera import Camera
+from .world.mesh import Mesh
 
 if TYPE_CHECKING:
-    from .frame import Frame
+    from .output.frame import Frame
 
 __all__ = ["main"]
 
@@ -128,113 +126,6 @@ def _join_vectors(argv: list[str]) -> list[str]:
     return out
 
 
-def _kind(path: Path, option: str, shown: Path) -> str | None:
-    """What `path` is, following links: "folder", "file" (anything else), or None where
-    nothing is or can be (a missing name, a file used as a folder, a name too long for the
-    file system). Any other error (a folder that cannot be searched, a link loop) is a
-    ValueError naming `option` and the path the user gave (`shown`)."""
-    try:
-        st = path.stat()
-    except (FileNotFoundError, NotADirectoryError):
-        return None
-    except OSError as exc:
-        if exc.errno == errno.ENAMETOOLONG:
-            return None   # cannot exist; the caller says which name is too long
-        raise ValueError(f"{option} {str(shown)!r} cannot be used: {exc.strerror or exc} "
-                         f"({str(path)!r})") from None
-    return "folder" if stat.S_ISDIR(st.st_mode) else "file"
-
-
-def _check_names(names: Sequence[str], folder: Path, option: str, shown: Path) -> None:
-    """Refuse a name in `names` (to be made in `folder`, or below it) longer than the file
-    system allows (``NAME_MAX`` bytes, `clraster.atomic.name_max`): the write would fail
-    only after the render."""
-    from .atomic import name_max
-
-    limit = name_max(folder)
-    for name in names:
-        size = len(os.fsencode(name))
-        if size > limit:
-            raise ValueError(f"{option} {str(shown)!r}: the name {_clip(name)!r} is {size} "
-                             f"bytes, longer than the {limit} bytes a name may have on that "
-                             f"file system; give a shorter name")
-
-
-def _clip(name: str, keep: int = 40) -> str:
-    return name if len(name) <= keep else f"{name[:keep // 2]}...{name[-keep // 2:]}"
-
-
-def _output_file(path: Path, option: str, suffixes: tuple[str, ...] | None = None) -> None:
-    """Refuse an output path before rendering (not after): a folder, a missing or
-    read-only folder, a read-only file, a name longer than the file system allows (bytes,
-    ``PC_NAME_MAX``), no or the wrong suffix (without ``suffixes``: one imageio does not
-    know as an image format). A link is checked where it points: the file is written
-    there (`_write_all`)."""
-    target = Path(os.path.realpath(path))
-    folder = target.parent
-    shown_folder = folder if os.path.islink(path) else path.parent
-    kind = _kind(folder, option, path)
-    if kind is None:
-        _check_names(folder.parts[1:], Path(folder.anchor or "."), option, path)
-        raise ValueError(f"{option} {str(path)!r}: folder {str(shown_folder)!r} does not "
-                         f"exist")
-    if kind != "folder":
-        raise ValueError(f"{option} {str(path)!r}: {str(shown_folder)!r} is a file, not a "
-                         f"folder")
-    _check_names([target.name], folder, option, path)
-    if _kind(target, option, path) == "folder":
-        raise ValueError(f"{option} {str(path)!r} is a folder; give a file name")
-    if not os.access(folder, os.W_OK | os.X_OK) or (
-            target.exists() and not os.access(target, os.W_OK)):
-        raise ValueError(f"{option} {str(path)!r} cannot be written (permission denied)")
-    suffix = path.suffix.lower()
-    if suffixes is None:
-        if not suffix:
-            raise ValueError(f"{option} {str(path)!r} has no file extension; give one that "
-                             f"names the image format, e.g. .png")
-        from imageio.config import known_extensions
-
-        if suffix not in known_extensions:
-            raise ValueError(f"{option} {str(path)!r}: {suffix} is not an image format "
-                             f"imageio knows; use e.g. .png, .jpg or .tif")
-    elif suffixes and suffix not in suffixes:   # (): the caller checks the suffix
-        raise ValueError(f"{option} {str(path)!r} must end in {' or '.join(suffixes)} "
-                         f"(it is written as a NumPy array file)")
-
-
-def check_output_folder(path: Path, option: str, *, parents: bool = False) -> None:
-    """Refuse, before any work, a folder for output files that cannot be used: an existing
-    file, a missing parent folder (with `parents`, missing folders are made: the nearest
-    existing one must be a folder), a name longer than the file system allows, no
-    permission to write in it (or to make it). (``clraster render --views``, ``clraster
-    demo``.)"""
-    folder = Path(os.path.realpath(path))
-    kind = _kind(folder, option, path)
-    if kind == "folder":
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise ValueError(f"{option} {str(path)!r}: cannot write in that folder "
-                             f"(permission denied)")
-        return
-    if kind is not None:
-        raise ValueError(f"{option} {str(path)!r} is a file; give a folder")
-    missing = [folder.name]   # the folders to make, outermost last
-    parent = folder.parent
-    while (kind := _kind(parent, option, path)) is None and parent != parent.parent:
-        if not parents:
-            break
-        missing.append(parent.name)
-        parent = parent.parent
-    if kind is None:
-        _check_names(parent.parts[1:], Path(parent.anchor or "."), option, path)
-        raise ValueError(f"{option} {str(path)!r}: folder {str(parent)!r} does not exist")
-    if kind != "folder":
-        raise ValueError(f"{option} {str(path)!r}: {str(parent)!r} is a file, not a folder")
-    _check_names(missing[::-1], parent, option, path)
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {str(path)!r}: cannot make the folder in {str(parent)!r} "
-                         f"(permission denied)")
-
-
 def _distinct_outputs(outputs: Sequence[tuple[str, Path]]) -> None:
     """Refuse two options naming one file (one would silently overwrite the other): the
     same path after resolving ``.``/``..``, the current folder and links, or, for files
@@ -301,7 +192,7 @@ def _positive(text: str) -> float:
 
 
 def _outputs(text: str) -> tuple[str, ...]:
-    from .batch import check_outputs
+    from .scale.batch import check_outputs
 
     try:
         return check_outputs(tuple(t.strip() for t in text.split(",") if t.strip()))
@@ -331,7 +222,7 @@ def _dask_client(args: argparse.Namespace, stack: contextlib.ExitStack):
         client = stack.enter_context(Client(args.scheduler))
         print(f"cluster: scheduler {args.scheduler}, {len(client.nthreads())} workers")
         return client
-    from .distributed import local_cluster
+    from .scale.distributed import local_cluster
 
     cluster = stack.enter_context(local_cluster(args.workers))
     print(f"cluster: local, {args.workers} worker processes")
@@ -342,8 +233,8 @@ def _view_cameras(args: argparse.Namespace) -> tuple[list, tuple[int, int]]:
     """The cameras of --views and the size to render them at: the cameras' own (a COLMAP,
     NeRF or intrinsics file), which --size may repeat but not contradict; else --size, else
     1280x720."""
-    from .camera_files import common_size
-    from .views import load_cameras
+    from .world.camera_files import common_size
+    from .world.views import load_cameras
 
     cameras = load_cameras(args.views, strict=False, size=args.size, near=args.near,
                            far=args.far, drop_distortion=args.drop_distortion)
@@ -356,8 +247,8 @@ def _view_cameras(args: argparse.Namespace) -> tuple[list, tuple[int, int]]:
 
 
 def _render_views(args: argparse.Namespace) -> int:
-    from .batch import render_views
-    from .renderer import Renderer
+    from .pipeline.renderer import Renderer
+    from .scale.batch import render_views
 
     if args.scheduler is None:
         check_output_folder(args.out, "--out")
@@ -365,7 +256,7 @@ def _render_views(args: argparse.Namespace) -> int:
         # a remote cluster's workers see --out; this host may not, so check no more here
         raise ValueError(f"--out {str(args.out)!r} is a file; with --views give a folder")
     if args.mesh == EXAMPLE:
-        from .examples import example_mesh
+        from .world.examples import example_mesh
 
         mesh = example_mesh()
     else:
@@ -376,7 +267,7 @@ def _render_views(args: argparse.Namespace) -> int:
     config = RasterConfig(tile_log2=args.tile_log2)
     summary: Any   # a Dask ViewsSummary or a RenderSummary: both have .failures
     if args.workers is not None or args.scheduler is not None:
-        from .distributed import render_views as dask_render_views
+        from .scale.distributed import render_views as dask_render_views
 
         with contextlib.ExitStack() as stack:
             client = _dask_client(args, stack)
@@ -550,16 +441,16 @@ def _camera(args: argparse.Namespace, mesh: Mesh, width: int, height: int) -> Ca
 def _render(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
-    from .outputs import check_output_path, write_output
-    from .shade import shade
+    from .output.outputs import check_output_path, write_output
+    from .output.shade import shade
 
     width, height = args.size or _DEFAULT_SIZE
     # --quiet: nothing on stdout; warnings and errors still go to stderr
     info: Callable[..., None] = _silent if args.quiet else print
-    _output_file(args.out, "--out")
+    check_output_file(args.out, "--out")
     for option, path, what in (("--depth", args.depth, "depth"), ("--ids", args.ids, "ids")):
         if path is not None:
-            _output_file(path, option, ())
+            check_output_file(path, option, ())
             try:   # the extension names the format (clraster.outputs): checked up front
                 check_output_path(path, what)
             except ValueError as exc:
@@ -568,7 +459,7 @@ def _render(args: argparse.Namespace) -> int:
                        (("--out", args.out), ("--depth", args.depth), ("--ids", args.ids))
                        if path is not None])
     if args.mesh == EXAMPLE:
-        from .examples import example_mesh
+        from .world.examples import example_mesh
 
         mesh = example_mesh()
     else:
@@ -578,7 +469,7 @@ def _render(args: argparse.Namespace) -> int:
     info(f"camera: {camera!r}")
 
     if args.reference:
-        from .reference import render as reference_render
+        from .pipeline.reference import render as reference_render
 
         info("pipeline: NumPy reference")
 
@@ -586,7 +477,7 @@ def _render(args: argparse.Namespace) -> int:
             return reference_render(mesh, camera, width, height, cull=args.cull,
                                     reversed_z=args.reversed_z, clip_planes=args.clip_planes)
     else:
-        from .renderer import Renderer
+        from .pipeline.renderer import Renderer
 
         renderer = Renderer(width, height, config=RasterConfig(tile_log2=args.tile_log2))
         info(f"device: {renderer.context.devices[0].name.strip()}")
@@ -612,9 +503,9 @@ def _render(args: argparse.Namespace) -> int:
 
     image = shade(frame, mesh)
     if args.wireframe:
-        from .lines import mesh_edges, overlay
-        from .lines import render_lines as draw_lines
-        from .reference.lines import render_lines as reference_lines
+        from .pipeline.lines import mesh_edges, overlay
+        from .pipeline.lines import render_lines as draw_lines
+        from .pipeline.reference.lines import render_lines as reference_lines
 
         edges = mesh_edges(mesh)
         draw_edges = reference_lines if args.reference else draw_lines
@@ -691,7 +582,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print(f"clraster: error: --repeat must be >= 1, got {args.repeat}", file=sys.stderr)
         return 2
-    from .layout import USER_PLANES_MAX
+    from .base.layout import USER_PLANES_MAX
 
     if args.clip_plane is not None and len(args.clip_plane) > USER_PLANES_MAX:
         parser.print_usage(sys.stderr)
@@ -724,32 +615,6 @@ def main(argv: Sequence[str] | None = None) -> int:
               "--ids)", file=sys.stderr)
         return 2
     return run_guarded("clraster", lambda: _render(args))
-
-
-def run_guarded(prog: str, command: Callable[[], int]) -> int:
-    """Run a command's body; the errors a user can cause or fix become one line on stderr
-    and an exit code (see the module docstring), never a traceback."""
-    from .device import ForkedProcessError, device_busy
-
-    try:
-        return command()
-    except (ValueError, OSError, NoDeviceError, ForkedProcessError) as exc:
-        # Bad mesh, camera, output path or no OpenCL device: a message, not a traceback.
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
-    except MemoryError as exc:
-        print(f"{prog}: error: out of memory ({exc or 'host memory'}); render a smaller "
-              f"image (--size) or a smaller scene", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
-        if device_busy():
-            # a kernel cannot be cancelled: rather than wait for it (seconds) or tear the
-            # interpreter down under it, leave now
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(130)
-        return 130
 
 
 if __name__ == "__main__":

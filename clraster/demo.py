@@ -19,7 +19,7 @@ history; the later ones reuse it), and writes into ``--out``:
 
 It prints the culling funnel (`FrameStats`), the frame times, the fate counts and the
 files written. The lettering, panels, colour ramps and colour bars in the images come from
-`clraster.annotate` (text in Pillow's default font).
+`clraster.output.annotate` (text in Pillow's default font).
 Exit codes: 0 success, 1 the output could not be written or no OpenCL device, 2 bad
 arguments.
 """
@@ -37,7 +37,9 @@ from typing import Any, cast
 
 import numpy as np
 
-from .annotate import (
+from .base.checks import parse_positive_int, parse_size
+from .culling.fates import Fate
+from .output.annotate import (
     DEPTH_RAMP,
     HEAT,
     TEXT_HEIGHT,
@@ -49,11 +51,9 @@ from .annotate import (
     text_width,
     ui_scale,
 )
-from .camera import Camera
-from .fates import Fate
-from .inputs import parse_positive_int, parse_size
-from .mesh import Mesh
-from .scene import Scene
+from .world.camera import Camera
+from .world.mesh import Mesh
+from .world.scene import Scene
 
 __all__ = ["FATE_COLORS", "main"]
 
@@ -117,7 +117,7 @@ def depth_picture(depth: Any, projection: np.ndarray, *, reversed_z: bool | None
     (covered where < 1), True reversed-Z ``(1 − z/w)/2`` (covered where > 0); as
     `clraster.shade.depth_image`, which raises ValueError for a flag contradicting the
     frame."""
-    from .shade import _depth_buffer
+    from .output.shade import _depth_buffer
 
     d, rev = _depth_buffer(depth, reversed_z)
     finite = np.isfinite(d)
@@ -217,8 +217,8 @@ def inspector_picture(frame, fates, world: Mesh, scene: Scene, view_proj: np.nda
     `FRUSTUM_HIDDEN_COLOR` — and the legend, with ``note`` (e.g. where the clip plane cuts)
     as its last line where the legend then still fits in the top half of the image (on
     small images it would hide the picture). Returns (image, pixels per fate)."""
-    from .lines import LineRenderer, frustum_segments, overlay
-    from .shade import DEFAULT_LIGHT_DIR
+    from .output.shade import DEFAULT_LIGHT_DIR
+    from .pipeline.lines import LineRenderer, frustum_segments, overlay
 
     all_inst, face = scene.split_ids(frame.triangle_id)
     hit = all_inst >= 0
@@ -313,10 +313,10 @@ def _triangles(text: str) -> int:
 def _run(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
-    from .cli import check_output_folder
-    from .renderer import Renderer
-    from .scenes import EYE_HEIGHT, plant, plant_inside_camera
-    from .shade import shade
+    from .cmdline import check_output_folder
+    from .output.shade import shade
+    from .pipeline.renderer import Renderer
+    from .world.generators import EYE_HEIGHT, plant, plant_inside_camera
 
     # before the plant is built and rendered (minutes at a million triangles), not after
     check_output_folder(args.out, "--out", parents=True)
@@ -403,7 +403,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return int(exc.code or 0)
-    from .cli import run_guarded
+    from .cmdline import run_guarded
 
     return run_guarded("clraster demo", lambda: _run(args))
 

@@ -161,7 +161,7 @@ def render_cl(mesh, camera, width, height, cull="none", tile_log2=4, culling=Fal
 
 def render_ref(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
                hiz=True):
-    from clraster import reference
+    from clraster.pipeline import reference
 
     return reference.render(mesh, camera, width, height, cull=cull, frustum=culling,
                             cones=culling,

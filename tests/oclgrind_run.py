@@ -35,7 +35,8 @@ def main() -> int:
         print(json.dumps({"unavailable": f"{type(exc).__name__}: {exc}"}))
         return 3
 
-    from clraster import Mesh, RasterConfig, Renderer, reference
+    from clraster import Mesh, RasterConfig, Renderer
+    from clraster.pipeline import reference
 
     class Cam:
         def __init__(self, m):
@@ -75,8 +76,8 @@ def main() -> int:
                 })
     # the depth pyramid against its twin, at sizes whose rows are not 32-byte aligned and
     # whose blocks take both the float8 first level and the clamped one (pyramid.cl)
-    from clraster.reference import pyramid as ref_pyramid
-    from clraster.stages.pyramid import PyramidStage
+    from clraster.pipeline.reference import pyramid as ref_pyramid
+    from clraster.pipeline.stages.pyramid import PyramidStage
     queue = cl.CommandQueue(ctx)
     stage = PyramidStage(ctx)
     rng = np.random.default_rng(7)

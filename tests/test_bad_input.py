@@ -14,24 +14,39 @@
 | PYOPENCL_CTX: the Oclgrind simulator / nothing | SimulatorWarning / NoDeviceError |
 | CLI: --ids/--depth not .npy, a folder, no extension | exit 1 before rendering |
 | CLI: out of memory, Ctrl-C | one line, exit 1 / exit 130 (tests/test_processes.py) |
-| CLI: two outputs naming one file (`--out a.png --depth a.png`, `./`, `..`, links) | exit 1 before loading, naming both options; nothing written |
-| CLI: an output or folder name over NAME_MAX, a parent that is a file | exit 1 before rendering; nothing written |
 | CLI: a later output fails while writing | exit 1; every output as it was (all-or-none) |
-| CLI / load_cameras: a camera file nested 100,000 levels, not UTF-8, a 5000-digit integer | CameraFileError naming the file; CLI exit 1, one line |
 | output names of 250 bytes (any writer) | written; temporary names fit NAME_MAX |
-| `render_sort_last` with more parts than clusters, an empty mesh or scene | empty parts render as background; the frame equals one machine's bit for bit |
 | `local_cluster(0)`, `(-1)`, `(1.5)`, `(True)` | ValueError: a positive integer |
 | Dask calls on a client with no workers | NoWorkersError (a ValueError) within WORKER_WAIT_S |
-| `render_views` into a folder made with another size or options | OutDirMismatchError listing the differences, before any view (or `overwrite=True`) |
 | `render_views` re-run with one camera changed | that view re-rendered; the others skipped |
-| `render_views(cull="sideways")`, a zero-normal plane, `reversed_z="yes"` | one ValueError before any view (one machine and Dask) |
 | a batch writer SIGKILLed mid-file | the next run removes its temporary (dead pid, same host) |
-| `render_shaded(ssaa=k, render_kwargs={"window": w})` | the window scaled by k: the same region as ssaa=1 |
-| `depth_image` / `depth_picture` of a reversed-Z frame; a contradicting flag | read by the frame's own convention; ValueError |
-| `Camera.from_pyrender`: orthographic xmag at another aspect; yfov/aspect/xmag/fx ≤ 0, yfov ≥ π | pyrender's aspect-corrected xmag; CameraArgumentError naming the attribute |
-| `Camera.look_at` with an eye 1e300 away; in a camera file | CameraArgumentError / ViewError naming eye (overflow), not "must differ" / up |
-| `from_intrinsics(fx=5e-324)`, projections singular in float32 | CameraArgumentError naming the parameter |
-| a polygon window of 10⁵–10⁶ vertices | validated in O(n log n) (tests/test_reliability_clip2d.py) |
+
+More cases, input → outcome:
+
+* CLI: two outputs naming one file (`--out a.png --depth a.png`, `./`, `..`, links) → exit 1
+  before loading, naming both options; nothing written
+* CLI: an output or folder name over NAME_MAX, a parent that is a file → exit 1 before
+  rendering; nothing written
+* CLI / load_cameras: a camera file nested 100,000 levels, not UTF-8, a 5000-digit integer →
+  CameraFileError naming the file; CLI exit 1, one line
+* `render_sort_last` with more parts than clusters, an empty mesh or scene → empty parts
+  render as background; the frame equals one machine's bit for bit
+* `render_views` into a folder made with another size or options → OutDirMismatchError
+  listing the differences, before any view (or `overwrite=True`)
+* `render_views(cull="sideways")`, a zero-normal plane, `reversed_z="yes"` → one ValueError
+  before any view (one machine and Dask)
+* `render_shaded(ssaa=k, render_kwargs={"window": w})` → the window scaled by k: the same
+  region as ssaa=1
+* `depth_image` / `depth_picture` of a reversed-Z frame; a contradicting flag → read by the
+  frame's own convention; ValueError
+* `Camera.from_pyrender`: orthographic xmag at another aspect; yfov/aspect/xmag/fx ≤ 0, yfov
+  ≥ π → pyrender's aspect-corrected xmag; CameraArgumentError naming the attribute
+* `Camera.look_at` with an eye 1e300 away; in a camera file → CameraArgumentError /
+  ViewError naming eye (overflow), not "must differ" / up
+* `from_intrinsics(fx=5e-324)`, projections singular in float32 → CameraArgumentError naming
+  the parameter
+* a polygon window of 10⁵–10⁶ vertices → validated in O(n log n)
+  (tests/test_reliability_clip2d.py)
 
 The cases added with the reliability issue live in tests/test_reliability_*.py (one file per
 area: cli, views, dask, shade, camera, clip2d, device) and tests/test_camera_files.py.
@@ -62,7 +77,8 @@ from conftest import (
     render_ref,
 )
 
-from clraster import Camera, Mesh, RasterConfig, Renderer, reference
+from clraster import Camera, Mesh, RasterConfig, Renderer
+from clraster.pipeline import reference
 
 W, H = 24, 16
 GOOD = Mesh([[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.0, 0.5, 0.0]], [[0, 1, 2]])
@@ -297,7 +313,7 @@ def _no_triangle_files(tmp_path):
 
 @pytest.mark.parametrize("name", ["points.ply", "lines.obj", "line.dxf", "points.glb"])
 def test_load_file_without_triangles(tmp_path, name):
-    from clraster.scene import Scene
+    from clraster.world.scene import Scene
 
     path = _no_triangle_files(tmp_path)[name]
     with pytest.raises(ValueError, match="holds no triangle"):
@@ -321,7 +337,7 @@ def test_cli_file_without_triangles_writes_nothing(tmp_path, capsys):
 def test_gltf_node_scaled_to_zero_is_skipped(tmp_path):
     import trimesh
 
-    from clraster.scene import Scene, SceneWarning
+    from clraster.world.scene import Scene, SceneWarning
 
     box = trimesh.creation.box()
     tms = trimesh.Scene()
@@ -400,7 +416,7 @@ def test_extreme_scales_render_like_unit_scale():
 
 @pytest.mark.parametrize("near, far", [(1e-30, 100.0), (1e-7, 1e7)])
 def test_depth_collapse_warns(near, far):
-    from clraster.precision import PrecisionWarning
+    from clraster.world.precision import PrecisionWarning
 
     spot = load_shared_mesh("spot.ply")
     cam = Camera.look_at((1.5, 1.0, 2.5), (0, 0.1, 0), near=near, far=far)
@@ -423,7 +439,7 @@ def test_ordinary_depth_range_does_not_warn(near, far):
 def _device_probe(env_value: str) -> subprocess.CompletedProcess:
     code = ("import warnings, sys\n"
             "warnings.simplefilter('always')\n"
-            "from clraster.device import default_context\n"
+            "from clraster.pipeline.device import default_context\n"
             "try:\n"
             "    print(default_context().devices[0].platform.name)\n"
             "except Exception as e:\n"
@@ -494,7 +510,7 @@ def test_cli_memory_error_is_one_line(monkeypatch, capsys):
     """Out of memory (host or a device buffer past its limit) is a message, not a
     traceback; MemoryError is what GrowBuffer raises for an oversized device buffer."""
     from clraster import cli
-    from clraster.renderer import Renderer
+    from clraster.pipeline.renderer import Renderer
 
     def oom(*_a, **_k):
         raise MemoryError("this frame needs a 5,063 MiB bin list")

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from clraster.camera import Camera, look_at_matrix, perspective_matrix
+from clraster.world.camera import Camera, look_at_matrix, perspective_matrix
 
 
 def project(m: np.ndarray, p) -> np.ndarray:

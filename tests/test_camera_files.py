@@ -16,7 +16,7 @@ import pytest
 from conftest import get_renderer
 
 from clraster import Camera, Mesh
-from clraster.camera_files import (
+from clraster.world.camera_files import (
     CameraFileError,
     common_size,
     read_colmap,
@@ -309,7 +309,7 @@ def test_common_size_refuses_mixed_sizes():
 # --- through load_cameras, render_views and the CLI -----------------------------------------
 
 def test_load_cameras_reads_every_format(tmp_path):
-    from clraster.views import load_cameras
+    from clraster.world.views import load_cameras
 
     _write_colmap(tmp_path / "colmap", extra_images=1)
     assert len(load_cameras(tmp_path / "colmap", near=NEAR, far=FAR)) == 2
@@ -330,7 +330,7 @@ def test_load_cameras_reads_every_format(tmp_path):
 def test_camera_list_intrinsics_entries(tmp_path):
     """{"K", "pose", "near", "far"} entries, with and without their own size, OpenCV and
     OpenGL poses, against the OpenCV projection on the image."""
-    from clraster.views import ViewError, load_cameras
+    from clraster.world.views import ViewError, load_cameras
 
     k = np.array([[50.0, 0, 30.4], [0, 52.0, 22.6], [0, 0, 1]])
     pose = _cv_pose()

@@ -282,7 +282,7 @@ def test_clip_planes_reach_the_views_paths(tmp_path, monkeypatch, capsys):
     import json
 
     from clraster import Camera, Renderer
-    from clraster.examples import example_mesh
+    from clraster.world.examples import example_mesh
 
     w, h = SIZE
     cams = [Camera.look_at((6.0, 3.0, 5.0), (0, 0.8, 0), fov_y=50, near=0.5, far=30),
@@ -293,7 +293,7 @@ def test_clip_planes_reach_the_views_paths(tmp_path, monkeypatch, capsys):
     out = tmp_path / "views"
     assert main(["render", "example", "--views", str(f), "--out", str(out), "--size",
                  f"{w}x{h}", "--outputs", "ids", *CUT]) == 0
-    from clraster.batch import view_files
+    from clraster.scale.batch import view_files
 
     r, mesh = Renderer(w, h), example_mesh()
     for k, cam in enumerate(cams):
@@ -306,7 +306,7 @@ def test_clip_planes_reach_the_views_paths(tmp_path, monkeypatch, capsys):
     import types
 
     import clraster.cli as cli
-    import clraster.distributed as dist
+    import clraster.scale.distributed as dist
 
     seen = {}
 

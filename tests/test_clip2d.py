@@ -20,7 +20,7 @@ shapely = pytest.importorskip("shapely")
 from shapely import geometry as sg  # noqa: E402
 from shapely.ops import unary_union  # noqa: E402
 
-from clraster.clip2d import (  # noqa: E402
+from clraster.clip.clip2d import (  # noqa: E402
     Polygon2D,
     as_polygon,
     auto_method,

@@ -23,18 +23,18 @@ from conftest import MatrixCamera, assert_frames_equal, assert_same_image, get_r
 from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Camera, Mesh, RasterConfig, Renderer, Scene
-from clraster import bvh as bvh_module
-from clraster import cull as cull_module
-from clraster import reference as twin
-from clraster.bvh import BVH, INSIDE, INTERSECTING, MAX_PLANES, OUTSIDE, check_mask
-from clraster.clusters import clusters_of
-from clraster.cull import CLIP_PLANE_MARGIN, build_draw_list
-from clraster.frustum import DEFAULT_MARGIN, frustum_plane_scales, frustum_planes
-from clraster.inputs import check_clip_planes
-from clraster.lines import render_lines
-from clraster.reference.lines import render_lines as twin_lines
-from clraster.scenes import random_scene
-from clraster.scenes.primitives import uv_sphere
+from clraster.base.checks import check_clip_planes
+from clraster.culling import bvh as bvh_module
+from clraster.culling import cull as cull_module
+from clraster.culling.bvh import BVH, INSIDE, INTERSECTING, MAX_PLANES, OUTSIDE, check_mask
+from clraster.culling.clusters import clusters_of
+from clraster.culling.cull import CLIP_PLANE_MARGIN, build_draw_list
+from clraster.culling.frustum import DEFAULT_MARGIN, frustum_plane_scales, frustum_planes
+from clraster.pipeline import reference as twin
+from clraster.pipeline.lines import render_lines
+from clraster.pipeline.reference.lines import render_lines as twin_lines
+from clraster.world.generators import random_scene
+from clraster.world.generators.primitives import uv_sphere
 
 
 def _planes_through(rng: np.random.Generator, centre: np.ndarray, k: int) -> np.ndarray:

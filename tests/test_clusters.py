@@ -11,14 +11,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from clraster.clusters import (
+from clraster.culling.clusters import (
     CONE_NEVER,
     DEGENERATE_SIN,
     clusterize,
     clusters_of,
     cone_backfacing,
 )
-from clraster.mesh import Mesh
+from clraster.world.mesh import Mesh
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

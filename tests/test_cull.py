@@ -12,11 +12,10 @@ from conftest import ortho
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from clraster.bvh import BVH
-from clraster.camera import Camera
-from clraster.clusters import clusters_of
-from clraster.cull import COUNT_NAMES, ViewCull, build_draw_list
-from clraster.frustum import (
+from clraster.culling.bvh import BVH
+from clraster.culling.clusters import clusters_of
+from clraster.culling.cull import COUNT_NAMES, ViewCull, build_draw_list
+from clraster.culling.frustum import (
     Visibility,
     classify_aabbs,
     classify_spheres,
@@ -25,8 +24,9 @@ from clraster.frustum import (
     frustum_planes,
     view_proj_flips,
 )
-from clraster.mesh import Mesh
-from clraster.scene import Scene
+from clraster.world.camera import Camera
+from clraster.world.mesh import Mesh
+from clraster.world.scene import Scene
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 IN, X, OUT = Visibility.INSIDE, Visibility.INTERSECTING, Visibility.OUTSIDE
@@ -488,7 +488,7 @@ def test_instances_of_one_mesh_many_and_few(path, monkeypatch):
     # pair / object-space planes against every cluster box / batched BVH traversal):
     # a pair is culled only if the exact object-space box test says OUTSIDE, and every pair
     # clearly outside (by 1e-3 relative) is culled.
-    import clraster.cull as cull_mod
+    import clraster.culling.cull as cull_mod
 
     flat, dense = {"flat": (10**9, 0), "dense": (0, 10**9), "bvh": (0, 0)}[path]
     monkeypatch.setattr(cull_mod, "FLAT_CLUSTERS", flat)
@@ -541,7 +541,7 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
     # Random views and transforms: every culled cluster is really culled (all vertices
     # outside one plane, or every usable triangle showing its culled side, also in NDC) and
     # every INSIDE cluster is inside in float32, as the renderer computes clip coordinates.
-    import clraster.cull as cull_mod
+    import clraster.culling.cull as cull_mod
 
     if path == "bvh":
         monkeypatch.setattr(cull_mod, "DENSE_PAIRS", 0)
@@ -661,8 +661,8 @@ def test_culling_threads_give_the_same_draw_list(threads, monkeypatch):
     # procedural plant (many small meshes on the flat path and several bigger ones) seen
     # from inside, with cones, culled back and front faces and a user clip plane: the same
     # pairs in the same order, the same inside flags, cone-culled pairs and counts.
-    import clraster.cull as cull_mod
-    from clraster.scenes import plant, plant_inside_camera
+    import clraster.culling.cull as cull_mod
+    from clraster.world.generators import plant, plant_inside_camera
 
     scene = plant(200_000)
     vp = plant_inside_camera(scene, 640, 480).view_projection(640, 480)
@@ -688,8 +688,8 @@ def test_instances_classified_densely_or_through_the_bvh_alike(monkeypatch):
     # box on its own instead of traversing the instance BVH (`BVH.cull` equals that by
     # contract). Both ways over the procedural plant from inside, with the frustum off and
     # on, user clip planes (16-bit masks) and without: the same draw lists and counts.
-    import clraster.cull as cull_mod
-    from clraster.scenes import plant, plant_inside_camera
+    import clraster.culling.cull as cull_mod
+    from clraster.world.generators import plant, plant_inside_camera
 
     scene = plant(200_000)
     assert 100 < scene.n_instances <= cull_mod.DENSE_INSTANCES
@@ -731,7 +731,7 @@ def test_view_cull_pairs_decide_each_pair_alone(seed):
     cone-culled) those pairs get among all of them, and the counts partition the pairs.
     Against `all` on the same view: the instance test is shared, so the pairs of culled
     instances are culled by both, and INSIDE instances keep all their pairs, inside."""
-    from clraster.scenes import random_scene
+    from clraster.world.generators import random_scene
     scene = random_scene(seed, 48, extent=4.0, mirrors=bool(seed % 2))
     rng = np.random.default_rng(seed)
     d = rng.normal(size=3)

@@ -44,10 +44,11 @@ from conftest import (
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from clraster import Camera, Mesh, RasterConfig, reference
-from clraster.clusters import clusters_of
-from clraster.scene import Scene
-from clraster.scenes import instance_grid, plant, plant_inside_camera, random_scene
+from clraster import Camera, Mesh, RasterConfig
+from clraster.culling.clusters import clusters_of
+from clraster.pipeline import reference
+from clraster.world.generators import instance_grid, plant, plant_inside_camera, random_scene
+from clraster.world.scene import Scene
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 
@@ -374,7 +375,7 @@ def fine_meshes() -> list[Mesh]:
     """Meshes with several clusters each: a UV sphere, a torus and a box subdivided into
     small quads (closed), and a flat square grid (one-sided: its clusters are flat, their
     normal cones as narrow as they get). Built once, shared by all scenes."""
-    from clraster.scenes.primitives import torus, uv_sphere  # procedural mesh primitives
+    from clraster.world.generators.primitives import torus, uv_sphere  # procedural mesh primitives
 
     if not _FINE:
         _FINE.extend([Mesh(*uv_sphere(0.5, 24, 48)), Mesh(*torus(0.4, 0.15, 64, 16)),
@@ -666,7 +667,7 @@ def _back_facing(mesh: Mesh, transform: np.ndarray, eye: np.ndarray) -> np.ndarr
 def test_sphere_normal_cones(transform):
     """A fine closed sphere seen from outside: cone culling removes some clusters with cull
     "back" (only clusters whose every face is seen from behind) and none with "none"."""
-    from clraster.cull import build_draw_list
+    from clraster.culling.cull import build_draw_list
 
     sphere = fine_meshes()[0]  # UV sphere, 2208 faces
     cm = clusters_of(sphere)

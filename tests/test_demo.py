@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 from clraster import Camera, Mesh, Renderer
-from clraster.clusters import clusters_of
-from clraster.fates import ClusterFates, Fate
-from clraster.scene import Scene
-from clraster.scenes import plant, plant_inside_camera, plant_overview_camera
+from clraster.culling.clusters import clusters_of
+from clraster.culling.fates import ClusterFates, Fate
+from clraster.world.generators import plant, plant_inside_camera, plant_overview_camera
+from clraster.world.scene import Scene
 
 W, H = 200, 120
 
@@ -282,7 +282,8 @@ def test_triangle_cap_is_checked_at_parsing(count, tmp_path, capsys, monkeypatch
     """--triangles above `demo.MAX_TRIANGLES` is a usage error (exit 2) naming the cap and
     the reason; the plant is never built (with no cap, 10**12 triangles ran until the host
     ran out of memory)."""
-    from clraster import cli, demo, scenes
+    from clraster import cli, demo
+    from clraster.world import generators as scenes
 
     def plant(*args, **kwargs):
         raise _PlantBuilt("the demo built the plant instead of refusing the count")
@@ -301,7 +302,7 @@ def test_triangle_cap_is_checked_at_parsing(count, tmp_path, capsys, monkeypatch
 
 
 def test_annotate_text_panel_ramp():
-    from clraster import annotate
+    from clraster.output import annotate
 
     img = np.zeros((40, 200, 3), np.uint8)
     img[:] = (50, 60, 70)

@@ -10,8 +10,8 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from clraster import device
-from clraster.config import ST_CLIPPED, ST_RASTER, RasterConfig
+from clraster.base.config import ST_CLIPPED, ST_RASTER, RasterConfig
+from clraster.pipeline import device
 
 
 @pytest.fixture(scope="module")

@@ -28,7 +28,8 @@ import pytest
 from conftest import MESH_DIR, load_shared_mesh
 
 from clraster import Camera, Mesh, Renderer
-from clraster.composite import (
+from clraster.output.frame import Frame, FrameStats
+from clraster.scale.composite import (
     composite,
     composite_crops,
     composite_into,
@@ -36,7 +37,7 @@ from clraster.composite import (
     crop,
     uncrop,
 )
-from clraster.distributed import (
+from clraster.scale.distributed import (
     POCL_THREAD_VARS,
     kd_split,
     partition,
@@ -44,8 +45,7 @@ from clraster.distributed import (
     render_sort_last,
     scatter_parts,
 )
-from clraster.frame import Frame, FrameStats
-from clraster.scene import Scene
+from clraster.world.scene import Scene
 
 W, H = 96, 72
 
@@ -204,7 +204,7 @@ def test_kd_split_balances_and_handles_few_points():
 
 @pytest.mark.parametrize("parts", [1, 2, 3, 5])
 def test_partition_covers_every_triangle_once(parts):
-    from clraster.scenes import instance_grid
+    from clraster.world.generators import instance_grid
 
     bunny = load_shared_mesh("stanford_bunny.ply")
     scene = instance_grid(bunny, 2, 1, 2)
@@ -237,7 +237,7 @@ def client():
     pytest.importorskip("dask.distributed")
     from dask.distributed import Client
 
-    from clraster.distributed import local_cluster
+    from clraster.scale.distributed import local_cluster
 
     with local_cluster(2, threads_per_worker=1, pocl_threads=1) as cluster, \
             Client(cluster) as c:
@@ -270,7 +270,7 @@ def check_sort_last(client, renderer, target, camera, parts_list=(2, 3, 4), **kw
 
 
 def test_workers_get_their_pocl_threads(client):
-    from clraster.distributed import worker_info
+    from clraster.scale.distributed import worker_info
 
     info = client.run(worker_info)
     assert len(info) == 2
@@ -289,14 +289,14 @@ def test_sort_last_bunny(client, one_machine):
 
 
 def test_sort_last_instance_grid(client, one_machine):
-    from clraster.scenes import grid_camera, instance_grid
+    from clraster.world.generators import grid_camera, instance_grid
 
     scene = instance_grid(load_shared_mesh("suzanne.ply"), 4, 2, 3, spacing=1.1)
     check_sort_last(client, one_machine, scene, grid_camera(scene, W, H), cull="none")
 
 
 def test_sort_last_plant_inside(client, one_machine):
-    from clraster.scenes import plant, plant_inside_camera
+    from clraster.world.generators import plant, plant_inside_camera
 
     scene = plant(200_000)
     cam = plant_inside_camera(scene, W, H)
@@ -354,9 +354,9 @@ def folder_bytes(path) -> dict[str, bytes]:
 
 
 def test_render_views_equals_one_machine_and_reruns_skip(client, one_machine, tmp_path):
-    from clraster.batch import render_views as one_machine_views
-    from clraster.distributed import ViewsSummary
-    from clraster.distributed import render_views as dask_views
+    from clraster.scale.batch import render_views as one_machine_views
+    from clraster.scale.distributed import ViewsSummary
+    from clraster.scale.distributed import render_views as dask_views
 
     bunny = load_shared_mesh("stanford_bunny.ply")
     cams: list = orbit_cameras(bunny, 11)
@@ -387,8 +387,8 @@ def test_render_views_equals_one_machine_and_reruns_skip(client, one_machine, tm
 
 
 def test_render_views_from_a_scene_file(client, one_machine, tmp_path):
-    from clraster.batch import render_views as one_machine_views
-    from clraster.distributed import render_views as dask_views
+    from clraster.scale.batch import render_views as one_machine_views
+    from clraster.scale.distributed import render_views as dask_views
 
     path = MESH_DIR / "stanford_bunny.ply"
     if not path.is_file():
@@ -413,8 +413,8 @@ def test_render_views_survives_a_lost_worker(client, one_machine, tmp_path):
     import threading
     import time
 
-    from clraster.batch import render_views as one_machine_views
-    from clraster.distributed import render_views as dask_views
+    from clraster.scale.batch import render_views as one_machine_views
+    from clraster.scale.distributed import render_views as dask_views
 
     bunny = load_shared_mesh("stanford_bunny.ply")
     n = 64

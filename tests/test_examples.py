@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clraster.examples import _example_parts, example_mesh, torus_knot
+from clraster.world.examples import _example_parts, example_mesh, torus_knot
 
 
 def test_deterministic_and_sized():

@@ -14,10 +14,11 @@ import pytest
 from conftest import MatrixCamera, assert_frames_equal
 from random_scenes import Lens, random_soup, random_view, to_world
 
-from clraster import Camera, Mesh, RasterConfig, Renderer, device
-from clraster.scenes import plant, plant_inside_camera
-from clraster.stages import _buffers
-from clraster.stages._buffers import GrowBuffer
+from clraster import Camera, Mesh, RasterConfig, Renderer
+from clraster.pipeline import device
+from clraster.pipeline.stages import _buffers
+from clraster.pipeline.stages._buffers import GrowBuffer
+from clraster.world.generators import plant, plant_inside_camera
 
 
 def _context(shared: bool) -> cl.Context:
@@ -191,8 +192,8 @@ def test_pool_positions_must_be_in_cluster_order():
     vert_ids is not the identity is refused at upload, not rendered wrong."""
     import dataclasses
 
-    from clraster.boxes import box_geometry
-    from clraster.stages.geometry import GeometryStage
+    from clraster.pipeline.boxes import box_geometry
+    from clraster.pipeline.stages.geometry import GeometryStage
 
     ctx = device.default_context()
     queue = cl.CommandQueue(ctx)
@@ -221,7 +222,7 @@ def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
     import gc
     import threading
 
-    from clraster.scenes import plant, plant_overview_camera
+    from clraster.world.generators import plant, plant_overview_camera
 
     w, h = 1280, 720
     big = plant(1_000_000)

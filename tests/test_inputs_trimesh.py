@@ -13,8 +13,9 @@ import trimesh
 from conftest import assert_frames_equal
 
 import clraster
-from clraster import Camera, Mesh, Scene, reference
-from clraster.inputs import _CONVERTED, as_target
+from clraster import Camera, Mesh, Scene
+from clraster.pipeline import reference
+from clraster.world.inputs import _CONVERTED, as_target
 
 W, H = 80, 60
 

@@ -24,7 +24,7 @@ import trimesh
 from conftest import get_renderer, load_shared_mesh
 
 from clraster import Camera
-from clraster.camera import intrinsics_projection
+from clraster.world.camera import intrinsics_projection
 
 #: Image sizes of the random cameras (few sizes: one cached Renderer each).
 SIZES = ((512, 384), (384, 512))

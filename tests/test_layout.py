@@ -23,9 +23,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from clraster import layout
-from clraster.config import RasterConfig
-from clraster.device import default_context, kernel_dir, kernel_source, program
+from clraster.base import layout
+from clraster.base.config import RasterConfig
+from clraster.pipeline.device import default_context, kernel_dir, kernel_source, program
 
 
 def probe_entries(cfg: RasterConfig) -> list[tuple[str, str, int]]:
@@ -125,13 +125,15 @@ def test_kernels_keep_no_hand_copies():
 
 
 def test_python_modules_use_the_layout_objects():
-    from clraster import config, lines, occlusion
-    from clraster.reference import lines as ref_lines
-    from clraster.reference import pyramid as ref_pyramid
-    from clraster.reference import query as ref_query
-    from clraster.reference import setup as ref_setup
-    from clraster.stages import lines as st_lines
-    from clraster.stages import pyramid as st_pyramid
+    from clraster.base import config
+    from clraster.pipeline import occlusion
+    from clraster.pipeline import segments as lines
+    from clraster.pipeline.reference import lines as ref_lines
+    from clraster.pipeline.reference import pyramid as ref_pyramid
+    from clraster.pipeline.reference import query as ref_query
+    from clraster.pipeline.reference import setup as ref_setup
+    from clraster.pipeline.stages import lines as st_lines
+    from clraster.pipeline.stages import pyramid as st_pyramid
 
     for name in ("PIECE_DTYPE", "DRAW_DTYPE", "WINVERT_DTYPE", "WINXY_DTYPE", "CULL_MODES",
                  "STATUS_NAMES"):

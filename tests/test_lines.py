@@ -24,15 +24,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clraster import Camera, Mesh, Renderer
-from clraster.lines import (
-    LineFrame,
+from clraster.pipeline.lines import (
     LineRenderer,
     frustum_segments,
     mesh_edges,
     overlay,
     render_lines,
 )
-from clraster.reference import lines as ref
+from clraster.pipeline.reference import lines as ref
+from clraster.pipeline.segments import LineFrame
 
 W, H = 8, 6
 
@@ -782,10 +782,10 @@ if not plats:
     print(json.dumps({"unavailable": "no OpenCL platform named Oclgrind"}))
     sys.exit(3)
 ctx = cl.Context(plats[0].get_devices())
-import clraster.device as dev
+import clraster.pipeline.device as dev
 from clraster import Camera
-from clraster.lines import LineRenderer, frustum_segments
-from clraster.reference.lines import render_lines as ref
+from clraster.pipeline.lines import LineRenderer, frustum_segments
+from clraster.pipeline.reference.lines import render_lines as ref
 # Oclgrind has no llvm.rint.f32 (common.h's __builtin_rintf); OpenCL rint rounds the same
 _source = dev.kernel_source
 dev.kernel_source = lambda stage: _source(stage).replace("__builtin_rintf", "rint")

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clraster.mesh import Mesh
+from clraster.world.mesh import Mesh
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

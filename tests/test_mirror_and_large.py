@@ -17,8 +17,9 @@ import pytest
 import trimesh
 from conftest import get_renderer
 
-from clraster import Camera, Mesh, Scene, reference
-from clraster.config import RasterConfig
+from clraster import Camera, Mesh, Scene
+from clraster.base.config import RasterConfig
+from clraster.pipeline import reference
 
 W, H = 128, 96
 

@@ -21,9 +21,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from clraster import Camera, Mesh, RasterConfig
-from clraster.occlusion import Occlusion, OcclusionQuery, QueryResult, query, sphere_boxes
-from clraster.reference import pyramid as ref_pyr
-from clraster.reference import query as ref_q
+from clraster.pipeline.occlusion import Occlusion, OcclusionQuery, QueryResult, query, sphere_boxes
+from clraster.pipeline.reference import pyramid as ref_pyr
+from clraster.pipeline.reference import query as ref_q
 
 _QUERIES: dict[int, OcclusionQuery] = {}
 
@@ -285,7 +285,7 @@ def test_occluded_content_changes_no_pixel(case):
     instance transform (rounded float32 VP · model, not the box's VP), changes no pixel of
     the frame. Occluders are instance 0; each content mesh (random triangles with vertices
     in model space) is one more instance, its box the outward-rounded world bounds."""
-    from clraster.scene import Scene
+    from clraster.world.scene import Scene
 
     (w, h), seed, offset, _ = case
     cam, depth, _lo, _hi, occ = _random_case(seed, w, h, offset, synthetic=False)
@@ -459,9 +459,9 @@ if not plats:
     sys.exit(0)
 ctx = cl.Context(plats[0].get_devices())
 from clraster import Camera, RasterConfig
-from clraster.inputs import mvp_matrix
-from clraster.occlusion import OcclusionQuery
-from clraster.reference import pyramid as rp, query as rq
+from clraster.base.checks import mvp_matrix
+from clraster.pipeline.occlusion import OcclusionQuery
+from clraster.pipeline.reference import pyramid as rp, query as rq
 rng = np.random.default_rng(0)
 same = []
 for (w, h), tl in (((33, 17), 3), ((17, 9), 4), ((1, 5), 3), ((70, 3), 6)):

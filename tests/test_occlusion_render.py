@@ -63,17 +63,17 @@ from conftest import (
 )
 
 from clraster import Camera, Mesh, RasterConfig, Renderer
-from clraster import reference as twin
-from clraster.clusters import clusters_of
-from clraster.fates import Fate
-from clraster.scene import Scene
-from clraster.scenes import (
+from clraster.culling.clusters import clusters_of
+from clraster.culling.fates import Fate
+from clraster.pipeline import reference as twin
+from clraster.world.generators import (
     instance_grid,
     plant,
     plant_inside_camera,
     plant_overview_camera,
     random_scene,
 )
+from clraster.world.scene import Scene
 
 SIZE = (96, 64)
 PLANT_SIZE = (160, 120)
@@ -994,7 +994,7 @@ def site_path(n: int, radius: float, site: int) -> list:
 def fallbacks(monkeypatch):
     """Counts the first-frame fallbacks of the two-phase schedule (both renderers): a list
     that grows by one per fallback (a first frame or a camera cut)."""
-    import clraster.twophase as twophase
+    import clraster.pipeline.twophase as twophase
 
     calls: list[int] = []
     real = twophase.eye_position
@@ -1112,8 +1112,8 @@ def test_phase_draws_are_the_frame_draws_they_select():
     # the selected records of FramePlan.frame in the same order, with their vertex and
     # triangle stream places counted from the subset's own cluster sizes, and the same
     # per-instance matrices.
-    from clraster.drawlist import PlanCache, plan_frame
-    from clraster.scenes import plant_inside_camera
+    from clraster.pipeline.drawlist import PlanCache, plan_frame
+    from clraster.world.generators import plant_inside_camera
 
     scene = plant(200_000)
     cam = plant_inside_camera(scene, 320, 240)

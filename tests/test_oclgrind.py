@@ -33,7 +33,7 @@ REPORT_HEADER = re.compile(
 
 
 def clraster_kernel_names() -> set[str]:
-    from clraster.device import kernel_dir
+    from clraster.pipeline.device import kernel_dir
 
     names = set()
     for path in Path(kernel_dir()).glob("*.cl"):

@@ -12,9 +12,9 @@ import trimesh
 from conftest import get_renderer, load_shared_mesh
 
 from clraster import Camera, Mesh
-from clraster.frame import Frame, FrameStats
-from clraster.outputs import FramePoints, write_output
-from clraster.scene import Scene
+from clraster.output.frame import Frame, FrameStats
+from clraster.output.outputs import FramePoints, write_output
+from clraster.world.scene import Scene
 
 W, H = 96, 72
 
@@ -356,7 +356,7 @@ def test_npy_npz_ply(tmp_path, spot_frame):
 
 
 def test_shaded_delegates_to_shade(tmp_path, spot_frame):
-    from clraster.shade import shade
+    from clraster.output.shade import shade
 
     frame, spot, _ = spot_frame
     img = iio.imread(frame.save(tmp_path / "s.png", "shaded", target=spot))

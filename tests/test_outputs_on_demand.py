@@ -10,7 +10,7 @@ import pytest
 
 import clraster
 from clraster import Camera, RasterConfig, Renderer
-from clraster.scenes import plant, plant_inside_camera
+from clraster.world.generators import plant, plant_inside_camera
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,7 @@ def test_frames_do_not_share_arrays(scene):
 def test_pool_recycles_only_dropped_arrays():
     """A block comes back to the pool only when the last view of its array is gone, and a
     new array never shares memory with one still referenced."""
-    from clraster.arraypool import ArrayPool
+    from clraster.pipeline.arraypool import ArrayPool
 
     pool = ArrayPool(1 << 20)
     a = pool.empty((64, 32), np.float32)

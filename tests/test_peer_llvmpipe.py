@@ -21,7 +21,7 @@ from conftest import MatrixCamera, get_renderer, load_shared_mesh
 from clraster import Camera, Mesh
 from clraster.bench import peer_llvmpipe as peer_mod
 from clraster.bench.peer_llvmpipe import LlvmpipePeer, coverage_agreement, probe
-from clraster.scene import Scene
+from clraster.world.scene import Scene
 
 OK, WHY = probe()
 needs_gl = pytest.mark.skipif(not OK, reason=f"peer unavailable: {WHY}")

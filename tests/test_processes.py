@@ -143,7 +143,7 @@ def test_renderers_with_own_contexts_are_freed():
     res = run_script("""
         import gc
         import pyopencl as cl
-        from clraster.device import default_context
+        from clraster.pipeline.device import default_context
         dev = default_context().devices[0]
         def rss():
             for line in open("/proc/self/status"):
@@ -175,7 +175,7 @@ def test_gil_released_while_the_device_works():
     if not dragon.is_file():
         pytest.skip(f"{dragon} not found")
     res = run_script(f"""
-        from clraster.scenes import instance_grid, grid_camera
+        from clraster.world.generators import instance_grid, grid_camera
         scene = instance_grid(Mesh.load({str(dragon)!r}), 2, 2)
         r = Renderer(1920, 1080)
         c = grid_camera(scene, 1920, 1080)
@@ -232,7 +232,7 @@ def test_cli_ctrl_c_exits_promptly_and_quietly(tmp_path):
 PINNING = """
 import json, os, threading
 import pyopencl as cl
-from clraster import device
+from clraster.pipeline import device
 START = dict(os.environ)
 before = set(os.listdir('/proc/self/task'))
 r = Renderer(32, 32)
@@ -344,7 +344,7 @@ def test_exit_while_a_wait_is_ending_does_not_abort(tmp_path):
         "import sys, threading, time",
         "import numpy as np",
         "import pyopencl as cl",
-        "from clraster import device",
+        "from clraster.pipeline import device",
         "ctx = device.default_context()",
         "q = cl.CommandQueue(ctx)",
         f"spin = cl.Kernel(cl.Program(ctx, {kernel!r}).build(), 'spin')",

@@ -19,10 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from clraster.device import default_context
-from clraster.occlusion import Occlusion
-from clraster.reference import pyramid as ref
-from clraster.stages.pyramid import PyramidStage, level_shapes, level_table
+from clraster.pipeline.device import default_context
+from clraster.pipeline.occlusion import Occlusion
+from clraster.pipeline.reference import pyramid as ref
+from clraster.pipeline.stages.pyramid import PyramidStage, level_shapes, level_table
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +124,7 @@ def test_pyramid_of_a_rendered_frame(dev, renderer_for):
     from conftest import MatrixCamera, perspective
 
     from clraster import Mesh
-    from clraster.reference.query import box_mesh
+    from clraster.pipeline.reference.query import box_mesh
 
     rng = np.random.default_rng(2)
     c = rng.uniform(-3, 3, (30, 3))
@@ -144,7 +144,7 @@ def test_pyramid_of_a_rendered_frame(dev, renderer_for):
 
 def _camera(rng: np.random.Generator, w: int, h: int):
     """A float32 view-projection: gluPerspective (random lens) · a random look-at."""
-    from clraster.camera import look_at_matrix, perspective_matrix
+    from clraster.world.camera import look_at_matrix, perspective_matrix
 
     eye = rng.uniform(-3, 3, 3)
     target = eye + rng.normal(size=3)
@@ -226,7 +226,7 @@ def test_box_test_matches_twin(dev, size, seed):
 
 def test_box_test_outcomes_by_construction(dev):
     """Clear-cut cases with a gluPerspective camera at the origin looking down −Z."""
-    from clraster.camera import perspective_matrix
+    from clraster.world.camera import perspective_matrix
 
     w, h = 65, 33
     vp = perspective_matrix(60, w / h, 0.5, 100).astype(np.float32)

@@ -13,9 +13,15 @@ import numpy as np
 import pytest
 
 from clraster import Camera
-from clraster.camera import CameraArgumentError, intrinsics_projection, look_at_matrix
 from clraster.cli import main
-from clraster.views import BrokenCamera, CameraFileError, ViewError, iter_cameras, load_cameras
+from clraster.world.camera import CameraArgumentError, intrinsics_projection, look_at_matrix
+from clraster.world.views import (
+    BrokenCamera,
+    CameraFileError,
+    ViewError,
+    iter_cameras,
+    load_cameras,
+)
 
 
 def perspective(fov_y=None, znear=0.1, zfar=10.0, aspect_ratio=None, **kw):

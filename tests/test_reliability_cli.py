@@ -138,7 +138,7 @@ def test_read_only_folder_is_refused(tmp_path, capsys):
 def test_a_failing_output_leaves_every_output_as_it_was(tmp_path, monkeypatch, capsys):
     """--ids failing at write time (here a full disk) must not leave --out written and
     --depth replaced: the files are written all or none, and no temporary file stays."""
-    import clraster.outputs as outputs
+    import clraster.output.outputs as outputs
 
     real = outputs.write_output
 
@@ -189,12 +189,12 @@ def test_names_of_250_bytes_work_end_to_end(tmp_path):
 
 def test_demo_output_folder_checked_before_the_plant_is_built(tmp_path, monkeypatch,
                                                               capsys):
-    import clraster.scenes
+    import clraster.world.generators as generators
 
     def no_plant(*_a, **_k):
         raise AssertionError("the plant was built before --out was checked")
 
-    monkeypatch.setattr(clraster.scenes, "plant", no_plant)
+    monkeypatch.setattr(generators, "plant", no_plant)
     file = tmp_path / "file"
     file.write_text("keep")
     limit = _name_max(tmp_path)

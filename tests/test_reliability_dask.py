@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 
 from clraster import Camera, Mesh, Renderer
-from clraster.frame import Frame
-from clraster.scene import Scene
+from clraster.output.frame import Frame
+from clraster.world.scene import Scene
 
 pytest.importorskip("dask.distributed")
 
-from clraster import distributed as cd  # noqa: E402  (after the importorskip)
+from clraster.scale import distributed as cd  # noqa: E402  (after the importorskip)
 
 W, H = 64, 48
 #: seconds after which a call on the cluster with no workers counts as hung (it is given a

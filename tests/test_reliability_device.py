@@ -10,7 +10,7 @@ import warnings
 import pyopencl as cl
 import pytest
 
-from clraster import device
+from clraster.pipeline import device
 
 
 def test_build_log_goes_to_the_logger_not_to_warnings(monkeypatch, caplog):

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from conftest import MatrixCamera
 
-from clraster import Camera, reference
-from clraster.clip2d import Polygon2D
+from clraster import Camera
+from clraster.clip.clip2d import Polygon2D
 from clraster.demo import depth_picture
-from clraster.mesh import Mesh
-from clraster.shade import depth_image, render_shaded
+from clraster.output.shade import depth_image, render_shaded
+from clraster.pipeline import reference
+from clraster.world.mesh import Mesh
 
 W, H = 40, 30
 # the quad [-1, 1]² at z = 0 fills the image exactly under the identity clip matrix
@@ -106,7 +107,7 @@ def test_ssaa_window_rgb_and_other_keywords():
 
 
 def test_ssaa_window_beyond_the_supersampled_limit():
-    from clraster.window import WINDOW_MAX_COORD
+    from clraster.clip.window import WINDOW_MAX_COORD
 
     big = WINDOW_MAX_COORD / 2 + 10
     far = [[0.0, 0.0], [big, 0.0], [big, 20.0], [0.0, 20.0]]

@@ -33,8 +33,8 @@ import numpy as np
 import pytest
 
 from clraster import Camera, Renderer
-from clraster.batch import render_views, view_files
-from clraster.examples import example_mesh
+from clraster.scale.batch import render_views, view_files
+from clraster.world.examples import example_mesh
 
 W, H = 40, 30
 
@@ -167,7 +167,7 @@ def _name_max(folder: Path) -> int:
 
 
 def test_longest_legal_name_is_written(renderer, mesh, tmp_path):
-    from clraster.outputs import write_output
+    from clraster.output.outputs import write_output
 
     frame = renderer.render(mesh, orbit(1)[0])
     limit = _name_max(tmp_path)
@@ -186,7 +186,7 @@ def test_longest_legal_name_is_written(renderer, mesh, tmp_path):
 
 
 def test_temporary_names_fit_and_stay_distinct():
-    from clraster.atomic import TEMPORARY_RE, temporary_name
+    from clraster.output.atomic import TEMPORARY_RE, temporary_name
 
     for limit in (255, 143, 64):
         names = ["a" * (limit - 4) + ".npy", "a" * (limit - 4) + ".png", "é" * 200 + ".npy",
@@ -222,7 +222,7 @@ def test_bad_render_values_raise_before_any_view(mesh, renderer, tmp_path, kw, m
 WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from clraster.batch import _write_atomic
+    from clraster.scale.batch import _write_atomic
 
     def write(fh):
         fh.write(b"x" * (1 << 20))
@@ -284,7 +284,7 @@ def client():
     pytest.importorskip("dask.distributed")
     from dask.distributed import Client
 
-    from clraster.distributed import local_cluster
+    from clraster.scale.distributed import local_cluster
 
     with local_cluster(1, threads_per_worker=1, pocl_threads=1) as cluster, \
             Client(cluster) as c:
@@ -292,7 +292,7 @@ def client():
 
 
 def test_dask_rerun_with_other_settings_is_refused(client, mesh, renderer, tmp_path):
-    from clraster.distributed import render_views as dask_views
+    from clraster.scale.distributed import render_views as dask_views
 
     out = tmp_path / "views"
     cams = orbit(4)
@@ -325,7 +325,7 @@ def test_dask_rerun_with_other_settings_is_refused(client, mesh, renderer, tmp_p
 
 @pytest.mark.parametrize(("kw", "match"), BAD_VALUES)
 def test_dask_bad_render_values_raise_before_any_work(client, mesh, tmp_path, kw, match):
-    from clraster.distributed import render_views as dask_views
+    from clraster.scale.distributed import render_views as dask_views
 
     out = tmp_path / "views"
     with pytest.raises(ValueError, match=match):

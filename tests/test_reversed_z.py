@@ -18,9 +18,14 @@ from conftest import MatrixCamera, assert_frames_equal, get_renderer, load_share
 from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Camera, Mesh, RasterConfig, Renderer, Scene
-from clraster import reference as twin
-from clraster.composite import composite
-from clraster.scenes import plant, plant_inside_camera, plant_overview_camera, random_scene
+from clraster.pipeline import reference as twin
+from clraster.scale.composite import composite
+from clraster.world.generators import (
+    plant,
+    plant_inside_camera,
+    plant_overview_camera,
+    random_scene,
+)
 
 
 @pytest.mark.parametrize("seed", [3, 4, 5])

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-import clraster.scene as scene_mod
-from clraster.mesh import Mesh
-from clraster.scene import MAX_SCENE_FACES, Instance, Scene
+import clraster.world.scene as scene_mod
+from clraster.world.mesh import Mesh
+from clraster.world.scene import MAX_SCENE_FACES, Instance, Scene
 
 TRI = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
 

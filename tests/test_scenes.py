@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from clraster import Camera, Mesh, scenes
-from clraster.scenes.primitives import boxes
+from clraster import Camera, Mesh
+from clraster.world import generators as scenes
+from clraster.world.generators.primitives import boxes
 
 MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 

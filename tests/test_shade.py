@@ -11,11 +11,12 @@ import pytest
 import trimesh
 from conftest import MatrixCamera
 
-from clraster import Camera, reference
-from clraster.mesh import Mesh
-from clraster.scene import Scene
-from clraster.shade import depth_image, pixel_normals, render_shaded, shade, vertex_normals
-from clraster.textures import Texture, texture_from_trimesh
+from clraster import Camera
+from clraster.output.shade import depth_image, pixel_normals, render_shaded, shade, vertex_normals
+from clraster.output.textures import Texture, texture_from_trimesh
+from clraster.pipeline import reference
+from clraster.world.mesh import Mesh
+from clraster.world.scene import Scene
 
 # Two faces: one facing +Z, the same triangle wound the other way (facing −Z), one degenerate.
 MESH = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], [[0, 1, 2], [0, 2, 1], [0, 1, 3]])

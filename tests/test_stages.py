@@ -25,7 +25,7 @@ from conftest import MatrixCamera
 from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Mesh, RasterConfig
-from clraster.config import (
+from clraster.base.config import (
     DRAW_INSIDE,
     OC_INVALID,
     OC_NEEDS_CLIP,
@@ -34,13 +34,13 @@ from clraster.config import (
     ST_CLIPPED,
     ST_RASTER,
 )
-from clraster.device import default_context
-from clraster.drawlist import PlanCache, plan_frame
-from clraster.params import FrameParams, FrameTotals
-from clraster.reference import bin as ref_bin
-from clraster.reference import setup as ref_setup
-from clraster.reference import vertex as ref_vertex
-from clraster.stages.chain import StageChain
+from clraster.pipeline.device import default_context
+from clraster.pipeline.drawlist import PlanCache, plan_frame
+from clraster.pipeline.params import FrameParams, FrameTotals
+from clraster.pipeline.reference import bin as ref_bin
+from clraster.pipeline.reference import setup as ref_setup
+from clraster.pipeline.reference import vertex as ref_vertex
+from clraster.pipeline.stages.chain import StageChain
 
 #: (seed, (width, height), tile_log2, cull, lens): sizes on both sides of powers of two,
 #: tiles that do not divide the image, every cull mode, near planes from 0.01 to 2.

@@ -22,11 +22,13 @@ import pytest
 from conftest import NDC_CAMERA, assert_frames_equal, load_shared_mesh
 
 import clraster
-from clraster import Camera, Mesh, RasterConfig, Renderer, reference
-from clraster.config import DRAW_DTYPE, PIECE_DTYPE
-from clraster.drawlist import FrameDraws
-from clraster.scenes import plant, plant_inside_camera, random_scene
-from clraster.streaming import BinBudgetExceeded, draw_range, stream_draws
+from clraster import Camera, Mesh, RasterConfig, Renderer
+from clraster.base.config import DRAW_DTYPE, PIECE_DTYPE
+from clraster.pipeline import reference
+from clraster.pipeline.draws import FrameDraws
+from clraster.pipeline.params import BinBudgetExceeded
+from clraster.pipeline.streaming import draw_range, stream_draws
+from clraster.world.generators import plant, plant_inside_camera, random_scene
 
 #: A budget larger than any scene here: the unbatched frame.
 UNBATCHED = RasterConfig(batch_triangles=2**31 - 1, batch_entries=2**31 - 1)
@@ -254,7 +256,7 @@ class _SmallDevice:
 
 
 def test_frame_that_cannot_fit_fails_before_allocating(monkeypatch):
-    from clraster import renderer as renderer_mod
+    from clraster.pipeline import renderer as renderer_mod
 
     ctx = clraster.device.default_context()
     monkeypatch.setattr(renderer_mod, "StageChain", None)   # nothing may be built

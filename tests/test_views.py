@@ -12,11 +12,11 @@ import pytest
 from conftest import assert_frames_equal
 
 from clraster import Camera, Renderer
-from clraster.batch import render_views, view_files
 from clraster.cli import main
-from clraster.examples import example_mesh
-from clraster.shade import shade
-from clraster.views import CameraFileError, ViewError, load_cameras
+from clraster.output.shade import shade
+from clraster.scale.batch import render_views, view_files
+from clraster.world.examples import example_mesh
+from clraster.world.views import CameraFileError, ViewError, load_cameras
 
 W, H = 97, 61   # small, not a multiple of the tile size
 

@@ -12,10 +12,10 @@ import pytest
 from conftest import assert_frames_equal, assert_same_image, get_renderer, load_shared_mesh
 
 from clraster import Camera, RasterConfig, Renderer
-from clraster import reference as twin
-from clraster.clip2d import as_polygon
-from clraster.scenes import random_scene
-from clraster.window import window_mask
+from clraster.clip.clip2d import as_polygon
+from clraster.clip.window import window_mask
+from clraster.pipeline import reference as twin
+from clraster.world.generators import random_scene
 
 W, H = 96, 72
 

@@ -9,7 +9,7 @@ change the image when a tunable does):
 
 * ``SUBPIXEL_BITS = 8``: vertices snap to 1/256 pixel, as D3D11 requires. Like every
   constant and record the kernels share with the host (outcode bits, status codes, piece
-  flags, PIECE_DTYPE...), it is defined in `clraster.layout`, which generates the kernels'
+  flags, PIECE_DTYPE...), it is defined in `clraster.base.layout`, which generates the kernels'
   copies, and re-exported here.
 * ``MAX_IMAGE_SIZE = 16384``: widths/heights above this are refused. Pixel coordinates are
   packed into 16 bits in the triangle setup records (``Piece.bb_min``/``bb_max``).
@@ -97,7 +97,7 @@ class RasterConfig:
             ``bin_chunks × tiles × 4`` bytes.
         batch_triangles: a frame's draws go through the stage chain (vertex → setup →
             bin → raster) in consecutive batches of at most this many triangles, each
-            rasterized into the same frame buffers (`clraster.streaming`), so the vertex,
+            rasterized into the same frame buffers (`clraster.pipeline.streaming`), so the vertex,
             setup and bin buffers are sized by the batch, never by the scene: at most 346
             bytes per triangle of the budget (`StageChain.budget_bounds`: draw records,
             the vertex stream of three vertices, the setup record, status and tile words,
@@ -130,7 +130,7 @@ class RasterConfig:
             decisions. 10M plant first person with occlusion culling: 12.2M fragments
             tested → 7.2M, raster 0.74×; no gain where back-face culling leaves little
             overdraw (dragon, bunny, spot framed: tested ≈ passed), dragon raster ~1.02×.
-        occlusion_groups: hierarchical occlusion culling (`clraster.twophase`): after the
+        occlusion_groups: hierarchical occlusion culling (`clraster.pipeline.twophase`): after the
             first frame, each instance's clusters are taken in groups of at most this many
             (neighbours in its mesh's cluster BVH; a small mesh's instance is one group),
             the groups' world boxes are Hi-Z tested first, and only the clusters of the
@@ -179,7 +179,7 @@ class RasterConfig:
 
     def build_options(self) -> tuple[str, ...]:
         """The ``-D`` options the kernels are built with (the tunables; the fixed constants
-        reach the kernels through clraster.layout's generated header)."""
+        reach the kernels through clraster.base.layout's generated header)."""
         return (f"-DTILE_LOG2={self.tile_log2}",)
 
 

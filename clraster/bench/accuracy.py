@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera
-from ..mesh import Mesh
+from ..world.camera import Camera
+from ..world.mesh import Mesh
 
 MESHES = ("spot.ply", "stanford_bunny.ply", "stanford_dragon_res2.ply")
 

@@ -19,6 +19,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from clraster.base.checks import parse_size
 from clraster.bench import report
 from clraster.bench.measure import (
     MEMORY_METHOD,
@@ -56,7 +57,6 @@ from clraster.bench.spec import (
     mesh_path,
     parse_count,
 )
-from clraster.inputs import parse_size
 
 #: First line of ``clraster bench --help``.
 DESCRIPTION = ("Benchmark harness: the OpenCL pipeline vs its NumPy twin (and Mesa llvmpipe), "

@@ -25,7 +25,7 @@ culling and the read-back of depth, ids and barycentrics included); per-stage ti
 the device times from OpenCL profiling events (``frame.stats.timings_ms``). The twin gets a
 time budget per configuration (``--twin-budget``): once spent, it stops after ≥ 1 timed run
 and the JSON says how many it made. The twin renders the same culling mode, occlusion
-culling included (it runs the same two-phase schedule, `clraster.twophase`). The OpenCL and
+culling included (it runs the same two-phase schedule, `clraster.pipeline.twophase`). The OpenCL and
 twin images are compared (triangle ids identical, largest depth difference). The llvmpipe peer
 (`clraster.bench.peer_llvmpipe`) draws the whole scene with back-face culling on the same
 view-projection, one frame per round after clraster's (interleaved like the twin); its

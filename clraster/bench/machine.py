@@ -83,7 +83,7 @@ def _git(repo: Path) -> dict[str, Any]:
 
 def _opencl() -> dict[str, Any]:
     try:
-        from clraster.device import default_context
+        from clraster.pipeline.device import default_context
 
         dev = default_context().devices[0]
         plat = dev.platform

@@ -404,8 +404,8 @@ def _probe_startup(task: dict) -> dict:
     import pyopencl  # noqa: F401
 
     import clraster
-    from clraster.device import default_context
-    from clraster.renderer import Renderer
+    from clraster.pipeline.device import default_context
+    from clraster.pipeline.renderer import Renderer
     t1 = time.perf_counter()
     ctx = default_context()
     t2 = time.perf_counter()
@@ -437,12 +437,12 @@ def _probe_memory(task: dict) -> dict:
     import clraster
 
     if task["path"] == "opencl":
-        from clraster.device import default_context
-        from clraster.renderer import Renderer
+        from clraster.pipeline.device import default_context
+        from clraster.pipeline.renderer import Renderer
 
         default_context()
     else:
-        from clraster import reference  # noqa: F401
+        from clraster.pipeline import reference  # noqa: F401
     base = _status_mib("VmRSS")
     sc = load_scene(spec, meshes)
     cam = sc.camera(w, h)

@@ -162,7 +162,7 @@ def _load_opencl_first() -> None:
     way round, both work. So: enumerate the OpenCL platforms first (cheap; nothing is built).
     """
     try:
-        from ..device import platforms
+        from ..pipeline.device import platforms
         platforms()   # PoCL's threads start here (clraster.device: pinned where safe)
     except Exception:  # noqa: BLE001 - no OpenCL is fine for the peer itself
         pass
@@ -358,8 +358,8 @@ class LlvmpipePeer:
         their outward side, the Scene rule clraster follows (glTF 2.0). Meshes without
         faces are skipped.
         """
-        from clraster.mesh import Mesh
-        from clraster.scene import Scene
+        from clraster.world.mesh import Mesh
+        from clraster.world.scene import Scene
         if isinstance(target, Mesh):
             meshes, transforms, bases = [target], np.eye(4)[None], np.zeros(1, np.int64)
         elif isinstance(target, Scene):
@@ -423,7 +423,7 @@ class LlvmpipePeer:
             ids: also read back the triangle ids (untimed).
             clip_planes: None, or (K, 4) world-space planes (a, b, c, d), 0 <= K <= 8,
                 keeping the points with a·x + b·y + c·z + d >= 0 (gl_ClipDistance; checked
-                by `clraster.inputs.check_clip_planes`, as clraster's render does).
+                by `clraster.base.checks.check_clip_planes`, as clraster's render does).
 
         The per-instance matrices (``view_proj @ model`` in float64, rounded to float32) and
         object-space planes (``plane @ model``, likewise) are written once per call, before
@@ -443,7 +443,7 @@ class LlvmpipePeer:
             raise ValueError(f"view_proj must be (4, 4), got {vp.shape}")
         planes = None
         if clip_planes is not None:
-            from clraster.inputs import check_clip_planes
+            from clraster.base.checks import check_clip_planes
             planes = check_clip_planes(clip_planes)
         ctx, fbo = self.ctx, self.fbo
         with ctx:

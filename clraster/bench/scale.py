@@ -91,7 +91,7 @@ def grid_inside_camera(scene, dims: tuple[int, int, int], width: int, height: in
     bounds, the pitch ``(grid extent − mesh extent) / (n − 1)`` per axis (any spacing).
     """
     from clraster import Camera
-    from clraster.inputs import check_size
+    from clraster.base.checks import check_size
 
     check_size(width, height)
     lo, hi = (np.asarray(b, np.float64) for b in scene.bounds())

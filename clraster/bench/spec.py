@@ -167,7 +167,7 @@ class LoadedScene:
     def camera(self, width: int, height: int, view: str | None = None):
         """The camera of `view` (default the loading spec's view)."""
         from clraster import Camera
-        from clraster import scenes as sc
+        from clraster.world import generators as sc
 
         v = view or self.spec.view
         if self.spec.kind == "grid":
@@ -196,7 +196,7 @@ def _load_mesh(name: str, meshes: Path):
     import clraster
 
     if name == "example":
-        from clraster.examples import example_mesh
+        from clraster.world.examples import example_mesh
 
         return example_mesh(), "clraster.examples.example_mesh()"
     p = mesh_path(name, meshes)
@@ -208,7 +208,7 @@ def _load_mesh(name: str, meshes: Path):
 
 def load_scene(spec: SceneSpec, meshes: Path) -> LoadedScene:
     """Load or build `spec` (SceneMissing when its file is not there)."""
-    from clraster import scenes as sc
+    from clraster.world import generators as sc
 
     t0 = time.perf_counter()
     if spec.kind == "plant":

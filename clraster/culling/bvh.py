@@ -14,17 +14,17 @@ subtree, a node outside any plane is dropped with its subtree, a node inside eve
 makes all its items INSIDE without further tests, and a leaf that is still intersecting
 tests its items one by one. P is the number of plane rows, at most `MAX_PLANES` = 14: the 6
 frustum planes (masks 0..63, as `ALL_PLANES`) and up to 8 user clip planes appended after
-them (bits 6..13; :mod:`clraster.cull` passes them so that a node wholly on a user plane's
+them (bits 6..13; :mod:`clraster.culling.cull` passes them so that a node wholly on a user plane's
 removed side is culled in the same traversal). The traversal returns uint16 masks; inside,
 and from `check_mask` and the classifiers, a mask has the narrowest dtype for P planes
 (uint8 up to 8: the frustum's 6 cost what they always did).
 
-Plane classification (also used by :mod:`clraster.frustum` and :mod:`clraster.cull`): a
-plane is a row (a, b, c, d) whose value ``a·x + b·y + c·z + d`` is >= 0 inside. With a
-relative margin μ and a per-plane *scale* row s >= 0 (the magnitude of the terms the
-renderer adds up in float32 when it evaluates that plane; see
-:func:`clraster.frustum.frustum_plane_scales`), a volume with
-coordinate magnitudes <= m (per axis) is
+Plane classification (also used by :mod:`clraster.culling.frustum` and
+:mod:`clraster.culling.cull`): a plane is a row (a, b, c, d) whose value
+``a·x + b·y + c·z + d`` is >= 0 inside. With a relative margin μ and a per-plane *scale* row
+s >= 0 (the magnitude of the terms the renderer adds up in float32 when it evaluates that
+plane; see :func:`clraster.culling.frustum.frustum_plane_scales`), a volume with coordinate
+magnitudes <= m (per axis) is
 
 * inside plane k iff ``min over the volume of plane_k >= μ_in · (s_k[:3]·m + s_k[3])``,
 * outside plane k iff ``max over the volume of plane_k < −μ_out · (s_k[:3]·m + s_k[3])``,
@@ -32,7 +32,7 @@ coordinate magnitudes <= m (per axis) is
 so both answers hold with room to spare for float32 rounding in clip space. μ_in and μ_out
 are one float for every plane, or one per plane (float64 (P,)): user clip planes are
 evaluated in float64 by the vertex stage and take a much smaller margin than the frustum's
-(`clraster.cull.CLIP_PLANE_MARGIN`), with scale rows ``|plane|``. Boxes use the
+(`clraster.culling.cull.CLIP_PLANE_MARGIN`), with scale rows ``|plane|``. Boxes use the
 n-vertex / p-vertex (the corner that minimizes / maximizes the plane), spheres centre ± r·|n|.
 NaN bounds compare false both ways: they are never culled and never INSIDE.
 
@@ -40,7 +40,7 @@ Public API beyond the tree, for the frustum and draw-list code: the classificati
 primitives (`box_extremes`, `sphere_extremes`, `classify_extremes`, `dense_rows`,
 `dense_row_states`, `box_magnitudes`, and `plane_table` / `box_extremes_table` for one
 plane set per box), the argument checks they share (`check_planes`,
-`check_mask`; boxes: `clraster.inputs.check_boxes`) and two index helpers
+`check_mask`; boxes: `clraster.base.checks.check_boxes`) and two index helpers
 (`concat_ranges`, `argsort_distinct`).
 """
 
@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, ClassVar, cast
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_boxes
+from ..base.checks import check_boxes
 
 __all__ = [
     "ALL_PLANES", "BVH", "DEFAULT_MARGIN", "INSIDE", "INTERSECTING", "MAX_PLANES", "OUTSIDE",
@@ -75,13 +75,13 @@ class Visibility(IntEnum):
 #: The `Visibility` values as plain ints, for comparisons with uint8 state arrays.
 INSIDE, INTERSECTING, OUTSIDE = 0, 1, 2
 #: Default relative margin for INSIDE and OUTSIDE (see the module docstring and
-#: :mod:`clraster.frustum`): 1e-5 of the float32 term magnitude, about 170× float32's unit
+#: :mod:`clraster.culling.frustum`): 1e-5 of the float32 term magnitude, about 170× float32's unit
 #: roundoff and >10× the error of evaluating a plane through an object and a view matrix.
 DEFAULT_MARGIN = 1e-5
 #: Mask with all 6 frustum plane bits set (test every frustum plane).
 ALL_PLANES = np.uint8(63)
 #: Most plane rows one classification or traversal takes: the 6 frustum planes and up to 8
-#: user clip planes (`clraster.layout.USER_PLANES_MAX`); masks are then uint16.
+#: user clip planes (`clraster.base.layout.USER_PLANES_MAX`); masks are then uint16.
 MAX_PLANES = 14
 
 
@@ -517,7 +517,7 @@ class BVH:
 
         Args:
             planes: (P, 4) plane rows (>= 0 inside), 1 <= P <= `MAX_PLANES`: e.g. the 6 of
-                `clraster.frustum.frustum_planes`, then any user clip planes.
+                `clraster.culling.frustum.frustum_planes`, then any user clip planes.
             scales: (P, 4) margin scales (default ``abs(planes)``).
             mask: planes to test (bit k = plane k), 0..2**P − 1 (default all P; 63 for the
                 6 frustum planes).
@@ -531,7 +531,7 @@ class BVH:
             left out, the others are `Visibility.INSIDE` (every bit cleared) or
             `INTERSECTING` — and the masks uint16 (D,) if `return_mask`. Equal to
             classifying every item box on its own against the P planes (for the 6 frustum
-            planes :func:`clraster.frustum.classify_aabbs`; same margins), minus the
+            planes :func:`clraster.culling.frustum.classify_aabbs`; same margins), minus the
             OUTSIDE ones.
         """
         p, s = check_planes(planes, scales, batch=False, max_planes=MAX_PLANES)

@@ -2,7 +2,7 @@
 
 A :class:`ClusteredMesh` is the unit of object culling below the instance level: every
 cluster has an axis-aligned box, a bounding sphere and a normal cone, and the renderer draws
-lists of (instance, cluster) pairs (see :mod:`clraster.cull`).
+lists of (instance, cluster) pairs (see :mod:`clraster.culling.cull`).
 
 How a mesh is cut (:func:`clusterize`):
 
@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .mesh import Mesh
+from ..world.mesh import Mesh
 
 __all__ = ["CONE_NEVER", "CONE_ROWS", "ClusteredMesh", "clusterize", "clusters_of",
            "cone_backfacing", "cone_kernel", "cone_table"]

@@ -1,7 +1,7 @@
 """Object culling on the host: the draw list of (instance, cluster) pairs for one view.
 
 Step 1 of the pipeline (DESIGN.md): instances and clusters are classified against the six
-frustum planes of the view-projection matrix (:mod:`clraster.frustum`: planes, margins,
+frustum planes of the view-projection matrix (:mod:`clraster.culling.frustum`: planes, margins,
 eye), and clusters that face away are removed with their normal cones. The result is a
 :class:`DrawList` of (instance, cluster) pairs for the renderer.
 
@@ -23,12 +23,12 @@ three equivalent-in-spirit, all-conservative paths chosen by mesh size:
   cluster box) and tested against the world planes, all instances at once.
 
 Planes move to object space as rows times the object transform and boxes are never
-transformed (see :mod:`clraster.frustum`), so every path stays exact under any affine
+transformed (see :mod:`clraster.culling.frustum`), so every path stays exact under any affine
 transform; INSIDE and OUTSIDE use the float32 margins described there.
 
 User clip planes (``clip_planes``: ``render(clip_planes=)`` and a polygon window's
 reject-only planes) are appended to the six frustum planes as rows 6.. of every test
-above (`_ViewPlanes`; plane masks are then up to 14 bits, :mod:`clraster.bvh`): an instance
+above (`_ViewPlanes`; plane masks are then up to 14 bits, :mod:`clraster.culling.bvh`): an instance
 or cluster (or a BVH node) wholly on a plane's removed side is culled where the frustum's
 outside ones are, and counted with them as frustum-culled; one wholly on its kept side
 drops the plane's bit, so what lies below is not tested against it again. User planes are
@@ -51,6 +51,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from ..base.config import CULL_MODES
+from ..world.mesh import Mesh
+from ..world.scene import Scene
 from .bvh import (
     ALL_PLANES,
     BVH,
@@ -69,10 +72,7 @@ from .bvh import (
     plane_table,
 )
 from .clusters import ClusteredMesh, clusters_of, cone_kernel, cone_table
-from .config import CULL_MODES
 from .frustum import check_view_proj, eye_and_flip, normalize_planes, raw_planes
-from .mesh import Mesh
-from .scene import Scene
 
 __all__ = ["CLIP_PLANE_MARGIN", "COUNT_NAMES", "DEFAULT_CONE_MARGIN", "DrawList", "ViewCull",
            "build_draw_list"]
@@ -865,7 +865,7 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         scene: the scene; its clusters (`clusters_of`) and BVHs are built on first use and
             cached (per mesh, and per scene version).
         view_proj: (4, 4) world → clip matrix (OpenGL conventions, see
-            `clraster.frustum.frustum_planes`).
+            `clraster.culling.frustum.frustum_planes`).
         frustum: cull instances and clusters outside the view frustum (instance world
             boxes first, then each intersecting instance's clusters against the planes it
             still crosses; see the module docstring).
@@ -880,10 +880,10 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
         cull: the renderer's face culling mode: "back", "front" or "none".
         max_triangles, max_vertices: cluster limits (see `clusterize`).
         inside_margin, outside_margin: relative frustum margins (the module docstring of
-            :mod:`clraster.frustum`).
+            :mod:`clraster.culling.frustum`).
         cone_margin: radians, >= 0.
         keep_cone_culled: also return the cone-culled pairs (``DrawList.cone_culled``).
-        clip_planes: float64 (K, 4) world-space user clip planes (`inputs.check_clip_planes`;
+        clip_planes: float64 (K, 4) world-space user clip planes (`checks.check_clip_planes`;
             at most 8, with a window's reject-only planes) or None: instances and clusters
             whose box lies wholly outside one of them (by `CLIP_PLANE_MARGIN`; clusters in
             their instance's object space) are culled in the same traversals as the
@@ -908,7 +908,7 @@ class ViewCull:
     """One view's object culling of a scene, in steps: the instances are classified when
     it is made; then `all` gives the draw list of every (instance, cluster) pair
     (`build_draw_list`), `pairs` that of given pairs only (hierarchical occlusion culling,
-    `clraster.twophase`, tests just the clusters of the groups it could not prove hidden).
+    `clraster.pipeline.twophase`, tests just the clusters of the groups it could not prove hidden).
     Arguments as `build_draw_list`."""
 
     def __init__(self, scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = True,

@@ -25,8 +25,8 @@ import numpy.typing as npt
 from .clusters import clusters_of
 
 if TYPE_CHECKING:
-    from .mesh import Mesh
-    from .scene import Scene
+    from ..world.mesh import Mesh
+    from ..world.scene import Scene
 
 __all__ = ["ClusterFates", "Fate"]
 

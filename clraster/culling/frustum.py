@@ -1,10 +1,10 @@
 """Frustum math on the host: planes of a view-projection matrix, its eye, and the
 classification of spheres and boxes against six planes.
 
-Used by the draw-list builder (:mod:`clraster.cull`), the renderer (eye point) and the
+Used by the draw-list builder (:mod:`clraster.culling.cull`), the renderer (eye point) and the
 tests. Everything here is float64: NumPy, and plain Python floats for the eye's 3×4 minors
 (`eye_and_flip`, every frame); the box / sphere primitives it shares with the BVH live in
-:mod:`clraster.bvh`.
+:mod:`clraster.culling.bvh`.
 
 Frustum planes (Gribb & Hartmann, "Fast extraction of viewing frustum planes from the
 world-view-projection matrix", 2001): with rows r0..r3 of VP, a point p is inside iff
@@ -32,6 +32,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from ..base.checks import check_boxes, check_mat4
 from .bvh import (
     DEFAULT_MARGIN,
     Visibility,
@@ -42,7 +43,6 @@ from .bvh import (
     classify_extremes,
     sphere_extremes,
 )
-from .inputs import check_boxes, check_mat4
 
 __all__ = [
     "DEFAULT_MARGIN", "PLANE_NAMES", "Visibility", "check_view_proj", "classify_aabbs",

@@ -1,4 +1,6 @@
-"""Frame outputs and per-frame statistics (plain data; imports nothing above config)."""
+"""A rendered frame (`Frame`: its buffers, what was culled, and the outputs made from them on
+demand) and its per-stage counts (`FrameStats`). The outputs and their files are
+`clraster.outputs`, which this module's methods call."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .config import (
+from ..base.config import (
     ST_BACKFACE,
     ST_CLIPPED,
     ST_DEGENERATE,
@@ -19,10 +21,10 @@ from .config import (
     ST_RASTER,
     ST_TRIVIAL_REJECT,
 )
+from .outputs import FramePoints, distance, linear_depth, normals, points, write_output
 
 if TYPE_CHECKING:
-    from .fates import ClusterFates
-    from .outputs import FramePoints
+    from ..culling.fates import ClusterFates
 
 
 def status_counts(status: np.ndarray) -> np.ndarray:
@@ -239,8 +241,7 @@ class Frame:
         return ids[ids >= 0].astype(np.int32)
 
     # Outputs that need the camera or the geometry take them as arguments (the frame holds
-    # only its buffers); the work is in clraster.outputs, imported when asked for, since
-    # it sits above this module (meshes, scenes, shading, image files).
+    # only its buffers); the work is in clraster.outputs (meshes, scenes, shading, files).
 
     def linear_depth(self, camera: Any, target: Any = None) -> np.ndarray:
         """(H, W) float32 depth along the view axis in scene units (−z in eye space for a
@@ -253,8 +254,6 @@ class Frame:
                 float64) instead of the float32 window depth, whose metric error grows as
                 distance² · (far − near) / (far · near) (~1e-6 relative at moderate range).
         """
-        from .outputs import linear_depth
-
         return linear_depth(self, camera, target)
 
     def distance(self, camera: Any, target: Any = None) -> np.ndarray:
@@ -262,8 +261,6 @@ class Frame:
         (the ray through the pixel centre), scene units; inf on the background. For an
         orthographic camera, the depth from the image plane. `target` as in
         :meth:`linear_depth`."""
-        from .outputs import distance
-
         return distance(self, camera, target)
 
     def normals(self, target: Any, smooth: bool = False, space: str = "world",
@@ -279,16 +276,12 @@ class Frame:
             space: "world", or "camera" (OpenGL eye space: x right, y up, z towards the
                 viewer; needs `camera`).
         """
-        from .outputs import normals
-
         return normals(self, target, smooth=smooth, space=space, camera=camera)
 
     def points(self, target: Any) -> FramePoints:
         """The covered pixels as a point cloud: ``(points, ids, pixels)`` — (N, 3) float64
         world positions (barycentrics applied to the face's world-space vertices), (N,)
         int32 triangle ids, (N, 2) int32 pixel (x, y); row-major pixel order."""
-        from .outputs import points
-
         return points(self, target)
 
     def save(self, path: str | os.PathLike, what: str = "depth", **options: Any) -> Path:
@@ -296,6 +289,4 @@ class Frame:
         "shaded", "points") to exactly `path`, in the format its extension names (.png,
         .tif/.tiff, .exr, .npy, .npz, .ply): `clraster.outputs.write_output`, whose
         keyword options (``target``, ``camera``, ``depth_scale``...) pass through."""
-        from .outputs import write_output
-
         return write_output(path, self, what, **options)

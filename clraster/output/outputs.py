@@ -54,19 +54,18 @@ import io
 import os
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
+from ..world.inputs import as_target
+from ..world.mesh import Mesh
+from ..world.scene import Scene
 from .atomic import write_atomic
-from .mesh import Mesh
-from .scene import Scene
+from .shade import pixel_normals, shade
 
-if TYPE_CHECKING:
-    from .frame import Frame
-
-__all__ = ["FORMATS", "OUTPUTS", "FramePoints", "check_output_path", "distance",
-           "linear_depth", "normals", "points", "write_output"]
+__all__ = ["FORMATS", "OUTPUTS", "FrameBuffers", "FramePoints", "check_output_path",
+           "distance", "linear_depth", "normals", "points", "write_output"]
 
 #: What `write_output` can write.
 OUTPUTS = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "points")
@@ -83,6 +82,22 @@ FORMATS: dict[str, tuple[str, ...]] = {
 _NEEDS_CAMERA = ("linear_depth", "distance")
 _NEEDS_TARGET = ("normals", "shaded", "points")
 _U16_MAX = 65535
+
+
+class FrameBuffers(Protocol):
+    """What the outputs read of a frame: a `clraster.Frame` (whose `Frame.save`,
+    `Frame.points`... call this module), or anything with its buffers and depth convention."""
+
+    @property
+    def depth(self) -> np.ndarray: ...
+
+    @property
+    def triangle_id(self) -> np.ndarray: ...
+
+    @property
+    def reversed_z(self) -> bool: ...
+
+    def need_barycentrics(self) -> np.ndarray: ...
 
 
 class FramePoints(NamedTuple):
@@ -104,12 +119,10 @@ class FramePoints(NamedTuple):
 def _as_geometry(target: Any) -> Mesh | Scene:
     """`target` as the Mesh or Scene the renderer drew: trimesh objects through the same
     cached conversion as the renderer (`clraster.inputs.as_target`), so ids match."""
-    from .inputs import as_target
-
     return as_target(target)
 
 
-def _covered(frame: Frame, n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _covered(frame: FrameBuffers, n_faces: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(ys, xs, ids) of the covered pixels, row-major; ids checked against the target."""
     ids = np.asarray(frame.triangle_id)
     ys, xs = np.nonzero(ids >= 0)
@@ -120,7 +133,7 @@ def _covered(frame: Frame, n_faces: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return ys, xs, sel
 
 
-def points(frame: Frame, target: Any) -> FramePoints:
+def points(frame: FrameBuffers, target: Any) -> FramePoints:
     """World positions of the covered pixels (see `FramePoints`): each pixel's barycentrics
     (perspective-correct, relative to its face's own three vertices) applied to the face's
     world-space vertices in float64 (a Scene's instance transform applied first)."""
@@ -171,7 +184,7 @@ def _view_axis(view: np.ndarray) -> np.ndarray:
     return fwd / np.linalg.norm(fwd)
 
 
-def _metric(frame: Frame, camera: Any, target: Any, kind: str) -> np.ndarray:
+def _metric(frame: FrameBuffers, camera: Any, target: Any, kind: str) -> np.ndarray:
     """(H, W) float32 linear depth or distance (`kind`), inf on the background."""
     h, w = frame.triangle_id.shape
     view, proj, eye, ortho = _camera_frame(camera, w, h)
@@ -202,19 +215,19 @@ def _metric(frame: Frame, camera: Any, target: Any, kind: str) -> np.ndarray:
     return out
 
 
-def linear_depth(frame: Frame, camera: Any, target: Any = None) -> np.ndarray:
+def linear_depth(frame: FrameBuffers, camera: Any, target: Any = None) -> np.ndarray:
     """(H, W) float32 depth along the camera's view axis, in scene units (for a rigid view:
     −z in eye space); inf on the background. See `Frame.linear_depth`."""
     return _metric(frame, camera, target, "linear_depth")
 
 
-def distance(frame: Frame, camera: Any, target: Any = None) -> np.ndarray:
+def distance(frame: FrameBuffers, camera: Any, target: Any = None) -> np.ndarray:
     """(H, W) float32 distance from the eye to the visible surface along each pixel's ray,
     in scene units; inf on the background. See `Frame.distance`."""
     return _metric(frame, camera, target, "distance")
 
 
-def normals(frame: Frame, target: Any, smooth: bool = False, space: str = "world",
+def normals(frame: FrameBuffers, target: Any, smooth: bool = False, space: str = "world",
             camera: Any = None) -> np.ndarray:
     """(H, W, 3) float32 unit normals of the visible surface, zeros on the background.
 
@@ -229,8 +242,6 @@ def normals(frame: Frame, target: Any, smooth: bool = False, space: str = "world
     if space == "camera" and camera is None:
         raise ValueError("normals in camera space need the camera: "
                          "frame.normals(target, space='camera', camera=camera)")
-    from .shade import pixel_normals
-
     n = pixel_normals(frame, _as_geometry(target), smooth=smooth)
     if space == "world":
         return n
@@ -268,7 +279,7 @@ def check_output_path(path: str | os.PathLike, what: str, *, target: Any = None,
     return p
 
 
-def _image_array(frame: Frame, what: str, ext: str, *, target: Any, camera: Any,
+def _image_array(frame: FrameBuffers, what: str, ext: str, *, target: Any, camera: Any,
                  depth_scale: float, smooth: bool, space: str, shade_options: dict) -> Any:
     """The array (or FramePoints) to write for `what` in format `ext`."""
     if what == "points":
@@ -311,8 +322,6 @@ def _image_array(frame: Frame, what: str, ext: str, *, target: Any, camera: Any,
             rgb[~(np.asarray(frame.triangle_id) >= 0)] = 0
             return rgb
         return n
-    from .shade import shade  # "shaded"
-
     return shade(frame, target, **shade_options)
 
 
@@ -364,7 +373,7 @@ def _write_atomic(path: Path, data: bytes) -> None:
     write_atomic(path, data)
 
 
-def write_output(path: str | os.PathLike, frame: Frame, what: str, *, target: Any = None,
+def write_output(path: str | os.PathLike, frame: FrameBuffers, what: str, *, target: Any = None,
                  camera: Any = None, depth_scale: float = 1000.0, smooth: bool = False,
                  space: str = "world", **shade_options: Any) -> Path:
     """Write one output of `frame` to exactly `path`, in the format its extension names.

@@ -4,7 +4,7 @@
 shading, vertex colours and textures), so it applies equally to frames from the OpenCL
 renderer and from the NumPy reference. `render_shaded` renders and shades in one call, with
 optional supersampled anti-aliasing. Colour sources (vertex colours, textures, per-instance
-colours) and their conventions are in `clraster.textures`.
+colours) and their conventions are in `clraster.output.textures`.
 
 Normals. A face's normal is ``normalize((b − a) × (c − a))`` in its mesh's object space
 (`Mesh.face_normals`); smooth shading interpolates area-weighted vertex normals
@@ -30,9 +30,10 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_flag
-from .mesh import Mesh
-from .scene import Instance, Scene
+from ..base.checks import check_flag
+from ..world.inputs import as_target
+from ..world.mesh import Mesh
+from ..world.scene import Instance, Scene
 from .textures import (
     Texture,
     as_colors,
@@ -156,7 +157,7 @@ def _texture(value: Any, mesh: Mesh, what: str) -> Texture | None:
         except ValueError as exc:
             raise ValueError(f"{what}: {exc}") from None
     raise ValueError(f"{what} must be True, False, a (uv, image) or (uv, image, factor) "
-                     f"tuple or a clraster.textures.Texture, got {type(value).__name__}")
+                     f"tuple or a clraster.output.textures.Texture, got {type(value).__name__}")
 
 
 def _per_instance(value: Any, n: int, shared: bool, name: str, single: Callable[[Any], bool]
@@ -182,9 +183,7 @@ def _resolve(target: Any, colors: Any, texture: Any) -> _Resolved:
     # options say otherwise (None for clraster targets)
     sources: list[Any] = []
     if _trimesh_type(target, "Trimesh") or _trimesh_type(target, "Scene"):
-        from .inputs import as_target  # the renderers' conversion (cached): ids match
-
-        geometry = as_target(target)
+        geometry = as_target(target)   # the renderers' conversion (cached): ids match
         if isinstance(geometry, Mesh):
             sources = [target]
         else:
@@ -433,7 +432,7 @@ def shade(frame: _FrameLike, target: Any, *, smooth: bool = False, colors: Any =
     interpolated with the barycentrics, the texture sampled at the interpolated UVs times its
     factor, face colours (trimesh), the instance's colour — or a light blue-grey where none
     does. Colours are linear blends of the numbers given (no sRGB decoding); see
-    `clraster.textures` for the UV convention (v up, texel centres, repeat wrapping,
+    `clraster.output.textures` for the UV convention (v up, texel centres, repeat wrapping,
     bilinear).
 
     Args:
@@ -451,7 +450,8 @@ def shade(frame: _FrameLike, target: Any, *, smooth: bool = False, colors: Any =
             (array or None) per instance, or one array when all instances share one mesh.
         texture: True (a trimesh target's own base-colour texture, if any), False (none),
             ``(uv (N, 2), image (H, W, 3|4))`` or ``(uv, image, factor)``, or a
-            `clraster.textures.Texture` (e.g. from `clraster.textures.texture_from_trimesh`).
+            `clraster.output.textures.Texture` (e.g. from
+            `clraster.output.textures.texture_from_trimesh`).
             For a `Scene`: a list with one entry per instance, or one texture when all
             instances share one mesh.
         per_instance_colors: a colour per instance: an (I, 3|4) array (uint8 or float, as
@@ -539,8 +539,8 @@ def _scaled_window(window: Any, k: int) -> Any:
     """`window` (any `clraster.clip2d.as_polygon` form, in output pixels) in the pixels of
     the k× frame: every vertex times k, so the k × k samples of an output pixel are inside
     it exactly where their positions, in output pixels, are inside the window given."""
-    from .clip2d import Polygon2D, as_polygon
-    from .window import WINDOW_MAX_COORD
+    from ..clip.clip2d import Polygon2D, as_polygon
+    from ..clip.window import WINDOW_MAX_COORD
 
     what = "render_kwargs['window']"
     try:

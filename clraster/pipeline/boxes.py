@@ -2,7 +2,7 @@
 three-state answer (`Occlusion`) and the triangle geometry an exact occlusion query draws
 (`box_geometry`).
 
-This is a lower layer: `clraster.occlusion` and `clraster.stages` (OpenCL) and
+This is a lower layer: `clraster.occlusion` and `clraster.pipeline.stages` (OpenCL) and
 the NumPy twin (the reference package) all import it, and it imports neither, so the two sides never
 import each other.
 """
@@ -14,9 +14,9 @@ from enum import IntEnum
 
 import numpy as np
 
-from .config import CLUSTER_MAX, DRAW_DTYPE
-from .drawlist import FrameDraws, depth_rows
-from .layout import BOX_TRIS, OCC_OCCLUDED, OCC_VIEW_CULLED, OCC_VISIBLE
+from ..base.config import CLUSTER_MAX, DRAW_DTYPE
+from ..base.layout import BOX_TRIS, OCC_OCCLUDED, OCC_VIEW_CULLED, OCC_VISIBLE
+from .draws import FrameDraws, depth_rows
 
 __all__ = ["BOX_FACES", "CLUSTER_BOXES", "BoxGeometry", "Occlusion", "box_corners",
            "box_geometry", "box_mesh"]

@@ -41,7 +41,8 @@ import pyopencl as cl
 
 from .arraypool import page_aligned  # plain NumPy, imports nothing of clraster
 
-log = logging.getLogger(__name__)
+#: named by the module's public path (users' logging settings name it)
+log = logging.getLogger("clraster.device")
 
 _INSTALL_HINT = (
     "clraster needs an OpenCL CPU platform. `pip install pocl-binary-distribution` gives one "
@@ -130,23 +131,24 @@ class NoDeviceError(RuntimeError):
 
 
 def kernel_dir() -> Path:
-    """Directory holding the OpenCL sources (installed wheel: clraster/kernels)."""
-    here = Path(__file__).resolve().parent
-    for cand in (here / "kernels", here.parent / "kernels"):
+    """Directory holding the OpenCL sources (installed wheel: clraster/kernels; a checkout:
+    kernels/ beside the package)."""
+    package = Path(__file__).resolve().parent.parent   # clraster/ (this is pipeline/device.py)
+    for cand in (package / "kernels", package.parent / "kernels"):
         if (cand / "common.h").is_file():
             return cand
-    raise FileNotFoundError(f"OpenCL kernels not found next to {here}; reinstall clraster")
+    raise FileNotFoundError(f"OpenCL kernels not found next to {package}; reinstall clraster")
 
 
 @functools.cache
 def kernel_source(stage: str) -> str:
     """Source of ``kernels/<stage>.cl`` with ``#include "common.h"`` inlined, and in it the
-    constants and records generated from clraster/layout.py (`clraster.layout.inline_layout`).
+    constants and records generated from clraster/layout.py (`clraster.base.layout.inline_layout`).
 
     Inlining (rather than ``-I``) keeps every cache keyed on the full text, so an edited
     header can never be served from a stale binary.
     """
-    from .layout import inline_layout
+    from ..base.layout import inline_layout
 
     kdir = kernel_dir()
     text = (kdir / f"{stage}.cl").read_text()

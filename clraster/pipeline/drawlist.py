@@ -3,29 +3,30 @@
 `GeometryPool` is built once per scene (and cached by the renderer): every unique mesh's
 vertices and clusters concatenated. `instance_matrices` makes a view's per-instance
 matrices and `draw_records` turns (a subset of) a `cull.DrawList` into `Draw` records with
-each draw's place in this frame's vertex and triangle streams; `FramePlan` holds both for
-one frame. The OpenCL renderer uploads these arrays; the NumPy twin reads the very same
-ones.
+each draw's place in this frame's vertex and triangle streams (`draws.FrameDraws`);
+`FramePlan` holds both for one frame, `plan_frame` makes it. The OpenCL renderer uploads
+these arrays; the NumPy twin reads the very same ones.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from .clusters import clusters_of
-from .config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
-from .cull import ViewCull
-from .inputs import as_target, view_projection
-from .layout import DRAW_MIRRORED
-from .mesh import Mesh
-from .precision import check_depth_range
-from .scene import Scene
+from ..base.checks import CameraLike, view_projection
+from ..base.config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
+from ..base.layout import DRAW_MIRRORED
+from ..culling.clusters import clusters_of
+from ..culling.cull import ViewCull
+from ..world.mesh import Mesh
+from ..world.precision import check_depth_range
+from ..world.scene import Scene
+from .draws import FrameDraws, depth_rows
 
 if TYPE_CHECKING:
-    from .cull import DrawList
+    from ..culling.cull import DrawList
 
 
 @dataclass(frozen=True)
@@ -200,35 +201,6 @@ def _mesh_origin(mesh) -> np.ndarray:
     return np.where(ok & (origin != 0), origin, 0.0)
 
 
-@dataclass(frozen=True)
-class FrameDraws:
-    """This frame's draws. draws: DRAW_DTYPE (D,). n_verts / n_tris: sizes of the vertex and
-    triangle streams. mvps: float32 (I, 16) row-major view-projection · model per instance
-    (the vertex stage's: coverage). mvps64: the same float64 (I, 16) before rounding (the
-    vertex stage's double positions for setup's value planes and clipper,
-    kernels/vertex.cl). zrows: float64 (I, 4) per instance its w row minus its z row (the
-    reversed-Z depth numerator w − z, setup.cl ClipIn).
-    uplanes: float64 (I, K, 4) the frame's K user clip planes moved to each instance's
-    object space (world plane · model, so distances are evaluated from object-space
-    positions: common.h user_dist); K = 0 without clip planes. uclip: bit k set when plane k
-    clips triangles; the others (a polygon window's bounding planes) only reject triangles
-    and cull clusters wholly outside them, so they never move coverage."""
-
-    draws: np.ndarray
-    n_verts: int
-    n_tris: int
-    mvps: np.ndarray
-    mvps64: np.ndarray
-    zrows: np.ndarray
-    uplanes: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 4)))
-    uclip: int = 0
-
-    @property
-    def n_user(self) -> int:
-        """K, the number of user clip planes."""
-        return int(self.uplanes.shape[1])
-
-
 def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
                       clip_planes: np.ndarray | None = None, n_clipping: int | None = None
                       ) -> FrameDraws:
@@ -239,7 +211,7 @@ def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
     for both the device and the twin: a camera and an instance both ~1e6 from the world
     origin cancel there, in float64, before anything becomes float32 (camera-relative
     rendering). clip_planes: float64 (K, 4) world-space user clip planes
-    (`inputs.check_clip_planes`), moved to each instance's object space in float64
+    (`checks.check_clip_planes`), moved to each instance's object space in float64
     (`FrameDraws.uplanes`); the first ``n_clipping`` of them (default all) clip, the rest
     only reject and cull (`uclip`)."""
     mats = scene.transforms()   # memoized per scene version (5K instances: 6 ms to stack)
@@ -291,14 +263,6 @@ def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndar
         raise ValueError("a frame may draw at most 2**31 - 1 vertices and triangles")
     return FrameDraws(d, n_verts, n_tris, frame.mvps, frame.mvps64, frame.zrows,
                       frame.uplanes, frame.uclip)
-
-
-def depth_rows(m64: np.ndarray) -> np.ndarray:
-    """`FrameDraws.zrows` float64 (I, 4) of the float64 matrices m64 (I, 4, 4): w row − z
-    row, formed before anything is rounded (so w − z keeps its relative precision far
-    away, where it is a small difference of two rows near 1)."""
-    m64 = np.asarray(m64, np.float64).reshape(-1, 4, 4)
-    return np.ascontiguousarray(m64[:, 3, :] - m64[:, 2, :])
 
 
 def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -409,21 +373,18 @@ class PlanCache:
         return self._value[1], self._value[2]
 
 
-def plan_frame(target, camera, width: int, height: int, *, cull: str, frustum: bool,
-               cones: bool, cache: PlanCache, keep_cone_culled: bool = False,
-               clip_planes: np.ndarray | None = None,
+def plan_frame(target: Mesh | Scene, camera: CameraLike, width: int, height: int, *,
+               cull: str, frustum: bool, cones: bool, cache: PlanCache,
+               keep_cone_culled: bool = False, clip_planes: np.ndarray | None = None,
                cull_planes: np.ndarray | None = None) -> FramePlan:
-    """Cull ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene: converted once by
-    `inputs.as_target`, before the cache, so the cache keys on the converted object) for
+    """Cull ``target`` (a Mesh or a Scene; the cache keeps its scene and pool) for
     ``camera`` and lay out this frame's draws (``keep_cone_culled``: see
     `cull.build_draw_list`). ``clip_planes``: float64 (K, 4) world-space user clip planes
-    (checked, `inputs.check_clip_planes`) or None: clusters wholly outside one are culled
+    (checked, `checks.check_clip_planes`) or None: clusters wholly outside one are culled
     and the rest clipped. ``cull_planes``: float64 (K', 4) planes that only cull and reject
     (a polygon window's, `window.window_planes_for`), never clip."""
     vp = view_projection(camera, width, height)
-    # (as_target returns a Mesh or Scene as it is; skipping the call saves its imports)
-    scene, pool = cache.scene_and_pool(target if isinstance(target, (Mesh, Scene))
-                                       else as_target(target))
+    scene, pool = cache.scene_and_pool(target)
     check_depth_range(camera, width, height, scene)
     n_clipping = None if clip_planes is None else clip_planes.shape[0]
     if cull_planes is not None and cull_planes.shape[0]:

@@ -5,7 +5,7 @@ camera (conventions as everywhere in clraster: window depth (z/w + 1)/2 in [0, 1
 the clear value, depth test LESS, row 0 at the top, pixel (x, y) sampled at (x+0.5, y+0.5)):
 
 * **Hi-Z test** (conservative, cheap: one work-item per box against the depth pyramid,
-  `clraster.stages.pyramid`): `Occlusion` per box. OCCLUDED promises that nothing inside
+  `clraster.pipeline.stages.pyramid`): `Occlusion` per box. OCCLUDED promises that nothing inside
   the box can produce a sample that passes LESS against the depth buffer, so skipping it
   never changes an image; VISIBLE only means "could not prove otherwise".
 * **Exact query** (`query`): per box, the number of pixels at which its surface — its 12
@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-# the enum is shared with the NumPy twin, so it lives in the lower layer (clraster.boxes)
+# the enum is shared with the NumPy twin, so it lives in the lower layer (clraster.pipeline.boxes)
 from .boxes import Occlusion, box_geometry
 
 __all__ = ["Occlusion", "OcclusionQuery", "QueryResult", "query", "sphere_boxes"]
@@ -66,7 +66,7 @@ def sphere_boxes(centers: npt.ArrayLike, radii: npt.ArrayLike
 
 
 def _check_depth(depth: npt.ArrayLike) -> np.ndarray:
-    from .inputs import check_size
+    from ..base.checks import check_size
 
     d = np.asarray(depth)
     if d.dtype != np.float32 or d.ndim != 2:
@@ -78,7 +78,7 @@ def _check_depth(depth: npt.ArrayLike) -> np.ndarray:
 
 def _check_boxes(boxes_min: npt.ArrayLike, boxes_max: npt.ArrayLike
                  ) -> tuple[np.ndarray, np.ndarray]:
-    from .inputs import check_boxes
+    from ..base.checks import check_boxes
 
     lo, hi = check_boxes(boxes_min, boxes_max, np.float32, names=("boxes_min", "boxes_max"))
     if lo.shape[0] > (1 << 27) // 12:
@@ -101,7 +101,7 @@ class OcclusionQuery:
     def __init__(self, context=None, config=None) -> None:
         import pyopencl as cl
 
-        from .config import RasterConfig
+        from ..base.config import RasterConfig
         from .device import default_context
         from .stages.pyramid import PyramidStage
         from .stages.query import QueryStage
@@ -118,8 +118,8 @@ class OcclusionQuery:
         """See `query`."""
         import pyopencl as cl
 
+        from ..base.checks import mvp_matrix
         from .device import event_ms
-        from .inputs import mvp_matrix
 
         d = _check_depth(depth)
         lo, hi = _check_boxes(boxes_min, boxes_max)

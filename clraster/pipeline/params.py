@@ -3,7 +3,7 @@
 
 A frame may run the stage chain (geometry → vertex → setup → bin → raster) several times
 into the same frame buffers — the two phases of occlusion culling, and within each the
-bounded batches of a streamed frame (`clraster.streaming`) — so the per-frame parameters
+bounded batches of a streamed frame (`clraster.pipeline.streaming`) — so the per-frame parameters
 are built once and passed to every pass, and the counts and timings of the passes
 accumulate in one `FrameTotals`.
 """
@@ -14,8 +14,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import CULL_MODES, RasterConfig, guard_band_factors
-from .frame import FrameStats, status_counts
+from ..base.config import CULL_MODES, RasterConfig, guard_band_factors
+from ..output.frame import FrameStats, status_counts
+
+
+class BinBudgetExceeded(Exception):
+    """Raised by a pass whose bin list would hold more than its ``max_entries`` (binning's
+    count → scan step found ``entries``), before anything is drawn or added to the frame's
+    counts. ``events``: device events of the work already done (their times still count)."""
+
+    def __init__(self, entries: int, max_entries: int, events: list | None = None) -> None:
+        super().__init__(f"this pass needs {entries:,} bin entries, over its budget of "
+                         f"{max_entries:,}")
+        self.entries = int(entries)
+        self.events = list(events or [])
+        #: the events of the pass's work by stage (filled in by clraster.pipeline.stages.chain)
+        self.stage_events: dict[str, list] = {}
 
 
 @dataclass(frozen=True)

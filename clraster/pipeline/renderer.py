@@ -1,4 +1,6 @@
-"""The OpenCL renderer: cull → vertex → setup → bin → raster for one frame."""
+"""The OpenCL renderer: the device backend of the frame driver (`clraster.pipeline.driver`), and the
+public entrances that check a frame's options and convert its target once (`render`,
+`render_many`)."""
 
 from __future__ import annotations
 
@@ -6,34 +8,29 @@ import functools
 import inspect
 import os
 import threading
-import time
 from collections.abc import Iterable, Iterator, Sequence
 from typing import Any, cast
 
 import numpy as np
 import pyopencl as cl
 
-from .config import RasterConfig
+from ..base.checks import CameraLike, check_size
+from ..base.config import RasterConfig
+from ..output.frame import Frame
+from ..world.camera import Camera
+from ..world.inputs import Target, as_target
+from ..world.views import ViewError, frames
 from .device import check_process, default_context, event_ms
-from .drawlist import PlanCache, plan_frame
-from .fates import ClusterFates
-from .frame import Frame, FrameStats
-from .inputs import (
-    CameraLike,
-    Target,
-    check_clip_planes,
-    check_cull,
-    check_flag,
-    check_render_outputs,
-    check_size,
-)
-from .params import FrameParams, FrameTotals, finish_depth
+from .drawlist import GeometryPool, PlanCache
+from .draws import FrameDraws
+from .driver import FrameBuffers, FrameOptions, HiZ, check_options, render_frame
+from .params import FrameParams, FrameTotals
 from .stages.chain import StageChain
 from .stages.pyramid import Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
-from .streaming import stream_draws
-from .twophase import OcclusionHistory, two_phase
-from .window import window_mask, window_planes_for
+from .twophase import OcclusionHistory
+
+__all__ = ["Renderer", "check_render_kwargs", "check_render_options"]
 
 
 class Renderer:
@@ -50,7 +47,7 @@ class Renderer:
     batches bounded by ``config.batch_triangles`` (M) and ``config.batch_entries`` (E, bin
     entries and clipped pieces of a pass), all rasterized into the same frame buffers —
     the image and every count are those of one unbatched pass, whatever the budget
-    (`clraster.streaming`). So device memory is bounded by the budget and the image,
+    (`clraster.pipeline.streaming`). So device memory is bounded by the budget and the image,
     never by the scene's triangle count::
 
         frame arrays   24·W·H bytes (depth, ids, barycentrics, overdraw; the caller's
@@ -91,8 +88,8 @@ class Renderer:
             self.context, properties=cl.command_queue_properties.PROFILING_ENABLE)
         self.chain = StageChain(self.context, self.config)
         self.pyramid = PyramidStage(self.context, self.config)
-        self._plans = PlanCache()
-        self._occlusion = OcclusionHistory()   # two-phase occlusion culling's memory
+        self._plans = PlanCache()   # the last target's scene and geometry pool
+        self._history = OcclusionHistory()   # two-phase occlusion culling's memory
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
@@ -157,17 +154,14 @@ class Renderer:
             (`Scene.split_ids` splits them). Triangles with a NaN/Inf vertex are dropped
             and counted in ``stats.invalid``.
         """
-        planes, mask, bary = _check_options(
-            self.width, self.height, cull, clip_planes, window, outputs,
-            {"frustum": frustum, "cones": cones, "occlusion": occlusion,
-             "overdraw": overdraw, "fates": fates, "reversed_z": reversed_z})
-        cull_planes = None
-        if window is not None:   # planes that cut the work outside the window's mask
-            cull_planes = window_planes_for(window, camera, self.width, self.height, planes)
+        options = FrameOptions.make(
+            self.width, self.height, camera, cull=cull, frustum=frustum, cones=cones,
+            occlusion=occlusion, overdraw=overdraw, fates=fates, reversed_z=reversed_z,
+            clip_planes=clip_planes, window=window, outputs=outputs)
+        target = as_target(target)
         check_process(self._pid)
         with self._lock:
-            return self._render(target, camera, cull, frustum, cones, occlusion, overdraw,
-                                fates, bary, reversed_z, planes, mask, cull_planes)
+            return render_frame(self, target, camera, options)
 
     def render_many(self, target: Target, cameras: Iterable[Any] | str | os.PathLike,
                     **render_kwargs: Any) -> Iterator[Frame]:
@@ -188,68 +182,43 @@ class Renderer:
         `clraster.views.ViewError` naming its index (and field) when the generator reaches
         it; `clraster.batch.render_views` instead fails that view and goes on.
         """
-        from .views import render_many
+        check_render_kwargs(self, render_kwargs)
+        target = as_target(target)   # once, for every view
+        if isinstance(cameras, (dict, Camera)):
+            raise ValueError("cameras must be a list of cameras (or a camera list file), got "
+                             f"one {type(cameras).__name__}; wrap it in a list")
 
-        return render_many(self, target, cameras, **render_kwargs)
+        def gen() -> Iterator[Frame]:
+            for _, item in frames(self, target, cameras, render_kwargs):
+                if isinstance(item, ViewError):
+                    raise item
+                yield item
 
-    def _render(self, target: Target, camera: CameraLike, cull: str, frustum: bool,
-                cones: bool, occlusion: bool, overdraw: bool, fates: bool,
-                bary: bool = True, reversed_z: bool = False,
-                clip_planes: np.ndarray | None = None,
-                window: np.ndarray | None = None,
-                cull_planes: np.ndarray | None = None) -> Frame:
-        w, h = self.width, self.height
-        t0 = time.perf_counter()
-        plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans, keep_cone_culled=fates, clip_planes=clip_planes,
-                          cull_planes=cull_planes)
-        # the draw records: all of them now, or, with occlusion culling, those of each
-        # phase when it is drawn (two_phase, which also culls the clusters: it may test
-        # only some of them, hierarchically)
-        fd = plan.frame if not occlusion else None
-        t_cull = (time.perf_counter() - t0) * 1e3
-        counts = dict(plan.draw_list.counts) if not occlusion else {}
-        params = FrameParams.make(w, h, self.config, cull, reversed_z, window)
-        if not occlusion and plan.empty:
-            # nothing in view: the cleared frame, cleared on the device
-            out = cast(RasterStage, self.chain.raster).clear(self.queue, params, overdraw, bary)
-            return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
-                         FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                         overdraw=out.overdraw,
-                         fates=ClusterFates.from_plan(plan) if fates else None,
-                         reversed_z=reversed_z)
-        totals = FrameTotals(timings_ms={"cull (host)": t_cull})
-        occluded = None
-        config = self.config
+        return gen()
 
-        def one_pass(batch, max_entries: int | None, into: RasterOutput | None
-                     ) -> RasterOutput:
-            return self.chain.draw(self.queue, plan.pool, batch, params, totals, into=into,
-                                   overdraw=overdraw, max_entries=max_entries, bary=bary)
+    # -- the backend of `render_frame` ---------------------------------------------------
 
-        def draw(draws, into: RasterOutput | None) -> RasterOutput:
-            # a frame (or an occlusion phase) as a stream of bounded passes
-            return stream_draws(draws, config.batch_triangles, config.batch_entries,
-                                one_pass, into)
+    def _clear(self, params: FrameParams, options: FrameOptions) -> RasterOutput:
+        # cleared on the device
+        return cast(RasterStage, self.chain.raster).clear(self.queue, params,
+                                                         options.overdraw, options.bary)
 
-        try:
-            if fd is not None:
-                out = draw(fd, None)
-            else:
-                self._pyramid = None
-                res = two_phase(plan, self._occlusion, draw,
-                                functools.partial(self._hiz, zoff=params.zoff), totals, counts,
-                                group_clusters=config.occlusion_groups)
-                out = res.out
-                # (listed only for fates: the hierarchical schedule counts hidden groups
-                # without listing their clusters)
-                occluded = res.occluded_keys if fates else None
-        finally:
-            self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
-        return Frame(finish_depth(out.depth, out.ids, reversed_z), out.ids, out.bary,
-                     totals.stats(counts), overdraw=out.overdraw,
-                     fates=ClusterFates.from_plan(plan, occluded) if fates else None,
-                     reversed_z=reversed_z)
+    def _draw_pass(self, pool: GeometryPool, draws: FrameDraws, params: FrameParams,
+                   totals: FrameTotals, into: RasterOutput | None, max_entries: int | None,
+                   options: FrameOptions) -> RasterOutput:
+        return self.chain.draw(self.queue, pool, draws, params, totals, into=into,
+                               overdraw=options.overdraw, max_entries=max_entries,
+                               bary=options.bary)
+
+    def _hiz_step(self, params: FrameParams) -> HiZ:
+        self._pyramid = None
+        return functools.partial(self._hiz, zoff=params.zoff)
+
+    def _buffers(self, out: RasterOutput) -> FrameBuffers:
+        return out.depth, out.ids, out.bary, out.overdraw
+
+    def _end_frame(self) -> None:
+        self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
 
     def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
              same_depth: bool = False) -> tuple[np.ndarray, float]:
@@ -269,20 +238,6 @@ class Renderer:
         return verdict, event_ms([*events, ev] if ev else events)
 
 
-def _check_options(width: int, height: int, cull: Any, clip_planes: Any, window: Any,
-                   outputs: Any, flags: dict[str, Any]
-                   ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
-    """The checks `Renderer.render` makes on its options' values, whatever the camera:
-    (clip planes float64 (K, 4) or None, window mask bool (height, width) or None, whether
-    barycentrics are made). ValueError naming the option otherwise."""
-    check_cull(cull)
-    planes = check_clip_planes(clip_planes)
-    mask = None if window is None else window_mask(window, width, height)
-    for name, value in flags.items():
-        check_flag(value, name)
-    return planes, mask, check_render_outputs(outputs)
-
-
 def check_render_options(width: int, height: int, options: dict[str, Any]) -> None:
     """Check ``options`` (`Renderer.render`'s keywords, e.g. ``{"cull": "none"}``) once, as
     `Renderer.render` would for a ``width`` × ``height`` image, so that a batch of views
@@ -299,7 +254,19 @@ def check_render_options(width: int, height: int, options: dict[str, Any]) -> No
     a = bound.arguments
     # the yes/no options are those whose default is a bool (a new one is checked too)
     flags = {name: a[name] for name, p in sig.parameters.items() if isinstance(p.default, bool)}
-    _check_options(width, height, a["cull"], a["clip_planes"], a["window"], a["outputs"], flags)
+    check_options(width, height, a["cull"], a["clip_planes"], a["window"], a["outputs"], flags)
+
+
+def check_render_kwargs(renderer: Any, render_kwargs: dict) -> None:
+    """TypeError now (not at the first view) for keywords ``renderer.render`` does not take,
+    and ValueError for values it would refuse on every view (``cull="sideways"``, a clip
+    plane with a zero normal, ``reversed_z="yes"``...: `check_render_options`, the
+    renderer's own checks, for ``renderer``'s width × height)."""
+    try:
+        inspect.signature(renderer.render).bind(None, None, **render_kwargs)
+    except TypeError as exc:
+        raise TypeError(f"render_many: {exc}") from None
+    check_render_options(renderer.width, renderer.height, render_kwargs)
 
 
 def _check_frame_fits(dev: cl.Device, width: int, height: int, config: RasterConfig) -> None:

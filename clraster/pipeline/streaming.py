@@ -1,6 +1,6 @@
 """Streamed frames: a frame's draws cut into bounded batches, each run through the stage chain
-into the same frame buffers. Shared by the OpenCL renderer and the NumPy twin (plain NumPy;
-imports only the draw layout).
+into the same frame buffers. Shared by the OpenCL renderer and the NumPy twin (plain NumPy over
+the draw records and the passes' parameters).
 
 Why the image cannot depend on where the batches are cut: the batches are consecutive runs
 of the frame's draws in draw order, so every tile still sees its pieces in submission order;
@@ -25,23 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from .drawlist import FrameDraws
+from .draws import FrameDraws
+from .params import BinBudgetExceeded
 
-__all__ = ["BinBudgetExceeded", "PassDraw", "draw_range", "stream_draws"]
-
-
-class BinBudgetExceeded(Exception):
-    """Raised by a pass whose bin list would hold more than its ``max_entries`` (binning's
-    count → scan step found ``entries``), before anything is drawn or added to the frame's
-    counts. ``events``: device events of the work already done (their times still count)."""
-
-    def __init__(self, entries: int, max_entries: int, events: list | None = None) -> None:
-        super().__init__(f"this pass needs {entries:,} bin entries, over its budget of "
-                         f"{max_entries:,}")
-        self.entries = int(entries)
-        self.events = list(events or [])
-        #: the events of the pass's work by stage (filled in by clraster.stages.chain)
-        self.stage_events: dict[str, list] = {}
+__all__ = ["PassDraw", "draw_range", "stream_draws"]
 
 
 #: pass_draw(batch, max_entries, into) → the frame buffers with ``batch`` drawn into

@@ -43,11 +43,12 @@ from typing import Any, Protocol, cast
 
 import numpy as np
 
+from ..culling.bvh import OUTSIDE, concat_ranges
+from ..culling.cull import DrawList
+from ..culling.frustum import eye_from_view_proj
 from .boxes import Occlusion
-from .bvh import OUTSIDE, concat_ranges
-from .cull import DrawList
-from .drawlist import FrameDraws, FramePlan, key_boxes
-from .frustum import eye_from_view_proj
+from .drawlist import FramePlan, key_boxes
+from .draws import FrameDraws
 from .params import FrameTotals
 
 __all__ = ["OCCLUSION_FIRST_CLUSTERS", "KeyGroups", "OcclusionHistory", "TwoPhaseResult",

@@ -49,25 +49,20 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 
-from .atomic import stale_temporary, write_atomic
-from .inputs import check_flag
-from .views import (
-    BrokenCamera,
-    ViewError,
-    camera_from_entry,
-    check_render_kwargs,
-    check_target,
-    frames,
-)
+from ..base.checks import check_flag
+from ..output.atomic import stale_temporary, write_atomic
+from ..world.inputs import as_target
+from ..world.views import BrokenCamera, ViewError, camera_from_entry, frames
 
 if TYPE_CHECKING:
-    from .frame import Frame
-    from .renderer import Renderer
+    from ..output.frame import Frame
+    from ..pipeline.renderer import Renderer
 
 __all__ = ["MANIFEST_FILE", "OUTPUTS", "OutDirMismatchError", "RenderSummary", "ViewFailure",
            "render_views", "view_files"]
 
-log = logging.getLogger(__name__)
+#: named by the module's public path (users' logging settings name it)
+log = logging.getLogger("clraster.batch")
 
 #: output name → file suffix
 OUTPUTS = {"depth": ".npy", "ids": ".npy", "bary": ".npy", "shaded": ".png"}
@@ -187,11 +182,11 @@ def run_settings(width: int, height: int, render_kwargs: dict[str, Any]) -> dict
     """What `MANIFEST_FILE` records for a run (JSON data): ``size`` [width, height] and every
     `Renderer.render` option but `IMAGE_NEUTRAL` ones, defaults filled in (``cull="back"``
     given or left out records the same). ``render_kwargs`` must have passed
-    `clraster.views.check_render_kwargs`."""
+    `clraster.renderer.check_render_kwargs`."""
     import inspect
 
-    from .inputs import check_clip_planes
-    from .renderer import Renderer
+    from ..base.checks import check_clip_planes
+    from ..pipeline.renderer import Renderer
 
     bound = inspect.signature(Renderer.render).bind(None, None, None, **render_kwargs)
     bound.apply_defaults()
@@ -199,7 +194,7 @@ def run_settings(width: int, height: int, render_kwargs: dict[str, Any]) -> dict
     if "clip_planes" in options:   # None, [] and a (4,) plane as render reads them
         options["clip_planes"] = check_clip_planes(options["clip_planes"])
     if options.get("window") is not None:   # any accepted form: its normalised rings
-        from .clip2d import as_polygon
+        from ..clip.clip2d import as_polygon
 
         poly = as_polygon(options["window"])
         options["window"] = {"exterior": poly.exterior, "holes": list(poly.holes)}
@@ -298,7 +293,7 @@ def remove_temporaries(out_dir: str | os.PathLike, *, any_writer: bool = False) 
     naming pattern only, never another file): those of processes of this machine that are
     gone, or with ``any_writer`` (no writer of the folder left anywhere: the end of a Dask
     run) all of them. Returns how many were deleted."""
-    from .atomic import pid_alive
+    from ..output.atomic import pid_alive
 
     gone = 0
     for p in Path(out_dir).iterdir():
@@ -323,7 +318,7 @@ def _write_view(files: dict[str, Path], frame: Frame, target: Any) -> None:
         if name == "shaded":
             from PIL import Image
 
-            from .shade import shade
+            from ..output.shade import shade
 
             image = shade(frame, target)
             _write_atomic(path, lambda fh, im=image: Image.fromarray(im).save(fh, "PNG"))
@@ -401,10 +396,10 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             camera list file that is not a list of entries. Errors writing files (OSError)
             stop the batch.
     """
-    from .renderer import Renderer
+    from ..pipeline.renderer import Renderer, check_render_kwargs
 
     outs = check_outputs(outputs)
-    check_target(target)
+    geometry = as_target(target)   # rendered; ``target`` itself is shaded (its colours)
     if isinstance(start, bool) or not isinstance(start, int) or start < 0:
         raise ValueError(f"start must be an integer >= 0, got {start!r}")
     if renderer is None:
@@ -428,7 +423,7 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         # clraster.distributed.render_views deletes them all once its tasks are done
         remove_temporaries(out)
     if isinstance(cameras, (str, os.PathLike)):
-        from .views import load_cameras
+        from ..world.views import load_cameras
 
         cameras = load_cameras(cameras, strict=False, size=(renderer.width, renderer.height))
     cams = cameras if isinstance(cameras, Sequence) else list(cameras)
@@ -453,7 +448,7 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             skipped += 1
         else:
             todo.append((k, cam, key, old))
-    for done, (k, item) in enumerate(frames(renderer, target, [t[1] for t in todo],
+    for done, (k, item) in enumerate(frames(renderer, geometry, [t[1] for t in todo],
                                             render_kwargs), start=skipped + 1):
         _, _, key, old = todo[k]
         index = start + todo[k][0]

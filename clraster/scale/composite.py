@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from .frame import Frame, FrameStats
+from ..output.frame import Frame, FrameStats
 
 __all__ = ["Crop", "composite", "composite_crops", "composite_into", "composite_tree", "crop",
            "merge_stats", "uncrop"]

@@ -53,13 +53,13 @@ from typing import Any, cast
 
 import numpy as np
 
+from ..base.config import RasterConfig
+from ..output.frame import Frame
+from ..pipeline.device import POCL_THREAD_VARS  # re-exported: the worker environment's variables
+from ..world.mesh import Mesh
+from ..world.scene import Scene
 from .batch import RenderSummary, ViewFailure
 from .composite import Crop, composite_crops, crop, uncrop
-from .config import RasterConfig
-from .device import POCL_THREAD_VARS  # re-exported: the worker environment's variables
-from .frame import Frame
-from .mesh import Mesh
-from .scene import Scene
 
 __all__ = ["POCL_THREAD_VARS", "WORKER_WAIT_S", "ChunkRecord", "NoWorkersError", "Part",
            "ScatteredParts", "SortLastFutures", "ViewsSummary", "WorkerRate", "kd_split",
@@ -67,7 +67,8 @@ __all__ = ["POCL_THREAD_VARS", "WORKER_WAIT_S", "ChunkRecord", "NoWorkersError",
            "render_views", "require_workers", "scatter_parts", "submit_sort_last",
            "usable_cores", "worker_info", "worker_renderer", "worker_target"]
 
-log = logging.getLogger(__name__)
+#: named by the module's public path (users' logging settings name it)
+log = logging.getLogger("clraster.distributed")
 
 
 # -- client helpers --------------------------------------------------------------------------
@@ -189,7 +190,7 @@ def worker_renderer(width: int, height: int, config: RasterConfig | None = None)
     Run it inside the worker (in a task): the Renderer holds an OpenCL context and device
     buffers, which are neither picklable nor valid in another process. It lives as long as
     the process, so its programs, buffers and plan cache serve every later task."""
-    from .renderer import Renderer
+    from ..pipeline.renderer import Renderer
 
     key = (int(width), int(height), config or RasterConfig())
     with _STATE_LOCK:
@@ -234,7 +235,7 @@ def worker_info() -> dict[str, Any]:
     with ``client.run(worker_info)`` to check a cluster's set-up."""
     info: dict[str, Any] = {"pid": os.getpid(),
                             **{k: os.environ.get(k) for k in POCL_THREAD_VARS}}
-    from .device import default_context
+    from ..pipeline.device import default_context
 
     dev = default_context().devices[0]
     info["device"] = dev.name
@@ -330,7 +331,7 @@ def _sub_mesh(mesh: Mesh, faces: np.ndarray) -> Mesh:
 def partition(target: Mesh | Scene, parts: int) -> list[Part]:
     """Split ``target`` spatially into ``parts`` `Part` objects for sort-last rendering.
 
-    The unit is a (instance, cluster) pair (clusters from `clraster.clusters.clusters_of`,
+    The unit is a (instance, cluster) pair (clusters from `clraster.culling.clusters.clusters_of`,
     the renderer's own): their world boxes (`drawlist.key_boxes`) give centres, which a
     `kd_split` weighted by triangle counts divides into ``parts`` groups of about equal
     work and compact extent (so each part covers a small piece of the screen, and occlusion
@@ -347,8 +348,8 @@ def partition(target: Mesh | Scene, parts: int) -> list[Part]:
     instance's matrix and the image size. Deterministic: the same scene gives the same
     parts in every process.
     """
-    from .clusters import clusters_of
-    from .drawlist import GeometryPool, key_boxes
+    from ..culling.clusters import clusters_of
+    from ..pipeline.drawlist import GeometryPool, key_boxes
 
     if not isinstance(parts, int) or isinstance(parts, bool) or parts < 1:
         raise ValueError(f"parts must be a positive integer, got {parts!r}")
@@ -485,7 +486,7 @@ def submit_sort_last(target, camera, client, *, parts: int | None = None, width:
                      height: int, config: RasterConfig | None = None,
                      **render_kwargs: Any) -> SortLastFutures:
     """Submit a sort-last frame to ``client`` without waiting; see `render_sort_last`."""
-    from .inputs import check_size
+    from ..base.checks import check_size
 
     width, height = check_size(width, height)
     bad = set(render_kwargs) - set(_RENDER_KWARGS)
@@ -767,11 +768,11 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     from dask.distributed import as_completed, wait
     from dask.distributed import progress as dask_progress
 
+    from ..base.checks import check_flag, check_size
+    from ..pipeline.renderer import Renderer, check_render_kwargs
+    from ..world.camera import Camera
+    from ..world.views import check_target, load_cameras
     from .batch import FAILURES_FILE, check_outputs, run_settings
-    from .camera import Camera
-    from .inputs import check_flag, check_size
-    from .renderer import Renderer
-    from .views import check_render_kwargs, check_target, load_cameras
 
     outs = check_outputs(outputs)
     width, height = check_size(*size)

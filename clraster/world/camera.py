@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_mat4, check_size
+from ..base.checks import check_mat4, check_size
 
 __all__ = ["Camera", "CameraArgumentError", "intrinsics_projection", "look_at_matrix",
            "perspective_matrix", "projection_fault"]

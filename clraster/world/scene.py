@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from .inputs import check_mat4
+from ..base.checks import check_mat4
 from .mesh import Mesh
 
 if TYPE_CHECKING:
@@ -42,7 +42,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Instance", "Scene", "SceneWarning"]
 
-log = logging.getLogger(__name__)
+#: named by the module's public path (users' logging settings name it)
+log = logging.getLogger("clraster.scene")
 
 #: Largest condition number (2-norm, linear 3×3 part) accepted for a transform. Beyond it the
 #: matrix is numerically singular for float32 rendering.

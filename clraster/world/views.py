@@ -1,4 +1,5 @@
-"""Many views of one scene: camera lists (Python or a JSON file) and `render_many`'s engine.
+"""Many views of one scene: camera lists (Python or a JSON file), and `frames`, the loop that
+renders a target from each (the engine of `Renderer.render_many` and `clraster.batch`).
 
 Camera list file (JSON, UTF-8): either a bare list of entries or an object
 ``{"cameras": [entry, ...]}``. Each entry is one of two kinds:
@@ -32,7 +33,7 @@ Camera list file (JSON, UTF-8): either a bare list of entries or an object
 
 An optional ``"name"`` (a string) is allowed in any kind and ignored by the renderer.
 
-`load_cameras` also reads the camera files of other tools (`clraster.camera_files`): a
+`load_cameras` also reads the camera files of other tools (`clraster.world.camera_files`): a
 COLMAP text model (a folder), a NeRF / instant-ngp ``transforms.json`` (a JSON object with
 ``"frames"``) and an ``.npz`` with ``K`` and ``poses``.
 Any other key is an error (a misspelt ``"fovy"`` must not silently become the default).
@@ -49,32 +50,43 @@ any object with ``view_projection(width, height)`` (as `Renderer.render` accepts
 
 from __future__ import annotations
 
-import inspect
 import json
 import math
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
 from .camera import CONVENTIONS, Camera, projection_fault
 from .camera_files import CameraFileError, nerf_cameras, read_colmap, read_npz
+from .inputs import as_target
 
-if TYPE_CHECKING:
-    from .frame import Frame
-    from .renderer import Renderer
+__all__ = ["BrokenCamera", "CameraFileError", "ViewError", "ViewRenderer", "camera_from_entry",
+           "frames", "iter_cameras", "load_cameras"]
 
-__all__ = ["BrokenCamera", "CameraFileError", "ViewError", "camera_from_entry",
-           "iter_cameras", "load_cameras", "render_many"]
+F = TypeVar("F", covariant=True)
 
 _LOOK_AT_KEYS = ("eye", "target", "up", "fov_y", "near", "far")
 _MATRIX_KEYS = ("view", "projection")
 _INTRINSICS_KEYS = ("K", "pose", "convention", "near", "far", "width", "height")
 _LOOK_AT_DEFAULTS: dict[str, Any] = {"up": (0.0, 1.0, 0.0), "fov_y": 45.0, "near": 0.1,
                                      "far": 100.0}
+
+
+class ViewRenderer(Protocol[F]):
+    """What `frames` renders with: a `clraster.Renderer` (frames of type F = `Frame`), or any
+    object with an image size and a ``render(target, camera, **render_kwargs)``."""
+
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
+
+    def render(self, *args: Any, **kwargs: Any) -> F: ...
 
 
 class ViewError(ValueError):
@@ -313,7 +325,7 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True,
     """Read a camera file: a camera list (JSON, the module docstring's format), a COLMAP
     text model (a folder with cameras.txt and images.txt, or sparse/0 below it), a NeRF /
     instant-ngp ``transforms.json`` (a JSON object with ``"frames"``) or an ``.npz`` with
-    ``K`` and ``poses`` (`clraster.camera_files` has each format's conventions).
+    ``K`` and ``poses`` (`clraster.world.camera_files` has each format's conventions).
 
     Args:
         strict: raise `ViewError` (naming the entry's index and field) for the first broken
@@ -321,7 +333,7 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True,
             (The other formats are read whole or refused.)
         size: (width, height) rendered at: for intrinsics entries and files without a size
             of their own. Cameras of a file with a size are tied to it (`Camera.image_size`;
-            `clraster.camera_files.common_size`).
+            `clraster.world.camera_files.common_size`).
         near, far: clip planes for the formats that carry none (COLMAP, NeRF, an .npz
             without them); refused for a camera list, whose entries carry their own.
         drop_distortion: render the pinhole part of a COLMAP / NeRF camera with lens
@@ -386,31 +398,16 @@ def load_cameras(path: str | os.PathLike, *, strict: bool = True,
     return out
 
 
-def check_render_kwargs(renderer: Renderer, render_kwargs: dict) -> None:
-    """TypeError now (not at the first view) for keywords `Renderer.render` does not take,
-    and ValueError for values it would refuse on every view (``cull="sideways"``, a clip
-    plane with a zero normal, ``reversed_z="yes"``...: `clraster.renderer.
-    check_render_options`, the renderer's own checks, for ``renderer``'s width × height)."""
-    from .renderer import check_render_options
-
-    try:
-        inspect.signature(renderer.render).bind(None, None, **render_kwargs)
-    except TypeError as exc:
-        raise TypeError(f"render_many: {exc}") from None
-    check_render_options(renderer.width, renderer.height, render_kwargs)
-
-
 def check_target(target: Any) -> None:
     """ValueError now, not once per view, unless ``target`` is a Mesh or a Scene (or a
     trimesh Trimesh or Scene, converted here once: `clraster.inputs.as_target` keeps the
     conversion for the views)."""
-    from .inputs import as_target
-
     as_target(target)
 
 
-def frames(renderer: Renderer, target: Any, cameras: Iterable[Any] | str | os.PathLike,
-           render_kwargs: dict) -> Iterator[tuple[int, Frame | ViewError]]:
+def frames(renderer: ViewRenderer[F], target: Any,
+           cameras: Iterable[Any] | str | os.PathLike,
+           render_kwargs: dict) -> Iterator[tuple[int, F | ViewError]]:
     """(index, frame) per camera in order, or (index, `ViewError`) for a view that failed:
     a broken camera, or a camera `Renderer.render` refuses (ValueError: e.g. a matrix that
     overflows float32). Other exceptions propagate.
@@ -435,22 +432,3 @@ def frames(renderer: Renderer, target: Any, cameras: Iterable[Any] | str | os.Pa
             yield index, err
             continue
         yield index, frame
-
-
-def render_many(renderer: Renderer, target: Any,
-                cameras: Iterable[Any] | str | os.PathLike, **render_kwargs: Any
-                ) -> Iterator[Frame]:
-    """`Renderer.render_many`: see its docstring."""
-    check_render_kwargs(renderer, render_kwargs)
-    check_target(target)
-    if isinstance(cameras, (dict, Camera)):
-        raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
-                         f"{type(cameras).__name__}; wrap it in a list")
-
-    def gen() -> Iterator[Frame]:
-        for _, item in frames(renderer, target, cameras, render_kwargs):
-            if isinstance(item, ViewError):
-                raise item
-            yield item
-
-    return gen()

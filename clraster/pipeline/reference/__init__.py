@@ -7,10 +7,11 @@ same triangle ids and depths. It is the test oracle and the benchmark baseline, 
 throughout (no per-pixel Python loops).
 
 `render` draws one frame; `Renderer` keeps what the OpenCL `clraster.Renderer` keeps between
-frames (the scene of a bare Mesh, the occlusion-culling history), so with ``occlusion=True``
-a sequence of frames follows the same two-phase schedule (`clraster.twophase`) as the OpenCL
-path. The twin imports only the lower layers (config, layout, drawlist, boxes, params,
-twophase...), never the OpenCL side.
+frames (the scene of a bare Mesh, the occlusion-culling history). Both are backends of the one
+frame driver (`clraster.pipeline.driver.render_frame`), so with ``occlusion=True`` a sequence
+of frames follows the same two-phase schedule (`clraster.pipeline.twophase`) as the OpenCL
+path, through the same code. The twin imports only the lower layers (config, layout, the
+driver, boxes, params...), never the OpenCL side.
 """
 
 from __future__ import annotations
@@ -21,22 +22,16 @@ from typing import Any
 
 import numpy as np
 
-from ..config import RasterConfig
-from ..drawlist import FrameDraws, PlanCache, plan_frame
-from ..frame import Frame, FrameStats
-from ..inputs import (
-    CameraLike,
-    Target,
-    check_clip_planes,
-    check_cull,
-    check_flag,
-    check_render_outputs,
-    check_size,
-)
-from ..params import FrameParams, FrameTotals, finish_depth
-from ..streaming import BinBudgetExceeded, stream_draws
-from ..twophase import OcclusionHistory, two_phase
-from ..window import window_mask, window_planes_for
+from ...base.checks import CameraLike, check_size
+from ...base.config import RasterConfig
+from ...output.frame import Frame
+from ...world.inputs import Target, as_target
+from ..drawlist import GeometryPool, PlanCache
+from ..draws import FrameDraws
+from ..driver import FrameBuffers, FrameOptions, HiZ, render_frame
+from ..params import BinBudgetExceeded, FrameParams, FrameTotals
+from ..streaming import stream_draws
+from ..twophase import OcclusionHistory
 from . import bin as bin_
 from . import pyramid as pyramid_
 from . import raster as raster_
@@ -54,9 +49,9 @@ class Renderer:
     """The twin with a memory across frames, as `clraster.Renderer` has one: it keeps the
     scene made from a bare Mesh and its geometry pool (so repeated frames of one target are
     frames of the same scene), and the visibility history of two-phase occlusion culling
-    (`clraster.twophase.OcclusionHistory`), so a sequence of ``render(..., occlusion=True)``
-    calls runs the OpenCL renderer's schedule frame for frame and gives the same frames and
-    occlusion counts as one `clraster.Renderer` fed the same sequence.
+    (`clraster.pipeline.twophase.OcclusionHistory`), so a sequence of ``render(...,
+    occlusion=True)`` calls runs the OpenCL renderer's schedule frame for frame and gives
+    the same frames and occlusion counts as one `clraster.Renderer` fed the same sequence.
 
     Args:
         width, height: image size in pixels. config: tile size used by binning (it never
@@ -67,7 +62,12 @@ class Renderer:
         self.width, self.height = check_size(width, height)
         self.config = config or RasterConfig()
         self._plans = PlanCache()
-        self.history = OcclusionHistory()
+        self._history = OcclusionHistory()
+
+    @property
+    def history(self) -> OcclusionHistory:
+        """The visibility history of two-phase occlusion culling."""
+        return self._history
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
@@ -75,41 +75,32 @@ class Renderer:
                outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
         outputs as `clraster.Renderer.render` (no overdraw or fates)."""
-        check_cull(cull)
-        want_bary = check_render_outputs(outputs)
-        check_flag(occlusion, "occlusion")
-        check_flag(reversed_z, "reversed_z")
-        planes = check_clip_planes(clip_planes)
-        mask = cull_planes = None
-        if window is not None:   # as Renderer.render
-            mask = window_mask(window, self.width, self.height)
-            cull_planes = window_planes_for(window, camera, self.width, self.height, planes)
-        w, h, config = self.width, self.height, self.config
-        t0 = time.perf_counter()
-        plan = plan_frame(target, camera, w, h, cull=cull, frustum=frustum, cones=cones,
-                          cache=self._plans, clip_planes=planes, cull_planes=cull_planes)
-        # all the draw records now, or each occlusion phase's when it is drawn (two_phase)
-        fd = plan.frame if not occlusion else None
-        t_cull = (time.perf_counter() - t0) * 1e3
-        pool = plan.pool
-        counts = dict(plan.draw_list.counts) if not occlusion else {}
-        if not occlusion and plan.empty:
-            return Frame.empty(w, h, FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                               bary=want_bary, reversed_z=reversed_z)
-        params = FrameParams.make(w, h, config, cull, reversed_z, mask)
-        totals = FrameTotals(timings_ms={"cull (host)": t_cull})
+        options = FrameOptions.make(
+            self.width, self.height, camera, cull=cull, frustum=frustum, cones=cones,
+            occlusion=occlusion, reversed_z=reversed_z, clip_planes=clip_planes,
+            window=window, outputs=outputs)
+        return render_frame(self, as_target(target), camera, options)
 
-        def draw(draws: FrameDraws, into: Images | None) -> Images:
-            return draw_pass(pool, draws, params, config, totals, into)
+    # -- the backend of `render_frame` ---------------------------------------------------
 
-        if fd is not None:
-            depth, ids, bary = draw(fd, None)
-        else:
-            res = two_phase(plan, self.history, draw, _hiz(w, h, params.zoff), totals, counts,
-                            group_clusters=config.occlusion_groups)
-            depth, ids, bary = res.out
-        return Frame(finish_depth(depth, ids, reversed_z), ids, bary if want_bary else None,
-                     totals.stats(counts), reversed_z=reversed_z)
+    def _clear(self, params: FrameParams, options: FrameOptions) -> Images:
+        # (barycentrics: fresh zero pages, free until touched; dropped without "bary")
+        f = Frame.empty(self.width, self.height)
+        return f.depth, f.triangle_id, f.need_barycentrics()
+
+    def _draw_pass(self, pool: GeometryPool, draws: FrameDraws, params: FrameParams,
+                   totals: FrameTotals, into: Images | None, max_entries: int | None,
+                   options: FrameOptions) -> Images:
+        return _one_pass(pool, draws, params, self.config, totals, into, max_entries)
+
+    def _hiz_step(self, params: FrameParams) -> HiZ:
+        return _hiz(self.width, self.height, params.zoff)
+
+    def _buffers(self, out: Images) -> FrameBuffers:
+        return out[0], out[1], out[2], None
+
+    def _end_frame(self) -> None:
+        pass
 
 
 def render(target: Target, camera: CameraLike, width: int, height: int, *,
@@ -122,7 +113,7 @@ def render(target: Target, camera: CameraLike, width: int, height: int, *,
 
     ``config`` only matters for the tile size used by binning; like on the device, it never
     changes the image. ``occlusion``: two-phase occlusion culling with the OpenCL renderer's
-    schedule (`clraster.twophase`); this function keeps no history, so it renders what a
+    schedule (`clraster.pipeline.twophase`); this function keeps no history, so it renders what a
     fresh `clraster.Renderer`'s first frame does (the nearest clusters first). For the
     frames after that, keep a `Renderer` (this module's) across calls.
     """
@@ -136,7 +127,7 @@ def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     """The twin's stage chain over the draws ``fd`` of ``pool``: vertex → setup → bin →
     raster into ``into`` (an earlier pass's images, not modified; None: clear), streamed
     in batches within ``config``'s budget by the renderer's own batching function
-    (`clraster.streaming.stream_draws`), so the twin's memory per pass is bounded like the
+    (`clraster.pipeline.streaming.stream_draws`), so the twin's memory per pass is bounded like the
     device's and it runs the same passes. Adds the counts and host times to ``totals``;
     returns the new images."""
 
@@ -149,9 +140,9 @@ def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
 
 def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
               totals: FrameTotals, into: Images | None, max_entries: int | None) -> Images:
-    """One pass of the twin's stage chain, as `clraster.stages.chain.StageChain.draw`
+    """One pass of the twin's stage chain, as `clraster.pipeline.stages.chain.StageChain.draw`
     (``max_entries``: over it, in clipped pieces or bin entries,
-    `clraster.streaming.BinBudgetExceeded` is raised and nothing is counted)."""
+    `clraster.pipeline.params.BinBudgetExceeded` is raised and nothing is counted)."""
     w, h = params.width, params.height
     if fd.n_tris == 0:
         if into is not None:
@@ -189,7 +180,7 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
 
 
 def _hiz(width: int, height: int, zoff: float = 0.5):
-    """The twin's Hi-Z step for `clraster.twophase.two_phase`: the NumPy pyramid of the
+    """The twin's Hi-Z step for `clraster.pipeline.twophase.two_phase`: the NumPy pyramid of the
     images' depth (key) buffer and the NumPy box test (twins of kernels/pyramid.cl); zoff:
     the key's offset (`FrameParams.zoff`). With same_depth, the pyramid of the previous
     call is tested again (the renderer's `_hiz`)."""

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
-from ..streaming import BinBudgetExceeded
+from ...base.config import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
+from ..params import BinBudgetExceeded
 
 
 def unified_order(status: np.ndarray, clip_count: np.ndarray, clip_offset: np.ndarray
@@ -55,7 +55,7 @@ def bin_pieces(pieces: np.ndarray, order: np.ndarray, width: int, height: int,
         pieces: PIECE_DTYPE (M + P,) unified piece array (slots, then clipped pieces).
         order: int64 (K,) indices of the live pieces in submission order (`unified_order`).
         max_entries: as bin.cl's host side: more (piece, tile) pairs than this raise
-            `clraster.streaming.BinBudgetExceeded` before the records are gathered
+            `clraster.pipeline.params.BinBudgetExceeded` before the records are gathered
             (None: no limit).
 
     Returns:

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..config import (
+from ...base.checks import check_clip_planes, check_size
+from ...base.config import (
     OC_X_NEG,
     OC_X_POS,
     OC_Y_NEG,
@@ -24,9 +25,8 @@ from ..config import (
     OC_Z_POS,
     SUBPIXEL_BITS,
 )
-from ..inputs import check_clip_planes, check_size
-from ..layout import LINE_DTYPE, ZMIN_CLEAR
-from ..lines import (
+from ...base.layout import (
+    LINE_DTYPE,
     LS_ACCEPTED,
     LS_ACCEPTED_DEGENERATE,
     LS_CLIPPED,
@@ -34,6 +34,9 @@ from ..lines import (
     LS_CLIPPED_DEGENERATE,
     LS_INVALID,
     LS_REJECTED,
+    ZMIN_CLEAR,
+)
+from ..segments import (
     LineFrame,
     check_bias,
     check_depth,

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..boxes import Occlusion
-
 # Error-model constants of kernels/pyramid.cl (see the comments there for the derivation).
-from ..layout import HIZ_DEPTH_SLACK, HIZ_EPS, HIZ_PIXEL_SLACK
+from ...base.layout import HIZ_DEPTH_SLACK, HIZ_EPS, HIZ_PIXEL_SLACK
+from ..boxes import Occlusion
 
 F32 = np.float32
 
@@ -67,7 +66,7 @@ def test_boxes(levels: list[np.ndarray], mins: np.ndarray, maxs: np.ndarray,
         mins, maxs: (K, 3) box corners (float32). view_proj: (4, 4) row-major float32
             world → clip matrix. width, height: the image size (level 0's shape).
         zoff: the depth buffer's key offset (0.5: window depth; -0.5: minus reversed-Z
-            depth, `clraster.params.FrameParams.zoff`).
+            depth, `clraster.pipeline.params.FrameParams.zoff`).
 
     See kernels/pyramid.cl for the rules; every float operation here is float32, in the
     kernel's order.

@@ -1,8 +1,9 @@
 """NumPy twin of kernels/query.cl: exact occlusion queries ("samples passed") for boxes.
 
-The boxes become a triangle mesh (`clraster.boxes.box_geometry`, which the OpenCL side draws
-too) that goes through the twin's vertex, setup (cull "none") and binning stages; then every
-(entry, pixel) candidate of every tile is generated in batches with the raster's exact
+The boxes become a triangle mesh (`clraster.pipeline.boxes.box_geometry`, which the OpenCL
+side draws too) that goes through the twin's vertex, setup (cull "none") and binning stages;
+then every (entry, pixel) candidate of every tile is generated in batches with the raster's
+exact
 integer coverage and float32 depth, and a box counts a pixel once if any of its fragments
 there has depth LESS than the depth buffer's.
 """
@@ -11,7 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-# the box geometry is shared with the OpenCL side (clraster.boxes); re-exported here
+from ...base.config import RasterConfig, guard_band_factors
+from ...base.layout import BOX_TRIS  # box b is faces 12b .. 12b+11 (triangle id // 12 is the box)
+
+# the box geometry is shared with the OpenCL side (clraster.pipeline.boxes); re-exported here
 from ..boxes import (  # noqa: F401
     BOX_FACES,
     CLUSTER_BOXES,
@@ -20,8 +24,6 @@ from ..boxes import (  # noqa: F401
     box_geometry,
     box_mesh,
 )
-from ..config import RasterConfig, guard_band_factors
-from ..layout import BOX_TRIS  # box b is faces 12b .. 12b+11 (triangle id // 12 is the box)
 from . import bin as bin_
 from . import setup as setup_
 from . import vertex as vertex_

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import (
+from ...base.config import (
     PF_CLIPPED,
     PF_INDEX_SHIFT,
     PF_SWAPPED,

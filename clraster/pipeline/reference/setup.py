@@ -11,7 +11,7 @@ from typing import cast
 
 import numpy as np
 
-from ..config import (
+from ...base.config import (
     COVER_KNOWN,
     CULL_MODES,
     OC_FRUSTUM,
@@ -39,7 +39,7 @@ from ..config import (
     SUBPIXEL_ONE,
     WINVERT_DTYPE,
 )
-from ..layout import (
+from ...base.layout import (
     DRAW_MIRRORED,
     POLY_MAX,  # vertex slots of the clipper's polygon (kernels/setup.cl)
 )
@@ -375,7 +375,7 @@ def setup(clip: np.ndarray, outcode: np.ndarray, win: np.ndarray, tri_verts: np.
     int (M,). clip64: float64 (N, 5) the clipper's and value planes' inputs
     (`object_clip`; None: ``clip`` itself, depth numerator z). mirrored: bool (M,)
     triangles of mirroring draws (`draw_mirrored`; None: none). reversed_z: the depth
-    convention (`clraster.params.FrameParams.reversed_z`; clip64 must then hold the
+    convention (`clraster.pipeline.params.FrameParams.reversed_z`; clip64 must then hold the
     reversed numerators). udist: float64 (N, U) each vertex's distances to the U user clip
     planes (`user_distances`; None: none): a triangle with all three vertices outside one
     is rejected (ST_TRIVIAL_REJECT), one with any outside a clipping one (bit set in

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import (
+from ...base.config import (
     DRAW_INSIDE,
     OC_GB_X_NEG,
     OC_GB_X_POS,

@@ -7,10 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from ..config import PIECE_DTYPE, RasterConfig
+from ...base.config import PIECE_DTYPE, RasterConfig
 from ..device import kernel, program, wait
-from ..params import FrameParams
-from ..streaming import BinBudgetExceeded
+from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
 from .setup import SetupBuffers
 
@@ -70,7 +69,7 @@ class BinStage:
         profiling events.
 
         ``max_entries``: when the count → scan step finds E > max_entries, raise
-        `clraster.streaming.BinBudgetExceeded` (E) before the entry buffer is sized or
+        `clraster.pipeline.params.BinBudgetExceeded` (E) before the entry buffer is sized or
         written (the streamed frame draws these triangles again in smaller batches);
         None: no limit (a single draw).
 

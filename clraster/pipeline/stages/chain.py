@@ -1,12 +1,13 @@
 """The stage chain, written once: geometry → vertex → setup → bin (→ raster).
 
 Each stage's ``run`` takes the upstream stage's buffers object and the frame's
-`clraster.params.FrameParams`, and returns its own buffers object (each dataclass documents
+`clraster.pipeline.params.FrameParams`, and returns its own buffers object (each dataclass documents
 its fields' sizes and dtypes) with its profiling events. `StageChain` runs them in order over
-any set of draws — a whole frame, one phase of occlusion culling (`clraster.twophase`), the
-boxes of an occlusion query (`clraster.stages.query`), or a bounded batch of a streamed frame
-— and adds each pass's counts and device times to the frame's `clraster.params.FrameTotals`,
-so a frame drawn in several passes into the same frame buffers reports the sums.
+any set of draws — a whole frame, one phase of occlusion culling
+(`clraster.pipeline.twophase`), the boxes of an occlusion query
+(`clraster.pipeline.stages.query`), or a bounded batch of a streamed frame — and adds each
+pass's counts and device times to the frame's `clraster.pipeline.params.FrameTotals`, so a
+frame drawn in several passes into the same frame buffers reports the sums.
 """
 
 from __future__ import annotations
@@ -17,11 +18,10 @@ from typing import Any, cast
 
 import pyopencl as cl
 
-from ..config import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE, RasterConfig
+from ...base.config import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE, RasterConfig
 from ..device import abandon, wait
-from ..drawlist import FrameDraws
-from ..params import FrameParams, FrameTotals
-from ..streaming import BinBudgetExceeded
+from ..draws import FrameDraws
+from ..params import BinBudgetExceeded, FrameParams, FrameTotals
 from ._buffers import GrowBuffer
 from .bin import BinBuffers, BinStage
 from .geometry import GeometryStage
@@ -120,7 +120,7 @@ class StageChain:
     def bin(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
             totals: FrameTotals, *, max_entries: int | None = None) -> BinBuffers:
         """Run geometry upload → vertex → setup → bin over the draws ``fd`` of ``pool`` (a
-        `drawlist.GeometryPool` or `clraster.boxes.BoxGeometry`; uploaded only when it is a
+        `drawlist.GeometryPool` or `clraster.pipeline.boxes.BoxGeometry`; uploaded only when it is a
         different object from last time). Adds the clipped pieces, binned entries and the
         stages' events (pending, see `FrameTotals.settle`) to ``totals``.
 
@@ -128,7 +128,7 @@ class StageChain:
         The last stages may still be running: read the outputs through the same queue.
 
         ``max_entries``: the pass's bin-entry budget (None: none). Over it — more entries,
-        or more clipped pieces — `clraster.streaming.BinBudgetExceeded` is raised before
+        or more clipped pieces — `clraster.pipeline.params.BinBudgetExceeded` is raised before
         anything is counted in ``totals`` (only the device times of the work done).
         """
         with self._pass(queue, leaves_work=True):
@@ -183,7 +183,7 @@ class StageChain:
         ``max_entries``: as in `bin` (over it, nothing is drawn or counted). ``bary``:
         fresh buffers get barycentrics (False: none computed, ``out.bary`` is None).
 
-        This is one pass of whatever size ``fd`` is; `clraster.streaming.stream_draws`
+        This is one pass of whatever size ``fd`` is; `clraster.pipeline.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
         """
         with self._pass(queue, leaves_work=False):

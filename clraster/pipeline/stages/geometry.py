@@ -7,8 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import DRAW_INSIDE
-from ..drawlist import FrameDraws, GeometryPool
+from ...base.config import DRAW_INSIDE
+from ..drawlist import GeometryPool
+from ..draws import FrameDraws
 from ._buffers import GrowBuffer
 
 
@@ -20,11 +21,11 @@ class GeometryBuffers:
     vert_ids: the kernels read a cluster's positions in place, so the pool must store them
     in cluster order, vert_ids the identity — `GeometryStage.upload_pool` checks it).
     draws: DRAW_DTYPE (D,), mvps: float32 (I, 16), mvps64: float64 (I, 16) and zrows:
-    float64 (I, 4), uplanes: float64 (I, K, 4) (drawlist.FrameDraws), uploaded for every
+    float64 (I, 4), uplanes: float64 (I, K, 4) (draws.FrameDraws), uploaded for every
     pass. n_user: K, the user clip planes of the draws uploaded last; uclip: the bits of
     those that clip (`FrameDraws.uclip`).
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
-    uploaded last (drawlist.FrameDraws). may_clip: whether setup can clip any of their
+    uploaded last (draws.FrameDraws). may_clip: whether setup can clip any of their
     triangles: False when every draw is inside the frustum by a margin (DRAW_INSIDE: the
     vertex stage sets no clip bits for it) and no user plane clips (uclip 0), so that
     setup need not wait to learn that none was clipped (`SetupStage.run`).

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig
+from ...base.config import RasterConfig
+from ...base.layout import LINE_DTYPE, ZMIN_CLEAR
 from ..device import kernel, program
-from ..layout import LINE_DTYPE, ZMIN_CLEAR
 from ._buffers import GrowBuffer
 
 #: Work-group size of the three kernels (PoCL compiles one specialization per local size).
@@ -28,7 +28,7 @@ class LineBuffers:
     """Device buffers, N segments, H × W image.
 
     positions: float32 (N, 2, 3) world endpoints. mvp: float32 (16,) row-major matrix.
-    records: LINE_DTYPE (N,) set-up segments (clraster.layout.LINE_DTYPE, 32 bytes).
+    records: LINE_DTYPE (N,) set-up segments (clraster.base.layout.LINE_DTYPE, 32 bytes).
     counts: int32 (N, 2) fragments / fragments passed per segment.
     depth_in: float32 (H, W) input depth buffer (4 bytes when none is given).
     zmin: uint32 (H, W) minimum depth bits per pixel (0xFFFFFFFF: none).

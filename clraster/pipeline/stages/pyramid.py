@@ -14,10 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from ..config import RasterConfig
+from ...base.checks import check_boxes
+from ...base.config import RasterConfig
+from ...base.layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ..device import kernel, program
-from ..inputs import check_boxes
-from ..layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ._buffers import GrowBuffer
 
 #: Boxes per test call: the kernel indexes its (6, K) box array with int32.
@@ -187,7 +187,7 @@ class PyramidStage:
         """`enqueue_test` with the boxes already in the kernel's layout: float32 (6, K)
         rows min x, y, z, max x, y, z; vp float32 (16,) row-major. For callers that keep
         their boxes that way (the renderer's occlusion culling, every frame). zoff: the
-        pyramid's depth key (`clraster.params.FrameParams.zoff`; 0.5 = window depth)."""
+        pyramid's depth key (`clraster.pipeline.params.FrameParams.zoff`; 0.5 = window depth)."""
         k = rows.shape[1]
         if k == 0:
             return np.empty(0, np.uint8), None

@@ -1,6 +1,6 @@
 """Exact occlusion queries, host side (kernels/query.cl).
 
-The boxes (clraster.boxes.box_geometry: 12 triangles per box, clusters of 10 boxes drawn in
+The boxes (clraster.pipeline.boxes.box_geometry: 12 triangles per box, clusters of 10 boxes drawn in
 box order) go through this stage's own `StageChain` of geometry, vertex, setup (cull "none")
 and binning stages — the same kernels and programs as the renderer's, separate buffers, so a
 query never disturbs a renderer's state — and then one work-item per tile walks the tile's
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
+from ...base.config import RasterConfig
 from ..boxes import BoxGeometry
-from ..config import RasterConfig
 from ..device import kernel, program
-from ..drawlist import FrameDraws
+from ..draws import FrameDraws
 from ..params import FrameParams, FrameTotals
 from ._buffers import GrowBuffer
 from .chain import StageChain
@@ -47,7 +47,7 @@ class QueryStage:
             depth_buf: cl.Buffer, width: int, height: int
             ) -> tuple[np.ndarray, dict[str, float]]:
         """Count samples passed for the ``n_boxes`` boxes of (pool, fd) — from
-        `clraster.boxes.box_geometry` — against the float32 (H, W) depth buffer
+        `clraster.pipeline.boxes.box_geometry` — against the float32 (H, W) depth buffer
         ``depth_buf``; blocking.
 
         Returns int64 (n_boxes,) counts and the device milliseconds per stage (vertex,

@@ -10,8 +10,8 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
+from ...base.config import RasterConfig
 from ..arraypool import ArrayPool
-from ..config import RasterConfig
 from ..device import kernel, program, shares_host_memory, wait
 from ..params import FrameParams
 from ._buffers import GrowBuffer

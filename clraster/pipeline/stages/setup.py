@@ -9,10 +9,9 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
-from ..config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
+from ...base.config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
 from ..device import kernel, program, wait
-from ..params import FrameParams
-from ..streaming import BinBudgetExceeded
+from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
 from .vertex import ClipBuffers
@@ -82,7 +81,7 @@ class SetupStage:
         """Set up the ``geo.n_tris`` triangles of the uploaded draws (geo) over the vertex
         stage's outputs (verts). Returns the buffers (n_clip_pieces = P) and the profiling
         events. ``max_pieces``: when P > max_pieces, raise
-        `clraster.streaming.BinBudgetExceeded` (P) before the clipped pieces are sized or
+        `clraster.pipeline.params.BinBudgetExceeded` (P) before the clipped pieces are sized or
         written (a streamed frame splits the pass; None: no limit)."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ..config import CLUSTER_MAX, WINXY_DTYPE, RasterConfig
+from ...base.config import CLUSTER_MAX, WINXY_DTYPE, RasterConfig
+from ...base.layout import VERTEX_LANES
 from ..device import kernel, program
-from ..layout import VERTEX_LANES
 from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers

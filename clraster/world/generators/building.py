@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...base.checks import check_int, check_size
 from ..camera import Camera
-from ..inputs import check_int, check_size
 from ..mesh import Mesh
 from ..scene import Scene
 from .dimensions import (

@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..inputs import check_int
+from ...base.checks import check_int
 from ..mesh import Mesh
 from .dimensions import CLEAR, STOREY
 from .primitives import (

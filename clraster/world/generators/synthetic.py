@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
+from ...base.checks import check_int, check_size
 from ..camera import Camera
-from ..inputs import check_int, check_size
 from ..mesh import Mesh
 from ..scene import Scene
 from .primitives import boxes, cylinders, torus, translation, uv_sphere
