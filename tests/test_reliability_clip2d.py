@@ -1,16 +1,16 @@
 """Reliability: polygon validation and polygon windows at 10⁵–10⁶ vertices
-(clraster.clip.clip2d, clraster.clip.window).
+(clraster.clip.polygon, clraster.clip.sweep, clraster.clip.window).
 
 Before, `as_polygon` tested every pair of edges (O(n²): 10⁴ vertices took 9 s, 4·10⁴ did not
 finish in 2 minutes), `window_mask` built an (image rows × edges) table and the window's
 convex hull was a Python loop over its vertices. Now validation takes its candidate pairs
-of edges from sweeps over a segment tree plus a grid of edge ends (`clip2d._candidate_pairs`,
+of edges from sweeps over a segment tree plus a grid of edge ends (`sweep._candidate_pairs`,
 O(n log n)) and the same exact pair predicates decide; the mask goes crossing by crossing in
 bounded steps; the hull is a gift wrap that stops past the clip planes there is room for.
 
 * Agreement: `as_polygon` raises exactly what the all-pairs check raised (same message) on
   families of random and adversarial rings and holes, with the sweep forced (the all-pairs
-  shortcut for small polygons, `clip2d._ALL_PAIRS`, off) and not. The old check is kept here
+  shortcut for small polygons, `polygon._ALL_PAIRS`, off) and not. The old check is kept here
   verbatim as the reference (``_old_*``).
 * Completeness: every pair of edges within the tolerance is a candidate, on random segment
   soups built to hit the sweep's cases (collinear, touching, near-misses at ±tol, needles).
@@ -34,14 +34,20 @@ import pytest
 from conftest import get_renderer, load_shared_mesh
 
 from clraster import Camera
-from clraster.clip import clip2d
+from clraster.clip import polygon as polygon_module
+from clraster.clip import sweep as sweep_module
 from clraster.clip import window as window_module
+from clraster.clip.polygon import (
+    Polygon2D,
+    _clean_ring,
+    _dedupe_ring,
+    _is_ring_like,
+    _perimeter,
+    _ring_area,
+    _tolerance,
+    as_polygon,
+)
 
-Polygon2D = clip2d.Polygon2D
-as_polygon = clip2d.as_polygon
-_clean_ring, _dedupe_ring, _is_ring_like = (clip2d._clean_ring, clip2d._dedupe_ring,
-                                            clip2d._is_ring_like)
-_perimeter, _ring_area, _tolerance = clip2d._perimeter, clip2d._ring_area, clip2d._tolerance
 window_mask, window_planes_for = window_module.window_mask, window_module.window_planes_for
 window_clip_planes = window_module.window_clip_planes
 WINDOW_MAX_COORD = window_module.WINDOW_MAX_COORD
@@ -58,7 +64,7 @@ _OLD_CHUNK = 1 << 21
 
 
 def _old_normalise(exterior: Any, holes: Any = ()) -> tuple[FloatArray, list[FloatArray]]:
-    """clip2d._normalise with the old checks."""
+    """polygon._normalise with the old checks."""
     ext = _clean_ring(exterior, "polygon exterior")
     if _is_ring_like(holes):
         raise ValueError("holes must be a sequence of (M, 2) rings, got one (M, 2) array; "
@@ -470,7 +476,7 @@ def test_validation_agrees_with_the_all_pairs_check(family, sweep, monkeypatch):
     """Same verdict and same message (ring, edges, holes named) as the old check, case by
     case; each family yields valid and invalid polygons."""
     if sweep:
-        monkeypatch.setattr(clip2d, "_ALL_PAIRS", 0)
+        monkeypatch.setattr(polygon_module, "_ALL_PAIRS", 0)
     rng = np.random.default_rng(sorted(FAMILIES).index(family))
     verdicts = set()
     for case in range(90):
@@ -524,7 +530,7 @@ def test_every_pair_within_tol_is_a_candidate():
         np.fill_diagonal(touch, False)
         want = set(zip(*np.nonzero(np.triu(touch)), strict=True))
         got: set[tuple[int, int]] = set()
-        for i, j, _ in clip2d._candidate_pairs(a, b, tol, clip2d._Ladders(a, b)):
+        for i, j, _ in sweep_module._candidate_pairs(a, b, tol, sweep_module._Ladders(a, b)):
             got.update(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist(), strict=True))
         missed = {(int(i), int(j)) for i, j in want} - got
         assert not missed, (case, sorted(missed)[:5], a.tolist(), b.tolist())
@@ -587,14 +593,15 @@ def test_validation_tests_linearly_many_pairs(monkeypatch):
     """The candidate pairs (all that the exact predicates may see) are O(n), not the n²/2
     pairs of the old check."""
     produced = []
-    real = clip2d._candidate_pairs
+    real = sweep_module._candidate_pairs
 
     def counting(*args):
         for i, j, work in real(*args):
             produced.append(len(i))
             yield i, j, work
 
-    monkeypatch.setattr(clip2d, "_candidate_pairs", counting)
+    # validation looks it up in polygon's namespace
+    monkeypatch.setattr(polygon_module, "_candidate_pairs", counting)
     n = 20_000
     as_polygon(_wavy_ring(n))
     assert n <= sum(produced) <= 20 * n    # at least each edge with a neighbour

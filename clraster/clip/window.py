@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..base.layout import SUBPIXEL_BITS, SUBPIXEL_ONE
-from .clip2d import Polygon2D, as_polygon
+from .polygon import Polygon2D, as_polygon
 
 __all__ = ["WINDOW_MAX_COORD", "WINDOW_PLANE_MARGIN", "window_clip_planes", "window_mask"]
 
