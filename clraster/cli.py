@@ -248,7 +248,11 @@ def _view_cameras(args: argparse.Namespace) -> tuple[list, tuple[int, int]]:
 
 def _render_views(args: argparse.Namespace) -> int:
     from .pipeline.renderer import Renderer
-    from .scale.batch import render_views
+    from .scale.batch import check_output_depth_scale, check_writable_outputs, render_views
+
+    # the outputs' formats and --depth-scale, before the mesh is loaded
+    check_output_depth_scale(args.outputs, args.depth_scale)
+    check_writable_outputs(args.outputs)
 
     if args.scheduler is None:
         check_output_folder(args.out, "--out")
@@ -274,7 +278,8 @@ def _render_views(args: argparse.Namespace) -> int:
             summary = dask_render_views(mesh, cameras, client, args.out, args.outputs,
                                         chunk=args.chunk, size=(width, height), config=config,
                                         progress=True if args.progress else None,
-                                        overwrite=args.overwrite, cull=args.cull,
+                                        overwrite=args.overwrite,
+                                        depth_scale=args.depth_scale, cull=args.cull,
                                         reversed_z=args.reversed_z,
                                         clip_planes=args.clip_planes)
         print(summary)
@@ -283,7 +288,8 @@ def _render_views(args: argparse.Namespace) -> int:
         renderer = Renderer(width, height, config=config)
         summary = render_views(mesh, cameras, args.out, args.outputs, renderer=renderer,
                                progress=True if args.progress else None,
-                               overwrite=args.overwrite, cull=args.cull,
+                               overwrite=args.overwrite, depth_scale=args.depth_scale,
+                               cull=args.cull,
                                reversed_z=args.reversed_z, clip_planes=args.clip_planes)
         print(f"{summary}; wrote {', '.join(args.outputs)} per view to {args.out}")
     if summary.failures:
@@ -332,8 +338,18 @@ def _parser() -> argparse.ArgumentParser:
                       help="re-render views whose files were made with other settings "
                            "(size, cull, clip planes...) instead of refusing the folder")
     many.add_argument("--outputs", type=_outputs, default=("depth", "ids"),
-                      metavar="LIST", help="comma-separated outputs per view out of depth, "
-                                           "ids, bary, shaded (default depth,ids)")
+                      metavar="LIST",
+                      help="comma-separated outputs per view, each NAME or NAME:FORMAT, out "
+                           "of depth, ids, bary, shaded, linear_depth, distance, normals, "
+                           "smooth_normals, camera_normals, smooth_camera_normals, mask, "
+                           "points; formats png, tif, tiff, exr, npy, npz, ply (defaults: "
+                           "npy; shaded, mask, linear_depth, distance png (16-bit, "
+                           "--depth-scale); points ply with normals). Default depth,ids. "
+                           "E.g. linear_depth:png,normals:npy,mask:png,ids:npy,points:ply")
+    many.add_argument("--depth-scale", type=_positive, metavar="S",
+                      help="linear_depth / distance PNGs hold round(depth * S), 0 = no hit "
+                           "(default 1000: millimetres for a scene in metres); a view whose "
+                           "depth does not fit 16 bits fails with its depth range")
     many.add_argument("--progress", action="store_true",
                       help="show a progress bar on stderr even when it is not a terminal "
                            "(with --workers/--scheduler: Dask's, on stdout)")
@@ -608,11 +624,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_guarded("clraster", lambda: _render_views(args))
     if (args.progress or args.outputs != ("depth", "ids") or args.workers is not None
             or args.scheduler is not None or args.chunk is not None or args.overwrite
-            or args.drop_distortion):
+            or args.drop_distortion or args.depth_scale is not None):
         parser.print_usage(sys.stderr)
-        print("clraster: error: --outputs, --progress, --workers, --scheduler, --chunk, "
-              "--overwrite and --drop-distortion need --views (one image: --out, --depth, "
-              "--ids)", file=sys.stderr)
+        print("clraster: error: --outputs, --depth-scale, --progress, --workers, --scheduler, "
+              "--chunk, --overwrite and --drop-distortion need --views (one image: --out, "
+              "--depth, --ids)", file=sys.stderr)
         return 2
     return run_guarded("clraster", lambda: _render(args))
 

@@ -21,7 +21,15 @@ from ..base.config import (
     ST_RASTER,
     ST_TRIVIAL_REJECT,
 )
-from .outputs import FramePoints, distance, linear_depth, normals, points, write_output
+from .outputs import (
+    FramePoints,
+    distance,
+    linear_depth,
+    normals,
+    point_normals,
+    points,
+    write_output,
+)
 
 if TYPE_CHECKING:
     from ..culling.fates import ClusterFates
@@ -278,15 +286,30 @@ class Frame:
         """
         return normals(self, target, smooth=smooth, space=space, camera=camera)
 
-    def points(self, target: Any) -> FramePoints:
+    def points(self, target: Any, space: str = "world", camera: Any = None) -> FramePoints:
         """The covered pixels as a point cloud: ``(points, ids, pixels)`` — (N, 3) float64
-        world positions (barycentrics applied to the face's world-space vertices), (N,)
-        int32 triangle ids, (N, 2) int32 pixel (x, y); row-major pixel order."""
-        return points(self, target)
+        positions (barycentrics applied to the face's world-space vertices), (N,) int32
+        triangle ids, (N, 2) int32 pixel (x, y); row-major pixel order.
+
+        Args:
+            target: the Mesh / Scene / trimesh object the frame was rendered from.
+            space: "world", or "camera": the world points mapped by ``camera.view`` into
+                OpenGL eye space (x right, y up, z towards the viewer; needs `camera`).
+        Their normals, in the same order: `point_normals`."""
+        return points(self, target, space=space, camera=camera)
+
+    def point_normals(self, target: Any, smooth: bool = False, space: str = "world",
+                      camera: Any = None) -> np.ndarray:
+        """(N, 3) float32 unit normals of the covered pixels, in the order of `points`:
+        :meth:`normals` (same ``smooth``, ``space``, ``camera``) at those pixels."""
+        return point_normals(self, target, smooth=smooth, space=space, camera=camera)
 
     def save(self, path: str | os.PathLike, what: str = "depth", **options: Any) -> Path:
-        """Write one output ("depth", "linear_depth", "distance", "ids", "normals",
-        "shaded", "points") to exactly `path`, in the format its extension names (.png,
-        .tif/.tiff, .exr, .npy, .npz, .ply): `clraster.outputs.write_output`, whose
-        keyword options (``target``, ``camera``, ``depth_scale``...) pass through."""
+        """Write one output ("depth", "linear_depth", "distance", "ids", "bary", "mask",
+        "normals", "shaded", "points") to exactly `path`, in the format its extension names
+        (.png, .tif/.tiff, .exr, .npy, .npz, .ply): `clraster.outputs.write_output`, whose
+        keyword options (``target``, ``camera``, ``depth_scale``, ``smooth``, ``space``...)
+        pass through. "points" are written with their normals (.ply: float32 x y z nx ny
+        nz; .npy: (N, 6) float64), in world space or, with ``space="camera"``, in eye
+        space. An option the output does not read is refused (ValueError naming it)."""
         return write_output(path, self, what, **options)

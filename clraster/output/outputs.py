@@ -1,10 +1,14 @@
 """What a frame gives beyond its buffers — metric depth, distance, normals, point clouds —
 and the files they are written to.
 
-The command line (and `Frame.save`) call one function::
+The command line, `Frame.save` and the batch paths (`clraster.scale.batch`,
+`clraster.scale.distributed`) call one function::
 
-    write_output(path, frame, what, *, target=None, camera=None, depth_scale=1000.0,
-                 **shade_options) -> Path
+    write_output(path, frame, what, *, target=None, camera=None, depth_scale=None,
+                 smooth=None, space=None, **shade_options) -> Path
+
+All of it runs on the host, in NumPy, from the frame's buffers (ids, barycentrics, window
+depth) and the target's geometry; no output here is resolved on the device.
 
 ``what`` (`OUTPUTS`) and what it needs:
 
@@ -16,15 +20,25 @@ what           needs        meaning
 "linear_depth" camera       eye-space depth along the view axis, scene units, inf on the background
 "distance"     camera       distance from the eye along the pixel's ray, scene units, inf background
 "ids"          —            triangle ids, int32, −1 on the background
+"bary"         —            (H, W, 3) float32 barycentrics (`Frame.barycentrics`)
+"mask"         —            bool, True where a triangle covers the pixel (``ids >= 0``)
 "normals"      target       unit world-space face normals (``smooth=True``: interpolated vertex
                             normals; ``space="camera"`` with a camera), zeros on the background
 "shaded"       target       `clraster.shade.shade(frame, target, **shade_options)`, uint8 RGB(A)
-"points"       target       the covered pixels' world positions (`Frame.points`)
+"points"       target       the covered pixels' positions (`Frame.points`) with their normals
+                            (as "normals": ``smooth``, ``space``); ``space="camera"``: both in
+                            OpenGL eye space (x right, y up, z towards the viewer)
 ============== ============ =====================================================================
 
 With a ``target`` (the Mesh / Scene / trimesh object the frame was rendered from),
 "linear_depth" and "distance" come from the exact surface points (ids + barycentrics, float64)
 instead of the float32 window depth, whose metric error grows with the square of the distance.
+
+Options an output does not use are refused (ValueError naming them), never ignored:
+``target`` is read by linear_depth, distance, normals, shaded, points; ``camera`` by
+linear_depth, distance, and normals / points with ``space="camera"``; ``depth_scale`` by
+linear_depth / distance written as .png only; ``smooth`` by normals, shaded, points;
+``space`` by normals, points; shade options by shaded.
 
 The file's extension picks the format, and the file written is exactly the file named (no
 extension is appended); an unknown extension or a format that cannot hold the data is refused
@@ -32,20 +46,24 @@ before anything is computed or written. Files are written to a temporary name in
 folder and renamed, so a reader never sees half a file.
 
 * ``.png`` — what RGB-D datasets store. "linear_depth"/"distance": uint16 ``round(value ·
-  depth_scale)`` (default 1000: millimetres for a scene in metres; TUM uses 5000), 0 = no depth;
-  a value that does not fit 1..65535 is refused (choose a smaller scale, or .tiff / .npy).
+  depth_scale)``, ``depth_scale`` in PNG units per scene unit (default 1000: millimetres for a
+  scene in metres; TUM uses 5000), 0 = no depth; a value that does not fit 1..65535 is
+  refused, never wrapped or clamped (choose a smaller scale, or .tiff / .npy).
   "depth": uint16 ``round(d · 65535)`` (OpenGL's 16-bit unsigned-normalized depth; background
   65535). "ids": uint16 ``id + 1`` (0 = background), only if every id fits, else refused.
-  "normals": RGB8 ``round((n + 1)/2 · 255)``, background 0. "shaded": RGB(A)8.
+  "normals": RGB8 ``round((n + 1)/2 · 255)``, background 0. "mask": uint8 255 covered, 0 not.
+  "shaded": RGB(A)8.
 * ``.tif`` / ``.tiff`` — float32 depth (window, linear, distance; inf on the background for
-  the metric ones), int32 ids, float32 (H, W, 3) normals, uint8 shaded. Written by imageio's
-  tifffile plugin where the `tifffile` package is installed; without it 2-D float32/int32 and
-  uint8 images go through Pillow, and (H, W, 3) float32 normals are refused with a message
-  naming tifffile.
+  the metric ones), int32 ids, uint8 mask (255 / 0), float32 (H, W, 3) normals and
+  barycentrics, uint8 shaded. Written by imageio's tifffile plugin where the `tifffile`
+  package is installed; without it 2-D float32/int32 and uint8 images go through Pillow, and
+  (H, W, 3) float32 images are refused with a message naming tifffile (`check_writable`).
 * ``.exr`` — float32, only where an imageio plugin writes EXR (else a clear error).
-* ``.npy`` — the array itself (points: (N, 3) float64). ``.npz`` — named arrays:
-  ``{what: array}``; points: ``points``, ``ids``, ``pixels``.
-* ``.ply`` — "points" only: a point cloud (via trimesh).
+* ``.npy`` — the array itself (mask: bool; points: (N, 6) float64, columns x y z nx ny nz).
+  ``.npz`` — named arrays: ``{what: array}``; points: ``points`` (N, 3) float64,
+  ``normals`` (N, 3) float32, ``ids`` (N,) int32, ``pixels`` (N, 2) int32 (x, y).
+* ``.ply`` — "points" only: a binary little-endian point cloud, one ``vertex`` element with
+  float32 properties ``x y z nx ny nz``.
 """
 
 from __future__ import annotations
@@ -64,23 +82,33 @@ from ..world.scene import Scene
 from .atomic import write_atomic
 from .shade import pixel_normals, shade
 
-__all__ = ["FORMATS", "OUTPUTS", "FrameBuffers", "FramePoints", "check_output_path",
-           "distance", "linear_depth", "normals", "points", "write_output"]
+__all__ = ["FORMATS", "OUTPUTS", "FrameBuffers", "FramePoints", "check_output_options",
+           "check_output_path", "check_writable", "distance", "linear_depth", "normals",
+           "point_normals", "points", "write_output"]
 
 #: What `write_output` can write.
-OUTPUTS = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "points")
+OUTPUTS = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "points", "bary",
+           "mask")
+_IMAGES = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "mask")
 #: Extensions (lower case) and the outputs each can hold.
 FORMATS: dict[str, tuple[str, ...]] = {
-    ".png": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
-    ".tif": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
-    ".tiff": ("depth", "linear_depth", "distance", "ids", "normals", "shaded"),
-    ".exr": ("depth", "linear_depth", "distance", "normals"),
+    ".png": _IMAGES,
+    ".tif": _IMAGES + ("bary",),
+    ".tiff": _IMAGES + ("bary",),
+    ".exr": ("depth", "linear_depth", "distance", "normals", "bary"),
     ".npy": OUTPUTS,
     ".npz": OUTPUTS,
     ".ply": ("points",),
 }
 _NEEDS_CAMERA = ("linear_depth", "distance")
 _NEEDS_TARGET = ("normals", "shaded", "points")
+#: option → the outputs that read it (``camera`` also by normals / points in camera space,
+#: ``depth_scale`` only in a .png: `check_output_options`)
+_READ_BY = {"target": ("linear_depth", "distance", "normals", "shaded", "points"),
+            "camera": ("linear_depth", "distance"),
+            "depth_scale": ("linear_depth", "distance"),
+            "smooth": ("normals", "shaded", "points"),
+            "space": ("normals", "points")}
 _U16_MAX = 65535
 
 
@@ -133,10 +161,14 @@ def _covered(frame: FrameBuffers, n_faces: int) -> tuple[np.ndarray, np.ndarray,
     return ys, xs, sel
 
 
-def points(frame: FrameBuffers, target: Any) -> FramePoints:
-    """World positions of the covered pixels (see `FramePoints`): each pixel's barycentrics
+def points(frame: FrameBuffers, target: Any, space: str = "world",
+           camera: Any = None) -> FramePoints:
+    """Positions of the covered pixels (see `FramePoints`): each pixel's barycentrics
     (perspective-correct, relative to its face's own three vertices) applied to the face's
-    world-space vertices in float64 (a Scene's instance transform applied first)."""
+    world-space vertices in float64 (a Scene's instance transform applied first).
+    ``space="camera"``: those world points mapped by the camera's view matrix into OpenGL eye
+    space (x right, y up, z towards the viewer; needs `camera`)."""
+    _check_space(space, camera, "points")
     geom = _as_geometry(target)
     n_faces = geom.n_faces
     ys, xs, ids = _covered(frame, n_faces)
@@ -156,7 +188,27 @@ def points(frame: FrameBuffers, target: Any) -> FramePoints:
             t = instance.transform
             world[sel] = local @ t[:3, :3].T + t[:3, 3]
     pixels = np.stack([xs, ys], axis=1).astype(np.int32)
+    if space == "camera":
+        h, w = frame.triangle_id.shape
+        view = _camera_frame(camera, w, h)[0]
+        world = world @ view[:3, :3].T + view[:3, 3]
     return FramePoints(world, ids.astype(np.int32), pixels)
+
+
+def point_normals(frame: FrameBuffers, target: Any, smooth: bool = False,
+                  space: str = "world", camera: Any = None) -> np.ndarray:
+    """(N, 3) float32 unit normals of the covered pixels, in the order of `points` (row-major
+    pixels): `normals` (same ``smooth``, ``space``, ``camera``) at those pixels."""
+    n = normals(frame, target, smooth=smooth, space=space, camera=camera)
+    return n[np.asarray(frame.triangle_id) >= 0]
+
+
+def _check_space(space: str, camera: Any, what: str) -> None:
+    if space not in ("world", "camera"):
+        raise ValueError(f"space must be 'world' or 'camera', got {space!r}")
+    if space == "camera" and camera is None:
+        raise ValueError(f"{what} in camera space need the camera: "
+                         f"frame.{what}(target, space='camera', camera=camera)")
 
 
 def _camera_frame(camera: Any, width: int, height: int
@@ -237,11 +289,7 @@ def normals(frame: FrameBuffers, target: Any, smooth: bool = False, space: str =
     those rotated into OpenGL eye space (x right, y up, z towards the viewer) by the
     inverse transpose of the view's 3×3 part, renormalized.
     """
-    if space not in ("world", "camera"):
-        raise ValueError(f"space must be 'world' or 'camera', got {space!r}")
-    if space == "camera" and camera is None:
-        raise ValueError("normals in camera space need the camera: "
-                         "frame.normals(target, space='camera', camera=camera)")
+    _check_space(space, camera, "normals")
     n = pixel_normals(frame, _as_geometry(target), smooth=smooth)
     if space == "world":
         return n
@@ -279,23 +327,115 @@ def check_output_path(path: str | os.PathLike, what: str, *, target: Any = None,
     return p
 
 
+class _Options(NamedTuple):
+    """`write_output`'s options with their defaults filled in."""
+
+    depth_scale: float
+    smooth: bool
+    space: str
+
+
+def check_depth_scale(depth_scale: Any) -> float:
+    """``depth_scale`` as a float, or a ValueError unless it is a finite number > 0."""
+    try:
+        scale = float(depth_scale)
+    except (TypeError, ValueError):
+        scale = float("nan")
+    if isinstance(depth_scale, bool) or not (np.isfinite(scale) and scale > 0.0):
+        raise ValueError(f"depth_scale must be a finite number > 0 (PNG units per scene "
+                         f"unit), got {depth_scale!r}")
+    return scale
+
+
+def check_output_options(what: str, ext: str, *, target: Any = None, camera: Any = None,
+                         depth_scale: float | None = None, smooth: bool | None = None,
+                         space: str | None = None, shade_options: dict | None = None
+                         ) -> _Options:
+    """Refuse the options output `what` would ignore in format `ext` (None: not given):
+    ``target``, ``camera``, ``depth_scale``, ``smooth``, ``space`` and shade options each
+    count only where the module docstring says they are read. Returns (depth_scale, smooth,
+    space) with the defaults (1000.0, False, "world") for those not given.
+
+    Raises:
+        ValueError: naming the options `what` does not read, and what does read them.
+    """
+    given = {"target": target, "camera": camera, "depth_scale": depth_scale,
+             "smooth": smooth, "space": space}
+    resolved_space = "world" if space is None else space
+    if what in ("normals", "points"):
+        _check_space(resolved_space, camera, what)
+    ignored = []
+    for name, value in given.items():
+        if value is None:
+            continue
+        readers = _READ_BY[name]
+        if name == "camera" and what in ("normals", "points") and resolved_space == "camera":
+            continue
+        if name == "depth_scale" and what in readers and ext != ".png":
+            ignored.append(f"depth_scale (only a .png of {what} is scaled; {ext} holds "
+                           f"float32 scene units)")
+        elif what not in readers:
+            also = (" (and normals / points with space='camera')" if name == "camera"
+                    else " (in a .png)" if name == "depth_scale" else "")
+            ignored.append(f"{name} (read by {', '.join(readers)}{also})")
+    if shade_options and what != "shaded":
+        ignored.append(f"{', '.join(sorted(shade_options))} (shade options: read by shaded)")
+    if ignored:
+        raise ValueError(f"output {what!r} does not use {'; '.join(ignored)}: leave "
+                         f"{'it' if len(ignored) == 1 else 'them'} out")
+    return _Options(1000.0 if depth_scale is None else check_depth_scale(depth_scale),
+                    False if smooth is None else bool(smooth), resolved_space)
+
+
+#: ext → None where imageio here writes it, else why not (probed once per process)
+_WRITABLE: dict[str, str | None] = {}
+
+
+def check_writable(what: str, ext: str) -> None:
+    """Refuse, before any work, a format this installation cannot write `what` in: an
+    (H, W, 3) float32 TIFF (normals, barycentrics) without the `tifffile` package, or EXR
+    without an imageio plugin that writes it. (`write_output` finds both while encoding,
+    after computing; batch paths call this once up front, not once per view.)"""
+    float3 = what == "bary" or (what == "normals" and ext != ".png")
+    if ext in (".tif", ".tiff") and float3:
+        try:
+            import tifffile  # noqa: F401
+        except ImportError:
+            raise ValueError(f"writing {what} ((H, W, 3) float32) as TIFF needs the tifffile "
+                             f"package (pip install tifffile); or write .npy / .npz") from None
+    if ext == ".exr":
+        if ext not in _WRITABLE:
+            try:
+                _encode(np.zeros((1, 1), np.float32), ext, what)
+                _WRITABLE[ext] = None
+            except ValueError as exc:
+                _WRITABLE[ext] = str(exc)
+        if _WRITABLE[ext] is not None:
+            raise ValueError(str(_WRITABLE[ext]))
+
+
 def _image_array(frame: FrameBuffers, what: str, ext: str, *, target: Any, camera: Any,
-                 depth_scale: float, smooth: bool, space: str, shade_options: dict) -> Any:
-    """The array (or FramePoints) to write for `what` in format `ext`."""
+                 options: _Options, shade_options: dict) -> Any:
+    """The array (or (FramePoints, normals)) to write for `what` in format `ext`."""
     if what == "points":
-        return points(frame, target)
+        pts = points(frame, target, space=options.space, camera=camera)
+        return pts, point_normals(frame, target, smooth=options.smooth, space=options.space,
+                                  camera=camera)
     if what == "depth":
         a = np.asarray(frame.depth, np.float32)
         if ext == ".png":
             return np.round(np.clip(a.astype(np.float64), 0.0, 1.0) * _U16_MAX).astype(np.uint16)
         return a
+    if what == "bary":
+        return np.asarray(frame.need_barycentrics(), np.float32)
+    if what == "mask":
+        m = np.asarray(frame.triangle_id) >= 0
+        return m if ext in (".npy", ".npz") else m.astype(np.uint8) * np.uint8(255)
     if what in _NEEDS_CAMERA:
         a = _metric(frame, camera, target, what)
         if ext != ".png":
             return a
-        scale = float(depth_scale)
-        if not (np.isfinite(scale) and scale > 0.0):
-            raise ValueError(f"depth_scale must be a finite number > 0, got {depth_scale!r}")
+        scale = options.depth_scale
         fin = np.isfinite(a)
         q = np.zeros(a.shape, np.float64)
         q[fin] = np.round(a[fin].astype(np.float64) * scale)
@@ -316,7 +456,7 @@ def _image_array(frame: FrameBuffers, what: str, ext: str, *, target: Any, camer
                              f"65535 only; write the ids as .npy, .npz or .tiff (int32)")
         return (ids + 1).astype(np.uint16)
     if what == "normals":
-        n = normals(frame, target, smooth=smooth, space=space, camera=camera)
+        n = normals(frame, target, smooth=options.smooth, space=options.space, camera=camera)
         if ext == ".png":
             rgb = np.round((n.astype(np.float64) + 1.0) * 0.5 * 255.0).astype(np.uint8)
             rgb[~(np.asarray(frame.triangle_id) >= 0)] = 0
@@ -354,16 +494,31 @@ def _encode(arr: np.ndarray, ext: str, what: str) -> bytes:
     return iio.imwrite("<bytes>", arr, extension=ext)
 
 
-def _encode_points(pts: FramePoints, ext: str) -> bytes:
-    if ext == ".ply":
-        import trimesh
+#: a PLY point cloud's vertex: position and unit normal, float32 little-endian
+_PLY_FIELDS = ("x", "y", "z", "nx", "ny", "nz")
+_PLY_VERTEX = np.dtype([(c, "<f4") for c in _PLY_FIELDS])
 
-        return trimesh.PointCloud(pts.points).export(file_type="ply")
+
+def _ply_bytes(xyz: np.ndarray, nrm: np.ndarray) -> bytes:
+    """A binary little-endian PLY of one ``vertex`` element (x y z nx ny nz float32)."""
+    rows = np.empty(len(xyz), _PLY_VERTEX)
+    for k, c in enumerate("xyz"):
+        rows[c] = xyz[:, k]
+        rows["n" + c] = nrm[:, k]
+    props = "".join(f"property float {c}\n" for c in _PLY_FIELDS)
+    header = (f"ply\nformat binary_little_endian 1.0\ncomment written by clraster\n"
+              f"element vertex {len(xyz)}\n{props}end_header\n")
+    return header.encode("ascii") + rows.tobytes()
+
+
+def _encode_points(pts: FramePoints, nrm: np.ndarray, ext: str) -> bytes:
+    if ext == ".ply":
+        return _ply_bytes(pts.points, nrm)
     buf = io.BytesIO()
     if ext == ".npy":
-        np.save(buf, pts.points)
+        np.save(buf, np.hstack([pts.points, nrm.astype(np.float64)]))
     else:
-        np.savez(buf, points=pts.points, ids=pts.ids, pixels=pts.pixels)
+        np.savez(buf, points=pts.points, normals=nrm, ids=pts.ids, pixels=pts.pixels)
     return buf.getvalue()
 
 
@@ -374,8 +529,9 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 
 def write_output(path: str | os.PathLike, frame: FrameBuffers, what: str, *, target: Any = None,
-                 camera: Any = None, depth_scale: float = 1000.0, smooth: bool = False,
-                 space: str = "world", **shade_options: Any) -> Path:
+                 camera: Any = None, depth_scale: float | None = None,
+                 smooth: bool | None = None, space: str | None = None,
+                 **shade_options: Any) -> Path:
     """Write one output of `frame` to exactly `path`, in the format its extension names.
 
     Args:
@@ -384,11 +540,14 @@ def write_output(path: str | os.PathLike, frame: FrameBuffers, what: str, *, tar
         what: one of `OUTPUTS`.
         target: the Mesh / Scene / trimesh object the frame was rendered from ("normals",
             "shaded", "points"; optional for "linear_depth"/"distance", which it makes exact).
-        camera: the camera it was rendered with ("linear_depth", "distance", camera-space
-            normals).
-        depth_scale: PNG units per scene unit for "linear_depth"/"distance" (1000: mm for a
-            scene in metres).
-        smooth, space: for "normals" (`Frame.normals`); `smooth` also for "shaded".
+        camera: the camera it was rendered with ("linear_depth", "distance"; "normals" and
+            "points" with ``space="camera"``).
+        depth_scale: for "linear_depth"/"distance" in a .png only: PNG value =
+            ``round(value · depth_scale)``, value in scene units (default 1000: millimetres
+            for a scene in metres).
+        smooth: for "normals" and the normals of "points" (`Frame.normals`), and "shaded";
+            default False.
+        space: "world" (default) or "camera", for "normals" and "points".
         shade_options: passed to `clraster.shade.shade` for "shaded".
 
     Returns:
@@ -396,18 +555,21 @@ def write_output(path: str | os.PathLike, frame: FrameBuffers, what: str, *, tar
 
     Raises:
         ValueError: unknown `what` or extension, a format that cannot hold the data (ids
-            or depths beyond 16 bits in a PNG, EXR without a plugin, float normals TIFF
-            without tifffile), a missing camera/target — all before the file is touched.
+            or depths beyond 16 bits in a PNG, EXR without a plugin, float (H, W, 3) TIFF
+            without tifffile), a missing camera/target, an option `what` does not read
+            (`check_output_options`) — all before the file is touched.
     """
     p = check_output_path(path, what, target=target, camera=camera)
     ext = p.suffix.lower()
+    options = check_output_options(what, ext, target=target, camera=camera,
+                                   depth_scale=depth_scale, smooth=smooth, space=space,
+                                   shade_options=shade_options)
     if what == "shaded":
-        shade_options = {"smooth": smooth, **shade_options}
-    data = _image_array(frame, what, ext, target=target, camera=camera,
-                        depth_scale=depth_scale, smooth=smooth, space=space,
+        shade_options = {"smooth": options.smooth, **shade_options}
+    data = _image_array(frame, what, ext, target=target, camera=camera, options=options,
                         shade_options=shade_options)
-    if isinstance(data, FramePoints):
-        blob = _encode_points(data, ext)
+    if isinstance(data, tuple):
+        blob = _encode_points(data[0], data[1], ext)
     elif ext == ".npy":
         buf = io.BytesIO()
         np.save(buf, data)

@@ -1,14 +1,43 @@
-"""Render many views of one scene to files: `render_views`.
+"""Render many views of one scene to files (`render_views`) or to arrays (`iter_views`).
 
-One file set per view in ``out_dir``, named by the view's index in the camera list:
-``view_00000_depth.npy`` (float32 (H, W) window depth, 1.0 background),
-``view_00000_ids.npy`` (int32 (H, W) triangle ids, −1 background),
-``view_00000_bary.npy`` (float32 (H, W, 3) barycentrics) and ``view_00000_shaded.png``
-(flat-shaded RGB, `clraster.shade.shade`). Row 0 is the top row, as in
-`clraster.Frame`. Each file is written to a temporary name in ``out_dir`` and renamed into
-place (`clraster.atomic.write_atomic`), so a file under its final name is always complete,
-and a batch killed halfway leaves no half-written files under those names; the temporaries
-a killed run left are deleted by the next run (those of processes of this machine that are
+One file set per view in ``out_dir``, named by the view's index in the camera list and the
+output: ``view_00000_{output}.{format}``. The outputs (`OUTPUTS`; default format first):
+
+======================= ======= ===============================================================
+output                  default meaning (`clraster.output.outputs` has each format's encoding)
+======================= ======= ===============================================================
+depth                   npy     float32 (H, W) window depth, 1.0 background
+ids                     npy     int32 (H, W) triangle ids, −1 background
+bary                    npy     float32 (H, W, 3) barycentrics
+shaded                  png     flat-shaded RGB (`clraster.shade.shade`)
+linear_depth            png     depth along the view axis; png: uint16 round(depth ·
+                                ``depth_scale``), 0 = no hit (default 1000: millimetres for a
+                                scene in metres); npy/npz/tif(f)/exr: float32 scene units, inf
+                                on the background
+distance                png     distance from the eye along the pixel's ray, as linear_depth
+normals                 npy     float32 (H, W, 3) unit world-space face normals, zeros on the
+                                background; png: RGB8 round((n + 1)/2 · 255)
+smooth_normals          npy     as normals, interpolated area-weighted vertex normals
+camera_normals          npy     as normals, in OpenGL eye space (x right, y up, z to the eye)
+smooth_camera_normals   npy     both
+mask                    png     covered pixels (ids >= 0): png uint8 255 / 0; npy bool
+points                  ply     the covered pixels' world positions with their face normals:
+                                ply float32 x y z nx ny nz; npy (N, 6) float64; npz points,
+                                normals, ids, pixels
+======================= ======= ===============================================================
+
+An output takes another format as ``"name:format"`` (``"linear_depth:npy"``,
+``"normals:png"``; any extension `clraster.output.outputs.FORMATS` allows for it: png, tif,
+tiff, exr, npy, npz, ply), and its file ends in that extension (``view_00000_normals.png``).
+The metric depths, normals, masks and point clouds are computed on the host from the
+frame's ids and barycentrics with the `clraster.Frame` methods (exact surface points,
+float64), not on the device, and written by `clraster.output.outputs.write_output`.
+Row 0 is the top row, as in `clraster.Frame`.
+
+Each file is written to a temporary name in ``out_dir`` and renamed into place
+(`clraster.atomic.write_atomic`), so a file under its final name is always complete, and a
+batch killed halfway leaves no half-written files under those names; the temporaries a
+killed run left are deleted by the next run (those of processes of this machine that are
 gone, by a run that keeps ``failures.json``: the default; `clraster.distributed.render_views`
 deletes all of them when its tasks are done).
 
@@ -17,10 +46,14 @@ otherwise for its own:
 
 * ``render_views.json`` (`MANIFEST_FILE`): the image size and the render options that change
   an image (cull, reversed_z, clip_planes, window; not the culling switches frustum, cones,
-  occlusion, which never do). A run whose size or options differ from it raises
-  `OutDirMismatchError`, saying what differs, before anything is rendered; give another
-  ``out_dir``, or ``overwrite=True`` to render every view again over the old files. A
-  folder holding view files but no record is refused the same way.
+  occlusion, which never do), and under ``"outputs"`` how each kind of view file was
+  written: its output, format and ``depth_scale`` (for a metric depth PNG), by file suffix
+  (``"linear_depth.png": {"depth_scale": 1000.0}``). A run whose size or options differ
+  from it, or that would write a file suffix the record lists with another depth_scale,
+  raises `OutDirMismatchError`, saying what differs, before anything is rendered; give
+  another ``out_dir``, or ``overwrite=True`` to render every view again over the old
+  files. Outputs the record does not list yet are added to it (a folder may gather outputs
+  over several runs). A folder holding view files but no record is refused the same way.
 * ``.view_00000.key`` per view, written after the view's files: a hash of those settings
   and of the view's camera (its view-projection matrix for this size). A re-run skips the
   views whose files all exist under the same key, which is what makes a batch resumable
@@ -30,7 +63,9 @@ otherwise for its own:
 A view whose camera is broken (a malformed entry, NaN, a singular matrix, near >= far, a
 matrix that overflows float32) fails with a message naming its index and field; the rest
 of the batch goes on, and the failures come back in the summary (and in
-``out_dir/failures.json``).
+``out_dir/failures.json``). So does a view whose output cannot be written as asked (a
+metric depth beyond a 16-bit PNG at this ``depth_scale``: the message names the view, the
+output and the depth range); none of its files is left.
 """
 
 from __future__ import annotations
@@ -51,21 +86,43 @@ import numpy as np
 
 from ..base.checks import check_flag
 from ..output.atomic import stale_temporary, write_atomic
+from ..output.outputs import FORMATS, check_depth_scale, check_writable, write_output
 from ..world.inputs import as_target
-from ..world.views import BrokenCamera, ViewError, camera_from_entry, frames
+from ..world.views import BrokenCamera, ViewError, camera_from_entry, frames, iter_cameras
 
 if TYPE_CHECKING:
+    from collections.abc import Iterator
+
     from ..output.frame import Frame
     from ..pipeline.renderer import Renderer
 
 __all__ = ["MANIFEST_FILE", "OUTPUTS", "OutDirMismatchError", "RenderSummary", "ViewFailure",
-           "render_views", "view_files"]
+           "iter_views", "output_formats", "render_views", "view_arrays", "view_files"]
 
 #: named by the module's public path (users' logging settings name it)
 log = logging.getLogger("clraster.batch")
 
-#: output name → file suffix
-OUTPUTS = {"depth": ".npy", "ids": ".npy", "bary": ".npy", "shaded": ".png"}
+#: output name → its default file extension (another: ``"name:format"``, module docstring)
+OUTPUTS = {"depth": ".npy", "ids": ".npy", "bary": ".npy", "shaded": ".png",
+           "linear_depth": ".png", "distance": ".png", "normals": ".npy",
+           "smooth_normals": ".npy", "camera_normals": ".npy", "smooth_camera_normals": ".npy",
+           "mask": ".png", "points": ".ply"}
+#: output name → (`clraster.output.outputs` output it is, its ``smooth``, its ``space``)
+_WRITTEN_AS = {"depth": ("depth", None, None), "ids": ("ids", None, None),
+               "bary": ("bary", None, None), "shaded": ("shaded", None, None),
+               "linear_depth": ("linear_depth", None, None),
+               "distance": ("distance", None, None), "normals": ("normals", None, None),
+               "smooth_normals": ("normals", True, None),
+               "camera_normals": ("normals", None, "camera"),
+               "smooth_camera_normals": ("normals", True, "camera"),
+               "mask": ("mask", None, None), "points": ("points", None, None)}
+#: outputs made from the barycentrics (the others need only depth and ids)
+_NEEDS_BARY = frozenset({"bary", "shaded", "linear_depth", "distance", "smooth_normals",
+                         "smooth_camera_normals", "points"})
+#: outputs whose PNG is scaled by ``depth_scale``
+_SCALED = frozenset({"linear_depth", "distance"})
+#: every view file extension (lower case, no dot)
+_EXTS = "|".join(sorted((e[1:] for e in FORMATS), key=lambda e: (-len(e), e)))
 #: where the failures of the last run are listed (absent when it had none)
 FAILURES_FILE = "failures.json"
 #: what rendered the files of a folder (size and image-changing options; module docstring)
@@ -77,13 +134,13 @@ MANIFEST_FORMAT = 1
 #: keyword is recorded, a new one included.
 IMAGE_NEUTRAL = frozenset({"frustum", "cones", "occlusion", "overdraw", "fates", "outputs"})
 #: the names of this module's files in an out_dir, for the temporaries they leave
-_OWN_FILE = re.compile(r"^(view_\d+_[a-z]+\.(npy|png)|\.view_\d+\.key|"
+_OWN_FILE = re.compile(r"^(view_\d+_[a-z_]+\.(" + _EXTS + r")|\.view_\d+\.key|"
                        + re.escape(FAILURES_FILE) + "|" + re.escape(MANIFEST_FILE) + r")$")
 #: temporaries of this module before `clraster.atomic` (``.{name}.{pid}.tmp``)
 _OLD_TEMPORARY = re.compile(r"^\.(view_\d+_[a-z]+\.(npy|png)|"
                             + re.escape(FAILURES_FILE) + r")\.(?P<pid>\d+)\.tmp$")
 #: view files (of any output) in an out_dir
-_VIEW_FILE = re.compile(r"^view_\d+_(" + "|".join(OUTPUTS) + r")\.(npy|png)$")
+_VIEW_FILE = re.compile(r"^view_\d+_(" + "|".join(OUTPUTS) + r")\.(" + _EXTS + r")$")
 
 
 class OutDirMismatchError(ValueError):
@@ -133,23 +190,89 @@ class RenderSummary:
                 f"{self.views_per_s:.2f} views/s")
 
 
+def _split(spec: Any) -> tuple[str, str | None]:
+    """("name", ".ext" or None) of an output spec "name" or "name:format"."""
+    if not isinstance(spec, str):
+        raise ValueError(f"an output is a name (or 'name:format'), got {spec!r}")
+    name, sep, fmt = spec.partition(":")
+    return name.strip(), ("." + fmt.strip().lower().lstrip(".")) if sep else None
+
+
 def check_outputs(outputs: Sequence[str]) -> tuple[str, ...]:
-    """``outputs`` as a tuple of known, distinct output names (`OUTPUTS`), at least one."""
+    """``outputs`` checked: known, distinct output names (`OUTPUTS`), at least one, each
+    optionally with a format its output can be written in (``"linear_depth:npy"``). Returns
+    them as a tuple of strings, as given (the formats lower-cased)."""
     if isinstance(outputs, str):
         outputs = (outputs,)
     out = tuple(outputs)
-    bad = [o for o in out if o not in OUTPUTS]
-    if bad or not out or len(set(out)) != len(out):
-        raise ValueError(f"outputs must be distinct names out of {', '.join(OUTPUTS)}, "
-                         f"at least one; got {list(out)}")
-    return out
+    pairs = [_split(o) for o in out]
+    names = [n for n, _ in pairs]
+    bad = [o for o, n in zip(out, names, strict=True) if n not in OUTPUTS]
+    if bad or not out or len(set(names)) != len(names):
+        raise ValueError(f"outputs must be distinct names out of {', '.join(OUTPUTS)} (each "
+                         f"optionally 'name:format'), at least one; got {list(out)}")
+    for spec, (name, ext) in zip(out, pairs, strict=True):
+        if ext is None:
+            continue
+        what = _WRITTEN_AS[name][0]
+        if ext not in FORMATS or what not in FORMATS[ext]:
+            fits = ", ".join(e[1:] for e, ws in FORMATS.items() if what in ws)
+            raise ValueError(f"output {spec!r}: {name} cannot be written as "
+                             f"{ext[1:] or '(none)'}; formats for it: {fits}")
+    return tuple(n if e is None else f"{n}:{e[1:]}" for n, e in pairs)
+
+
+def output_formats(outputs: Sequence[str]) -> dict[str, str]:
+    """Output name → file extension (".png"...) of checked ``outputs`` (`check_outputs`),
+    the default (`OUTPUTS`) where no format is named."""
+    return {n: e or OUTPUTS[n] for n, e in map(_split, check_outputs(outputs))}
 
 
 def view_files(out_dir: str | os.PathLike, index: int, outputs: Sequence[str]
                ) -> dict[str, Path]:
-    """Output name → path of view ``index``'s files (``view_00042_depth.npy``...)."""
+    """Output name → path of view ``index``'s files (``view_00042_depth.npy``, with
+    ``"normals:png"`` ``view_00042_normals.png``...)."""
     d = Path(out_dir)
-    return {o: d / f"view_{index:05d}_{o}{OUTPUTS[o]}" for o in outputs}
+    return {n: d / f"view_{index:05d}_{n}{e}" for n, e in output_formats(outputs).items()}
+
+
+def _all_view_files(out: Path, index: int) -> list[Path]:
+    """Every view file of view ``index`` there is in ``out`` (any output, any format)."""
+    prefix = f"view_{index:05d}_"
+    return [out / f"{prefix}{n}.{e}" for n in OUTPUTS for e in _EXTS.split("|")
+            if (out / f"{prefix}{n}.{e}").exists()]
+
+
+def check_output_depth_scale(outputs: Sequence[str], depth_scale: float | None) -> float | None:
+    """``depth_scale`` checked against checked ``outputs``: None when no output reads it;
+    1000.0 when one does and it was not given. A depth_scale that no output reads (none is
+    linear_depth / distance written as PNG) is refused, never ignored."""
+    reads = [n for n, e in output_formats(outputs).items() if n in _SCALED and e == ".png"]
+    if depth_scale is None:
+        return 1000.0 if reads else None
+    scale = check_depth_scale(depth_scale)
+    if not reads:
+        raise ValueError(f"depth_scale={depth_scale!r} is read only by linear_depth or "
+                         f"distance written as png (uint16 = round(depth * depth_scale)); "
+                         f"outputs {list(outputs)} have none: leave it out")
+    return scale
+
+
+def check_writable_outputs(outputs: Sequence[str]) -> None:
+    """Refuse a format this installation cannot write for one of checked ``outputs`` (EXR
+    without a plugin, a float (H, W, 3) TIFF without tifffile:
+    `clraster.output.outputs.check_writable`), once before any view is rendered."""
+    for name, ext in output_formats(outputs).items():
+        check_writable(_WRITTEN_AS[name][0], ext)
+
+
+def outputs_record(outputs: Sequence[str], depth_scale: float | None) -> dict[str, dict]:
+    """How checked ``outputs`` write their files, for `MANIFEST_FILE`: file suffix
+    (``"linear_depth.png"``) → its options (``{"depth_scale": 1000.0}`` for a scaled PNG,
+    else ``{}``)."""
+    scale = check_output_depth_scale(outputs, depth_scale)
+    return {f"{n}{e}": ({"depth_scale": scale} if n in _SCALED and e == ".png" else {})
+            for n, e in output_formats(outputs).items()}
 
 
 def _write_atomic(path: Path, write) -> None:
@@ -242,25 +365,50 @@ def _short(value: Any, n: int = 60) -> str:
     return text if len(text) <= n else text[:n - 3] + "..."
 
 
+def _read_record(text: str | None) -> tuple[dict | None, dict]:
+    """(settings, outputs record) of a `MANIFEST_FILE`'s text; settings None when it cannot
+    be read. A record without "outputs" (written before outputs were recorded) lists none."""
+    try:
+        old = json.loads(text or "")
+        there = old["settings"] if old.get("format") == MANIFEST_FORMAT else None
+        files = old.get("outputs", {})
+    except (ValueError, AttributeError, KeyError, TypeError):
+        return None, {}
+    if not isinstance(there, dict):
+        return None, {}
+    return there, files if isinstance(files, dict) else {}
+
+
 def prepare_out_dir(out_dir: str | os.PathLike, settings: dict[str, Any], *,
-                    overwrite: bool = False) -> None:
+                    overwrite: bool = False, outputs: dict[str, dict] | None = None) -> None:
     """Check ``out_dir`` (an existing folder) against ``settings`` (`run_settings`) and
-    record them in its `MANIFEST_FILE` (atomically; left alone when it says the same).
+    ``outputs`` (`outputs_record`: how this run writes its files), and record them in its
+    `MANIFEST_FILE` (atomically; left alone when it says the same). Outputs recorded by
+    earlier runs and not written by this one stay in the record.
 
     Raises:
         OutDirMismatchError: (unless ``overwrite``) the folder's record holds another size
-            or other options (the message lists them), cannot be read, or is missing while
-            view files are there.
+            or other options, or lists one of this run's file suffixes with other output
+            options (depth_scale; the message lists them), cannot be read, or is missing
+            while view files are there.
     """
     out = Path(out_dir)
     path = out / MANIFEST_FILE
-    manifest = {"written_by": "clraster.batch.render_views", "format": MANIFEST_FORMAT,
-                "settings": settings}
-    text = json.dumps(manifest, indent=1, sort_keys=True) + "\n"
     try:
         old_text: str | None = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         old_text = None
+    there, files = _read_record(old_text)
+    here = dict(outputs or {})
+    if there == settings:   # files of the same settings: this run's outputs join them
+        here = {**files, **here}
+
+    def manifest_text() -> str:
+        manifest = {"written_by": "clraster.batch.render_views", "format": MANIFEST_FORMAT,
+                    "settings": settings, "outputs": here}
+        return json.dumps(manifest, indent=1, sort_keys=True) + "\n"
+
+    text = manifest_text()
     if old_text == text:
         return
     what = ("give another out_dir, delete this folder's files, or pass overwrite=True to "
@@ -272,15 +420,13 @@ def prepare_out_dir(out_dir: str | os.PathLike, settings: dict[str, Any], *,
                 f"rendered them (another program, or an older clraster), so "
                 f"they cannot be told from this run's: {what}")
     elif not overwrite:
-        try:
-            old = json.loads(old_text or "")
-            there = old["settings"] if old.get("format") == MANIFEST_FORMAT else None
-        except (ValueError, AttributeError, KeyError, TypeError):
-            there = None
-        if not isinstance(there, dict):
+        if there is None:
             raise OutDirMismatchError(f"{str(path)!r} is not a record this version of "
                                       f"clraster can read (format {MANIFEST_FORMAT}): {what}")
         diff = _differences(there, settings)
+        diff += [f"{suffix} files: {_short(files[suffix])} there, {_short(opts)} now"
+                 for suffix, opts in sorted((outputs or {}).items())
+                 if suffix in files and files[suffix] != opts]
         if diff:
             raise OutDirMismatchError(
                 f"out_dir {str(out)!r} holds views rendered with other settings "
@@ -312,18 +458,158 @@ def remove_temporaries(out_dir: str | os.PathLike, *, any_writer: bool = False) 
     return gone
 
 
-def _write_view(files: dict[str, Path], frame: Frame, target: Any) -> None:
-    arrays = {"depth": frame.depth, "ids": frame.triangle_id, "bary": frame.barycentrics}
-    for name, path in files.items():
-        if name == "shaded":
-            from PIL import Image
+def _write_options(name: str, ext: str, target: Any, camera: Any,
+                   depth_scale: float | None) -> tuple[str, dict[str, Any]]:
+    """(`clraster.output.outputs` output, `write_output` keywords) of output ``name`` written
+    as ``ext``: only the options it reads (write_output refuses the others)."""
+    what, smooth, space = _WRITTEN_AS[name]
+    kw: dict[str, Any] = {}
+    if what in ("linear_depth", "distance"):
+        kw = {"camera": camera, "target": target}
+        if ext == ".png":
+            kw["depth_scale"] = depth_scale
+    elif what in ("normals", "points", "shaded"):
+        kw = {"target": target}
+        if smooth:
+            kw["smooth"] = True
+        if space == "camera":
+            kw.update(space="camera", camera=camera)
+    return what, kw
 
+
+def _write_view(files: dict[str, Path], frame: Frame, target: Any, camera: Any,
+                depth_scale: float | None, index: int) -> None:
+    """Write the view's files (`clraster.output.outputs.write_output`). An output that cannot
+    be written as asked (a ValueError: a depth beyond a 16-bit PNG...) is the view's
+    failure: its files written so far are deleted and a `ViewError` naming it is raised."""
+    for name, path in files.items():
+        what, kw = _write_options(name, path.suffix.lower(), target, camera, depth_scale)
+        try:
+            write_output(path, frame, what, **kw)
+        except ValueError as exc:
+            for p in files.values():
+                p.unlink(missing_ok=True)
+            raise ViewError(index, None, f"output {name} ({path.name}): {exc}") from exc
+
+
+def view_arrays(frame: Frame, camera: Any, target: Any, outputs: Sequence[str]
+                ) -> dict[str, np.ndarray]:
+    """Output name → array of one rendered view, from the `clraster.Frame` methods (host
+    NumPy, float64 surface points; the same values the files of `render_views` hold before
+    encoding): depth, ids (int32), bary, mask (bool), shaded (uint8) as the frame has them;
+    linear_depth / distance float32 (H, W) scene units, inf background
+    (``frame.linear_depth(camera, target)``); normals and its variants float32 (H, W, 3);
+    points (N, 6) float64, columns x y z nx ny nz (world positions and face normals of the
+    covered pixels in row-major order: ``frame.points(target)``, ``frame.point_normals``).
+    ``outputs``: names of `OUTPUTS` (no formats)."""
+    out: dict[str, np.ndarray] = {}
+    for name in outputs:
+        what, smooth, space = _WRITTEN_AS[name]
+        if what == "depth":
+            out[name] = frame.depth
+        elif what == "ids":
+            out[name] = frame.triangle_id
+        elif what == "bary":
+            out[name] = frame.need_barycentrics()
+        elif what == "mask":
+            out[name] = frame.mask
+        elif what == "shaded":
             from ..output.shade import shade
 
-            image = shade(frame, target)
-            _write_atomic(path, lambda fh, im=image: Image.fromarray(im).save(fh, "PNG"))
+            out[name] = shade(frame, target)
+        elif what == "linear_depth":
+            out[name] = frame.linear_depth(camera, target)
+        elif what == "distance":
+            out[name] = frame.distance(camera, target)
+        elif what == "normals":
+            out[name] = frame.normals(target, smooth=bool(smooth), space=space or "world",
+                                      camera=camera if space == "camera" else None)
         else:
-            _write_atomic(path, lambda fh, a=arrays[name]: np.save(fh, a))
+            xyz = frame.points(target).points
+            out[name] = np.hstack([xyz, frame.point_normals(target).astype(np.float64)])
+    return out
+
+
+def _render_outputs(outs: Sequence[str], render_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``render_kwargs`` with the renderer's ``outputs`` narrowed to depth and ids when no
+    output needs the barycentrics (8 bytes a pixel are made instead of 20)."""
+    if "outputs" in render_kwargs or any(_split(o)[0] in _NEEDS_BARY for o in outs):
+        return render_kwargs
+    return {**render_kwargs, "outputs": ("depth", "ids")}
+
+
+def _checked_cameras(cams: Sequence[Any], width: int, height: int) -> list[Any]:
+    """The cameras of a list as `clraster.world.views.iter_cameras` makes them (entry dicts
+    made into cameras, broken ones `BrokenCamera`): what each view was rendered with, for
+    the outputs that read the camera."""
+    return [c for _, c in iter_cameras(cams, width, height)]
+
+
+def iter_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
+               outputs: Sequence[str] = ("depth", "ids"), *, renderer: Renderer | None = None,
+               size: tuple[int, int] = (640, 480), errors: str = "raise",
+               **render_kwargs: Any) -> Iterator[dict[str, Any]]:
+    """Render ``target`` from each camera in turn and yield its outputs as arrays, for a
+    training loop that wants no files: one dict per view, output name → array
+    (`view_arrays`: the `clraster.Frame` methods, computed on the host), plus ``"index"``
+    (the view's place in ``cameras``) and ``"camera"`` (the camera it was rendered with).
+
+    Lazy: a view is rendered when the next dict is asked for, and the arrays are the
+    caller's (never reused by the renderer). Example::
+
+        for v in iter_views(mesh, cams, ("linear_depth", "normals", "mask"), size=(640, 480)):
+            train_step(v["linear_depth"], v["normals"], v["mask"])
+
+    Args:
+        target: a `clraster.Mesh` / `clraster.Scene` / trimesh object.
+        cameras: as `render_views` (a list, an iterable read one camera at a time, or a
+            camera file).
+        outputs: names out of `OUTPUTS` (no ``":format"``: nothing is written).
+        renderer: a `clraster.Renderer` (its size is used); default a new one of ``size``.
+        errors: "raise" (default): a broken camera raises its `ViewError` (naming its index
+            and field); "skip": it is logged as a warning and left out.
+        render_kwargs: `Renderer.render`'s keywords (cull, reversed_z, ...).
+
+    Raises:
+        ValueError / TypeError: bad outputs, errors or keywords, before anything is
+        rendered; ViewError (a ValueError): a broken camera, with ``errors="raise"``.
+    """
+    from ..pipeline.renderer import Renderer, check_render_kwargs
+
+    outs = check_outputs(outputs)
+    formats = [o for o in outs if ":" in o]
+    if formats:
+        raise ValueError(f"iter_views yields arrays, not files: outputs {formats} name a "
+                         f"format; give the names alone")
+    if errors not in ("raise", "skip"):
+        raise ValueError(f"errors must be 'raise' or 'skip', got {errors!r}")
+    geometry = as_target(target)
+    if renderer is None:
+        renderer = Renderer(*size)
+    check_render_kwargs(renderer, render_kwargs)
+    kwargs = _render_outputs(outs, render_kwargs)
+    return _iter_views(renderer, geometry, target, cameras, outs, errors, kwargs)
+
+
+def _iter_views(renderer: Renderer, geometry: Any, target: Any, cameras: Any,
+                outs: tuple[str, ...], errors: str, kwargs: dict[str, Any]
+                ) -> Iterator[dict[str, Any]]:
+    checked = ((i, c) for i, c in iter_cameras(cameras, renderer.width, renderer.height))
+    pending: list[tuple[int, Any]] = []
+
+    def cams() -> Iterator[Any]:   # the cameras, read one at a time, remembered for the frame
+        for i, c in checked:
+            pending.append((i, c))
+            yield c
+
+    for _, item in frames(renderer, geometry, cams(), kwargs):
+        index, cam = pending.pop(0)
+        if isinstance(item, ViewError):
+            if errors == "raise":
+                raise item
+            log.warning("%s", item)
+            continue
+        yield {"index": index, "camera": cam, **view_arrays(item, cam, target, outs)}
 
 
 def write_failures(path: Path, failures: Sequence[ViewFailure]) -> None:
@@ -359,7 +645,8 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
                  out_dir: str | os.PathLike, outputs: Sequence[str] = ("depth", "ids"), *,
                  size: tuple[int, int] = (640, 480), renderer: Renderer | None = None,
                  start: int = 0, progress: bool | None = None, failures_file: bool = True,
-                 overwrite: bool = False, **render_kwargs: Any) -> RenderSummary:
+                 overwrite: bool = False, depth_scale: float | None = None,
+                 **render_kwargs: Any) -> RenderSummary:
     """Render ``target`` (a `clraster.Mesh` or `clraster.Scene`) from every camera and write
     one file set per view into ``out_dir`` (names and formats: the module docstring).
 
@@ -369,7 +656,9 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         out_dir: created if missing (its parent must exist). What rendered its files is
             recorded in it (module docstring); a folder rendered with another size or
             other image options is refused.
-        outputs: any of "depth", "ids", "bary", "shaded".
+        outputs: names out of `OUTPUTS` (depth, ids, bary, shaded, linear_depth, distance,
+            normals, smooth_normals, camera_normals, smooth_camera_normals, mask, points),
+            each optionally ``"name:format"`` (module docstring).
         size: (width, height) of the images, when no ``renderer`` is given.
         renderer: a `clraster.Renderer` to render with (its size is used); default a new
             one of ``size``.
@@ -382,6 +671,11 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             list once and deletes the temporaries at the end).
         overwrite: render every view again, even those whose files are there, and record
             this run's settings over a folder's old ones (instead of refusing them).
+        depth_scale: linear_depth / distance PNG units per scene unit: PNG value =
+            ``round(depth · depth_scale)``, 0 = no hit; default 1000 (millimetres for a
+            scene in metres). A depth that does not fit 1..65535 fails its view (the message
+            names the view and the depth range), never wraps. Refused when no output is a
+            linear_depth / distance PNG. Recorded in the folder (module docstring).
         render_kwargs: `Renderer.render`'s keywords (cull, frustum, cones, occlusion, ...).
 
     Returns:
@@ -389,16 +683,21 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         whose files all exist under the key of this run's settings and camera.
 
     Raises:
-        ValueError / TypeError: bad outputs, target, keywords or keyword values (cull,
-            clip_planes, reversed_z, ...: the checks `Renderer.render` makes), all before
-            anything is rendered; OutDirMismatchError (a ValueError): ``out_dir`` holds
-            views of another size or other options (module docstring); CameraFileError: a
-            camera list file that is not a list of entries. Errors writing files (OSError)
-            stop the batch.
+        ValueError / TypeError: bad outputs, formats, depth_scale, target, keywords or
+            keyword values (cull, clip_planes, reversed_z, ...: the checks
+            `Renderer.render` makes), a format this installation cannot write (EXR without
+            a plugin...), all before anything is rendered; OutDirMismatchError (a
+            ValueError): ``out_dir`` holds views of another size or other options, or
+            files of its outputs written with another depth_scale (module docstring);
+            CameraFileError: a camera list file that is not a list of entries. Errors
+            writing files (OSError) stop the batch.
     """
     from ..pipeline.renderer import Renderer, check_render_kwargs
 
     outs = check_outputs(outputs)
+    record = outputs_record(outs, depth_scale)
+    scale = check_output_depth_scale(outs, depth_scale)
+    check_writable_outputs(outs)
     geometry = as_target(target)   # rendered; ``target`` itself is shaded (its colours)
     if isinstance(start, bool) or not isinstance(start, int) or start < 0:
         raise ValueError(f"start must be an integer >= 0, got {start!r}")
@@ -407,16 +706,14 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
     check_render_kwargs(renderer, render_kwargs)   # names and values, once for all views
     check_flag(overwrite, "overwrite")
     settings = run_settings(renderer.width, renderer.height, render_kwargs)
-    if "bary" not in outs and "shaded" not in outs and "outputs" not in render_kwargs:
-        # no file needs the barycentrics: 8 bytes a pixel are made instead of 20
-        render_kwargs = {**render_kwargs, "outputs": ("depth", "ids")}
+    render_kwargs = _render_outputs(outs, render_kwargs)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir {str(out)!r} exists and is not a folder")
     if not out.parent.is_dir():
         raise ValueError(f"out_dir {str(out)!r}: folder {str(out.parent)!r} does not exist")
     out.mkdir(exist_ok=True)
-    prepare_out_dir(out, settings, overwrite=overwrite)
+    prepare_out_dir(out, settings, overwrite=overwrite, outputs=record)
     if failures_file:
         # a run killed earlier (SIGKILL: nothing ran to clean up) left its temporaries here.
         # Not per chunk (failures_file=False): each would scan the whole folder, and
@@ -448,8 +745,9 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             skipped += 1
         else:
             todo.append((k, cam, key, old))
-    for done, (k, item) in enumerate(frames(renderer, geometry, [t[1] for t in todo],
-                                            render_kwargs), start=skipped + 1):
+    checked = _checked_cameras([t[1] for t in todo], renderer.width, renderer.height)
+    for done, (k, item) in enumerate(frames(renderer, geometry, checked, render_kwargs),
+                                     start=skipped + 1):
         _, _, key, old = todo[k]
         index = start + todo[k][0]
         if key is None or old != key:
@@ -457,15 +755,20 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
             # not this view's: gone before anything is written, so that neither a failure
             # now nor a kill halfway leaves them looking done
             _marker(out, index).unlink(missing_ok=True)
-            for p in view_files(out, index, tuple(OUTPUTS)).values():
+            for p in _all_view_files(out, index):
                 p.unlink(missing_ok=True)
+        if not isinstance(item, ViewError):
+            try:
+                _write_view(view_files(out, index, outs), item, target, checked[k], scale,
+                            index)
+            except ViewError as exc:
+                item = exc
         if isinstance(item, ViewError):
             # the engine numbers the views it was given; name the entry in the caller's list
             err = ViewError(index, item.field, item.message)
             failures.append(ViewFailure(index, str(err)))
             log.warning("%s", err)
         else:
-            _write_view(view_files(out, index, outs), item, target)
             if key is not None:   # last: the view is done once its key is there
                 _write_atomic(_marker(out, index), lambda fh, t=key: fh.write(t.encode()))
             rendered += 1

@@ -635,7 +635,8 @@ class ViewsSummary(RenderSummary):
 
 def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tuple[str, ...],
                   width: int, height: int, config: RasterConfig | None,
-                  render_kwargs: dict[str, Any], overwrite: bool = False) -> ChunkRecord:
+                  render_kwargs: dict[str, Any], overwrite: bool = False,
+                  depth_scale: float | None = None) -> ChunkRecord:
     """Worker task: `clraster.batch.render_views` of one chunk of cameras with this process's
     Renderer; the files are written here (atomic renames, views already complete skipped),
     so running it twice — Dask recomputing it after a worker was lost — writes every file
@@ -650,7 +651,7 @@ def _render_chunk(target, cameras: list, start: int, out_dir: str, outputs: tupl
     s = batch_render_views(target, cameras, out_dir, outputs,
                            renderer=worker_renderer(width, height, config), start=start,
                            progress=False, failures_file=False, overwrite=overwrite,
-                           **render_kwargs)
+                           depth_scale=depth_scale, **render_kwargs)
     return ChunkRecord(start, s.views, s.rendered, s.skipped, s.failures,
                        time.perf_counter() - t0, get_worker().address, os.getpid())
 
@@ -672,9 +673,10 @@ def _finish_out_dir(out_dir: str, failures: list[ViewFailure]) -> int:
     return remove_temporaries(out, any_writer=True)
 
 
-def _prepare_out_dir(out_dir: str, settings: dict[str, Any], overwrite: bool) -> bool:
+def _prepare_out_dir(out_dir: str, settings: dict[str, Any], overwrite: bool,
+                     outputs: dict[str, dict] | None = None) -> bool:
     """Run on every worker before the chunks of `render_views`: make ``out_dir``, refuse
-    one rendered with other settings (`clraster.batch.prepare_out_dir`:
+    one rendered with other settings or output options (`clraster.batch.prepare_out_dir`:
     OutDirMismatchError, raised by ``client.run`` on the client) and record this run's.
     False on a worker that does not see the folder's parent."""
     from .batch import prepare_out_dir
@@ -683,7 +685,7 @@ def _prepare_out_dir(out_dir: str, settings: dict[str, Any], overwrite: bool) ->
     if not out.parent.is_dir() or (out.exists() and not out.is_dir()):
         return False   # not seen from here, or not a folder: the chunk tasks say which
     out.mkdir(exist_ok=True)
-    prepare_out_dir(out, settings, overwrite=overwrite)
+    prepare_out_dir(out, settings, overwrite=overwrite, outputs=outputs)
     return True
 
 
@@ -698,7 +700,7 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
                  outputs=("depth", "ids"), *, chunk: int | None = None,
                  size: tuple[int, int] = (640, 480), config: RasterConfig | None = None,
                  progress: bool | None = None, overwrite: bool = False,
-                 **render_kwargs: Any) -> ViewsSummary:
+                 depth_scale: float | None = None, **render_kwargs: Any) -> ViewsSummary:
     """Render many views of one scene on the workers of ``client``, each writing its views'
     files; what `clraster.batch.render_views` does on one machine, with the same files.
 
@@ -733,8 +735,11 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
         client: a `dask.distributed.Client`.
         out_dir: the folder the workers write into (made absolute here; on a real cluster a
             file system every worker sees under that path, also for the final clean-up).
-        outputs: any of "depth", "ids", "bary", "shaded" (names and formats:
-            `clraster.batch`; "shaded" needs a Mesh target).
+        outputs: names out of `clraster.scale.batch.OUTPUTS` (depth, ids, bary, shaded,
+            linear_depth, distance, normals, smooth_normals, camera_normals,
+            smooth_camera_normals, mask, points), each optionally ``"name:format"`` (names
+            and formats: `clraster.scale.batch`; "shaded" needs a Mesh target). Computed
+            on the workers' hosts from the frames, as on one machine.
         chunk: cameras per task; default up to 16, fewer when there are few views
             (`_chunk_size`). Smaller chunks balance and recover better, larger ones cost
             less scheduling.
@@ -744,6 +749,8 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
             chunk tasks; default only when stdout is a terminal.
         overwrite: render every view again and record this run's settings over the
             folder's (`clraster.batch.render_views`).
+        depth_scale: linear_depth / distance PNG units per scene unit (default 1000:
+            millimetres for a scene in metres), as `clraster.batch.render_views`.
         render_kwargs: `Renderer.render`'s keywords (cull, frustum, cones, occlusion, ...).
 
     Returns:
@@ -753,8 +760,9 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
         was lost reports the views that worker had already written as skipped.
 
     Raises:
-        ValueError / TypeError: bad outputs, target, chunk, keywords or keyword values
-            (the checks `Renderer.render` makes), before anything is submitted;
+        ValueError / TypeError: bad outputs, formats, depth_scale, target, chunk, keywords
+            or keyword values (the checks `Renderer.render` makes), a format this machine
+            cannot write, before anything is submitted;
             OutDirMismatchError (a ValueError): ``out_dir`` holds views of another size or
             other options; CameraFileError: a camera list file that is not a list of entries;
             FileNotFoundError: a scene file that is not there; NoWorkersError (a
@@ -772,9 +780,17 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     from ..pipeline.renderer import Renderer, check_render_kwargs
     from ..world.camera import Camera
     from ..world.views import check_target, load_cameras
-    from .batch import FAILURES_FILE, check_outputs, run_settings
+    from .batch import (
+        FAILURES_FILE,
+        check_outputs,
+        check_writable_outputs,
+        outputs_record,
+        run_settings,
+    )
 
     outs = check_outputs(outputs)
+    record = outputs_record(outs, depth_scale)
+    check_writable_outputs(outs)   # here: the workers are set up alike
     width, height = check_size(*size)
     if isinstance(target, (str, os.PathLike)):
         target = os.path.abspath(target)
@@ -805,14 +821,15 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     t0 = time.perf_counter()
     # the folder's record checked (and written) where the files go, before any work; an
     # OutDirMismatchError on a worker is raised here
-    client.run(_prepare_out_dir, out, settings, overwrite)
+    client.run(_prepare_out_dir, out, settings, overwrite, record)
     if isinstance(target, str):
         held = target
     else:
         # broadcast: every worker gets its copy now, not each task its own
         held = client.scatter(target, broadcast=True, hash=False)
     futures = [client.submit(_render_chunk, held, cams[s:s + step], s, out, outs, width,
-                             height, config, render_kwargs, overwrite, pure=False)
+                             height, config, render_kwargs, overwrite, depth_scale,
+                             pure=False)
                for s in range(0, len(cams), step)]
     bar = None
     if show and futures:
