@@ -254,7 +254,7 @@ __kernel void bin_scatter(__global const uchar *restrict status,
     uint chunk = get_global_id(0);
     /* entries holds cap records: a list that does not fit (summary from bin_scan_tiles)
      * writes nothing; the host reads the total afterwards and scatters again into a
-     * larger buffer (clraster/stages/bin.py BinStage.run, defer) */
+     * larger buffer (clraster/pipeline/stages/bin.py BinStage.run, defer) */
     if (chunk >= chunks || BIN_LIST_OVER(summary, cap)) return;
     __global int *row = counts + (size_t)chunk * n_tiles;
     CHUNK_SLOTS

@@ -1,15 +1,15 @@
 /* clraster — types and constants shared by every stage.
  *
  * The constants and records the host shares with the kernels (outcode bits, status codes,
- * piece flags, Piece, Draw, WinVert, LineRec...) are not written here: clraster/layout.py is
+ * piece flags, Piece, Draw, WinVert, LineRec...) are not written here: clraster/base/layout.py is
  * their one source, and the host puts its generated C (clraster.layout.c_header) in place of
  * the `#include "layout.h"` line below (there is no layout.h file). tests/test_layout.py
  * checks that the compiler sees the same values, sizes and offsets as NumPy. Stage sources
  * say `#include "common.h"`; the host inlines this file (clraster.device.kernel_source).
  *
  * Every float expression here is written out operation by operation and FP contraction is
- * off, so the NumPy twin (clraster/reference), doing the same IEEE float32 operations in the
- * same order, gets bit-identical clip positions, fixed-point vertices and depths — that is
+ * off, so the NumPy twin (clraster/pipeline/reference), doing the same IEEE float32 operations
+ * in the same order, gets bit-identical clip positions, fixed-point vertices and depths — that is
  * what lets the tests compare triangle ids exactly.
  *
  * Pointer arguments of the vertex, setup and bin kernels are `restrict`: no two buffers of
@@ -21,9 +21,9 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable   /* the clipper and user clip distances */
 
 #ifndef TILE_LOG2
-#error "TILE_LOG2 must be defined (see clraster/config.py RasterConfig.build_options)"
+#error "TILE_LOG2 must be defined (see clraster/base/config.py RasterConfig.build_options)"
 #endif
-#include "layout.h"   /* generated from clraster/layout.py: SUBPIXEL_BITS, OC_*, ST_*, PF_*... */
+#include "layout.h"   /* generated from clraster/base/layout.py: SUBPIXEL_BITS, OC_*, ST_*... */
 
 #define TILE_SIZE (1 << TILE_LOG2)
 #define TILE_PIXELS (TILE_SIZE * TILE_SIZE)
@@ -215,7 +215,7 @@ inline long floor_div(long a, long d) { return a >= 0 ? a / d : -((-a + d - 1) /
 /* Does the frame's bin list (summary from bin.cl bin_scan_tiles: [0] its length, [1] set
  * when that overflowed) not fit the cap records of the entry buffer it was scattered
  * into? Then bin_scatter wrote nothing and raster_tiles draws nothing; the host scatters
- * and draws again with a larger buffer (clraster/stages/bin.py BinStage.run, defer). */
+ * and draws again with a larger buffer (clraster/pipeline/stages/bin.py BinStage.run, defer). */
 #define BIN_LIST_OVER(summary, cap) ((summary)[1] != 0 || (summary)[0] > (cap))
 
 inline int bb_x(int packed) { return packed & 0xFFFF; }
@@ -278,7 +278,7 @@ ALWAYS_INLINE void depth_plane(__global const Piece *pc, DepthPlane *P)
 }
 
 /* A fragment's depth in two steps, in this order wherever a fragment is depth-tested (the
- * raster's lanes, raster.cl depth_block8, too; and clraster/reference/raster.py): the
+ * raster's lanes, raster.cl depth_block8, too; and clraster/pipeline/reference/raster.py): the
  * plane's value at the start of row y, then at column x of that row, raised to zlo: a
  * covered centre up to 1/512 px outside the unsnapped triangle must not extrapolate past
  * its nearest vertex (the tile Hi-Z and the Hi-Z test rely on it). */

@@ -1,5 +1,5 @@
 /* Layout probe (tests/test_layout.py): what the OpenCL C compiler sees of the constants and
- * records that clraster/layout.py generates into common.h.
+ * records that clraster/base/layout.py generates into common.h.
  *
  * The test builds this file through the renderer's own path (clraster.device.program, so
  * common.h and its generated part are inlined exactly as for every stage) with

@@ -1,8 +1,8 @@
 /* Line segments: world -> clip space, Cohen–Sutherland clipping in homogeneous clip space,
  * aliased rasterization with exact integer arithmetic, depth test and a deterministic
- * resolve. The NumPy twin (clraster/reference/lines.py) does the same float32 / float64
+ * resolve. The NumPy twin (clraster/pipeline/reference/lines.py) does the same float32 / float64
  * operations in the same order and the same integer rules, so both give bit-identical
- * line ids, depths and counts. Host side: clraster/stages/lines.py.
+ * line ids, depths and counts. Host side: clraster/pipeline/stages/lines.py.
  *
  * Three launches, one work-item per segment each:
  *
@@ -66,7 +66,7 @@
 
 /* Segment status LS_* (accepted, clipped, invalid, rejected, clipped away, accepted /
  * clipped but degenerate), the resolve buffers' clear values ZMIN_CLEAR / IDMIN_CLEAR
- * (0xFFFFFFFFu) and LineRec come from clraster/layout.py (common.h). LineRec is one set-up
+ * (0xFFFFFFFFu) and LineRec come from clraster/base/layout.py (common.h). LineRec is one set-up
  * segment (clraster.layout.LINE_DTYPE), 32 bytes: 24.8 fixed-point window endpoints in
  * canonical order along the major axis (xs/ys the start), the start's window depth and
  * (end − start) depth. Only status is meaningful unless status is LS_ACCEPTED or LS_CLIPPED. */

@@ -10,14 +10,15 @@
  * dropped (floor sizes would drop it unless its neighbours took 3×3 texels, niagara's fix in
  * depthreduce); it gets a texel of its own whose clamped second read repeats it. And since
  * (x >> L) <= (W − 1) >> L = w_L − 1, the test below can never read outside a level.
- * The maximum is exact, so the NumPy twin (clraster/reference/pyramid.py) is bit-identical.
+ * The maximum is exact, so the NumPy twin (clraster/pipeline/reference/pyramid.py) is
+ * bit-identical.
  *
  * Level table (host-built, int4 per level): (offset of the level in the pyramid buffer in
  * floats, width, height, 0). All levels, level 0 included, live in one float buffer.
  */
 #include "common.h"
 
-/* Levels made per launch, PYR_LOG2 (clraster/layout.py, 6): each work-item reduces a
+/* Levels made per launch, PYR_LOG2 (clraster/base/layout.py, 6): each work-item reduces a
  * (1 << PYR_LOG2)² block of its source level through PYR_LOG2 levels in private memory (the
  * footprint of a level-(s+j) texel, j <= PYR_LOG2, lies inside one aligned block), so 1080p
  * takes 2 launches, 16384² 3. The private scratch is (block/2)² floats = 4 KiB. */
@@ -130,7 +131,7 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
 /* ---- Occlusion test --------------------------------------------------------------------
  *
  * Results OCC_VISIBLE, OCC_OCCLUDED, OCC_VIEW_CULLED (clraster.occlusion.Occlusion; values
- * from clraster/layout.py). */
+ * from clraster/base/layout.py). */
 
 /* Error model. What the renderer draws for a box is some content inside it (or, for the
  * exact query, the box's own triangles): vertices whose float32 clip positions are the exact
@@ -145,7 +146,7 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
  * convex hull of the corners' error boxes [c − e, c + e]; x/w, y/w and z/w are monotone in
  * each of x, y, z and w on w > 0, so their extremes over that hull are at error-box corners,
  * which is what the bounds below take. HIZ_EPS = 2^-18 = 64u.
- * (HIZ_EPS, HIZ_DEPTH_SLACK and HIZ_PIXEL_SLACK are defined in clraster/layout.py.)
+ * (HIZ_EPS, HIZ_DEPTH_SLACK and HIZ_PIXEL_SLACK are defined in clraster/base/layout.py.)
  *
  * Window depth of a drawn fragment is never below its piece's least vertex depth: the raster
  * raises the interpolated plane to zlo (setup.cl value_planes),
@@ -164,7 +165,7 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
  * vectorization across work-items gave up on this kernel: LLVM's SLP pass packed pairs of
  * scalars first, and a vector-typed value cannot be widened again). Lane l of work-item g is
  * box 8g + l; every lane does exactly the scalar float32 operations described here, so the
- * NumPy twin (clraster/reference/pyramid.py test_boxes) matches it bit for bit.
+ * NumPy twin (clraster/pipeline/reference/pyramid.py test_boxes) matches it bit for bit.
  *
  * boxes: float32 (6, n_pad) rows min.x, min.y, min.z, max.x, max.y, max.z (world space),
  * n_pad a multiple of 8 (padding lanes are computed and ignored). vp: float32 (16,) row-major

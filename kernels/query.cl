@@ -14,12 +14,16 @@
  * counter sum is order-independent, so the result is deterministic. A decreasing box number
  * (a broken ordering assumption) sets order_error instead of silently double-counting.
  *
- * clraster/reference/query.py is the NumPy twin.
+ * clraster/pipeline/reference/query.py is the NumPy twin.
  */
 #include "common.h"
 
-#define SPAN 8   /* columns per branch-free span of the pixel loop (divides TILE_SIZE) */
-/* BOX_TRIS (12, clraster/layout.py): box b is faces BOX_TRIS·b .. BOX_TRIS·b + 11. */
+/* QUERY_SPAN: columns per branch-free span of the pixel loop, a -D option from
+ * clraster/base/config.py (speed only); a power of two that divides TILE_SIZE. */
+#if !defined(QUERY_SPAN) || (QUERY_SPAN & (QUERY_SPAN - 1)) || QUERY_SPAN > TILE_SIZE
+#error "QUERY_SPAN (clraster.base.config) must be a power of two <= TILE_SIZE"
+#endif
+/* BOX_TRIS (12, clraster/base/layout.py): box b is faces BOX_TRIS·b .. BOX_TRIS·b + 11. */
 
 __kernel void query_tiles(__global const int *tile_start, __global const Piece *entries,
                           const int width, const int height, const int tiles_x,
@@ -74,7 +78,7 @@ __kernel void query_tiles(__global const int *tile_start, __global const Piece *
         /* coverage and depth exactly as raster_tiles (kernels/raster.cl): the same edges
          * (common.h piece_edges, set up at the tile's first column of row ly0) and the same
          * float32 depth (depth_row, depth_at) at each pixel centre; walked in branch-free
-         * spans of SPAN columns, lanes outside [lx0, lx1] masked */
+         * spans of QUERY_SPAN columns, lanes outside [lx0, lx1] masked */
         PieceEdges E;
         piece_edges(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2], tx0,
                     ty0 + ly0, &E);
@@ -83,8 +87,8 @@ __kernel void query_tiles(__global const int *tile_start, __global const Piece *
         for (int ly = ly0; ly <= ly1; ++ly) {
             int row = ly << TILE_LOG2;
             float zrow = depth_row(&P, ty0 + ly);
-            for (int cx = lx0 & ~(SPAN - 1); cx <= lx1; cx += SPAN)
-            for (int j = 0; j < SPAN; ++j) {
+            for (int cx = lx0 & ~(QUERY_SPAN - 1); cx <= lx1; cx += QUERY_SPAN)
+            for (int j = 0; j < QUERY_SPAN; ++j) {
                 int lx = cx + j;
                 bool in = lx >= lx0 && lx <= lx1 && edges_inside(&E, lx, 0);
                 float z = depth_at(&P, zrow, tx0 + lx);

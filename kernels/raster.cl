@@ -1,5 +1,5 @@
-/* Tile raster: one work-item per row of screen tiles; each tile walks its bin list in
- * submission order.
+/* Tile raster: one work-item per segment of a row of screen tiles (raster_tiles); each tile
+ * walks its bin list in submission order.
  *
  * Per entry: intersect the piece's pixel box with the tile and find the covered pixel
  * centres exactly (top-left rule via edge_bias): from the coverage bits setup found for a
@@ -12,20 +12,22 @@
  * resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
  * farthest depth is skipped untested (tile Hi-Z, see raster_tile).
  *
- * Depth arithmetic is spelled out operation by operation; clraster/reference/raster.py does
- * the same float32 operations, so both z-buffers and hence the triangle ids agree exactly.
+ * Depth arithmetic is spelled out operation by operation; clraster/pipeline/reference/raster.py
+ * does the same float32 operations, so both z-buffers and hence the triangle ids agree exactly.
  */
 #include "common.h"
 
 #if TILE_SIZE < 8
 #error "the raster works in blocks of eight columns of a tile row: TILE_LOG2 >= 3"
 #endif
-/* Tunables of the edge-function path (speed only: any value gives the same fragments).
- * WIDE_RUN: a piece whose columns in a tile span more than WIDE_RUN (x1 - x0 >= WIDE_RUN)
- * finds each row's run by division (edge_columns); a narrower one tests its edges in lanes.
- * TRIM_ROWS: a piece over more than TRIM_ROWS rows of a tile first narrows its rows. */
-#define WIDE_RUN 8
-#define TRIM_ROWS 4
+/* Tunables of the edge-function path, -D options from clraster/base/config.py (speed only:
+ * any value gives the same fragments). WIDE_RUN: a piece spanning at least WIDE_RUN columns
+ * of a tile (x1 - x0 >= WIDE_RUN) finds each row's run by division (edge_columns); a
+ * narrower one tests its edges in lanes. TRIM_ROWS: a piece over at least TRIM_ROWS rows of
+ * a tile first narrows its rows. */
+#if !defined(WIDE_RUN) || !defined(TRIM_ROWS)
+#error "WIDE_RUN and TRIM_ROWS come from clraster.base.config (RasterConfig.build_options)"
+#endif
 #define LANE8 ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
 
 /* Counting the true lanes (-1) of int8 masks: LANE_COUNTER(c) declares counter c,
@@ -259,7 +261,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
      * zbuf[zarg] is not skipped with no more work, and only one behind it finds the
      * farthest depth again (when zbuf[zarg] has fallen below tzmax). Every decision is thus
      * the exact "zlo > farthest depth now", whatever the order of work, and the twin takes
-     * the same decisions from the depth history (clraster/reference/raster.py hiz_skipped).
+     * the same decisions from the depth history (clraster/pipeline/reference/raster.py
+     * hiz_skipped).
      * Pixels outside the image hold -inf so they never count as the farthest. */
     for (int y = ty1 - ty0 + 1; y < TILE_SIZE; ++y)
         for (int x = 0; x < TILE_SIZE; ++x) zbuf[(y << TILE_LOG2) + x] = -INFINITY;
@@ -532,7 +535,8 @@ __kernel void raster_tiles(__global const float *clip_bary,
      * nothing, the outputs stay untouched, the host runs the pass again */
     if (BIN_LIST_OVER(bin_summary, bin_cap)) return;
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
-    /* segments per row: the host's choice (clraster/stages/raster.py segments) */
+    /* segments per row: the host's choice (clraster/pipeline/stages/raster.py segments, about
+     * SEG_TILES tiles each) */
     int segs = (int)get_global_size(0) / tiles_y, seg_tiles = (tiles_x + segs - 1) / segs;
     int g = get_global_id(0);
     int ty = g / segs, seg = g - ty * segs;

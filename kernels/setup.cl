@@ -14,8 +14,8 @@
  */
 #include "common.h"
 
-/* POLY_MAX (clraster/layout.py, 16) > 3 + 6: float rounding can make a clipped polygon a hair
- * non-convex. */
+/* POLY_MAX (clraster/base/layout.py, 24) > MAX_CLIP_VERTICES (3 + 6 + USER_PLANES_MAX = 17):
+ * float rounding can make a clipped polygon a hair non-convex. */
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 
@@ -134,7 +134,7 @@ inline int facing(float4 a, float4 b, float4 c, int cull)
  * is used only while it stays within a factor 2 of the snapped one (as = area2 / 256^2,
  * exact): a sub-pixel sliver whose snap changed its shape that much (or flipped it) falls
  * back to the snapped positions, so weights at its covered pixel centres stay bounded.
- * clraster/reference/setup.py `value_planes` does the same double operations in order. */
+ * clraster/pipeline/reference/setup.py `value_planes` does the same double operations in order. */
 ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0, int X1, int Y1,
                          int X2, int Y2, long area2, double hw, double hh, int px0, int py0,
                          double zs, double zo, Piece *pc)

@@ -22,8 +22,8 @@
  * the lanes are written out. Outcodes as vector compares ORed into int8 masks came out
  * wrong on Oclgrind (tests/test_oclgrind.py), so under CLRASTER_PORTABLE they are per
  * vertex. The host launches CLUSTER_MAX / VERTEX_LANES work-items per draw
- * (clraster/stages/vertex.py); VERTEX_LANES (8, clraster/layout.py) must match the vector
- * types below. */
+ * (clraster/pipeline/stages/vertex.py); VERTEX_LANES (8, clraster/base/layout.py) must match
+ * the vector types below. */
 typedef float8 fvec;
 typedef double8 dvec;
 #ifdef __clang__

@@ -15,7 +15,7 @@ import pytest
 from conftest import assert_frames_equal, load_shared_mesh
 
 from clraster import Camera, RasterConfig, Renderer
-from clraster.base.config import PIECE_DTYPE
+from clraster.base.layout import PIECE_DTYPE
 from clraster.pipeline.params import BinBudgetExceeded
 from clraster.pipeline.stages import bin as bin_stage
 from clraster.world.generators import plant, plant_inside_camera

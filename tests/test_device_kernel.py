@@ -10,7 +10,8 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from clraster.base.config import ST_CLIPPED, ST_RASTER, RasterConfig
+from clraster.base.config import RasterConfig
+from clraster.base.layout import ST_CLIPPED, ST_RASTER
 from clraster.pipeline import device
 
 

@@ -81,7 +81,6 @@ def test_level_shapes():
     assert len(level_shapes(1920, 1080)) == 12
     for w, h in ((7, 9), (64, 64), (65, 3), (16384, 1)):
         shapes = level_shapes(w, h)
-        assert shapes == ref.level_shapes(w, h)
         assert shapes[0] == (h, w) and shapes[-1] == (1, 1)
         for (h0, w0), (h1, w1) in zip(shapes, shapes[1:], strict=False):
             assert (h1, w1) == (-(-h0 // 2), -(-w0 // 2))

@@ -25,7 +25,7 @@ from conftest import MatrixCamera
 from random_scenes import Lens, random_soup, random_view, to_world
 
 from clraster import Mesh, RasterConfig
-from clraster.base.config import (
+from clraster.base.layout import (
     DRAW_INSIDE,
     OC_INVALID,
     OC_NEEDS_CLIP,

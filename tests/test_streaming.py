@@ -23,7 +23,7 @@ from conftest import NDC_CAMERA, assert_frames_equal, load_shared_mesh
 
 import clraster
 from clraster import Camera, Mesh, RasterConfig, Renderer
-from clraster.base.config import DRAW_DTYPE, PIECE_DTYPE
+from clraster.base.layout import DRAW_DTYPE, PIECE_DTYPE
 from clraster.pipeline import reference
 from clraster.pipeline.draws import FrameDraws
 from clraster.pipeline.params import BinBudgetExceeded

@@ -16,8 +16,8 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from .config import CULL_MODES, MAX_IMAGE_SIZE
-from .layout import USER_PLANES_MAX
+from .config import MAX_IMAGE_SIZE
+from .layout import CULL_MODES, USER_PLANES_MAX
 
 
 class CameraLike(Protocol):

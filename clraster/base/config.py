@@ -1,16 +1,23 @@
 """Every tunable of the pipeline, in one place.
 
-`RasterConfig` is a frozen dataclass: it is hashed into the program cache key and turned into
-the ``-D`` options that the kernels in ``kernels/`` are built with. The NumPy twin reads the
-same object, so both sides agree on every constant.
+Two kinds, both for speed or memory only: none of them changes an image or an id (a few
+change how the culling counts attribute a culled cluster, as their comments say):
 
-Constants that are *rules*, not tunables (they are part of the output contract and never
-change the image when a tunable does):
+* `RasterConfig`: the per-renderer tunables, a frozen dataclass. It is hashed into the
+  program cache key and turned into the ``-D`` options the kernels in ``kernels/`` are built
+  with (`RasterConfig.build_options`); the NumPy twin reads the same object.
+* Module constants below: fixed tunables, one line each with its effect, unit and limits
+  (as nvdiffrast's ``Constants.hpp``). Those in `KERNEL_TUNABLES` reach the kernels as
+  ``-D`` options too (no kernel file spells them out); the others are read by the host
+  module named in their comment, which imports them by name (tests and benchmarks switch
+  them there, on that module).
 
-* ``SUBPIXEL_BITS = 8``: vertices snap to 1/256 pixel, as D3D11 requires. Like every
-  constant and record the kernels share with the host (outcode bits, status codes, piece
-  flags, PIECE_DTYPE...), it is defined in `clraster.base.layout`, which generates the kernels'
-  copies, and re-exported here.
+Constants that are *rules*, not tunables (part of the output contract): the fixed point
+(``SUBPIXEL_BITS = 8``: vertices snap to 1/256 pixel, as D3D11 requires), outcode bits,
+status codes, piece flags and records live in `clraster.base.layout`, which generates the
+kernels' copies; import them from there. Two more rules are here, since the host's checks
+use them:
+
 * ``MAX_IMAGE_SIZE = 16384``: widths/heights above this are refused. Pixel coordinates are
   packed into 16 bits in the triangle setup records (``Piece.bb_min``/``bb_max``).
 * ``GUARD_BAND_PIXELS = 2**19``: window coordinates of any vertex that reaches the fixed-point
@@ -25,62 +32,86 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# The constants and records shared with the kernels live in clraster/layout.py, their one
-# source (it generates the kernels' #defines and structs); they are re-exported here, where
-# the pipeline has always imported them from.
-from .layout import (
-    CLUSTER_LOG2,
-    CLUSTER_MAX,
-    COVER_KNOWN,
-    CULL_MODES,
-    DRAW_DTYPE,
-    DRAW_INSIDE,
-    MAX_CLIP_VERTICES,
-    OC_FRUSTUM,
-    OC_GB_X_NEG,
-    OC_GB_X_POS,
-    OC_GB_Y_NEG,
-    OC_GB_Y_POS,
-    OC_INVALID,
-    OC_NEEDS_CLIP,
-    OC_W_NONPOS,
-    OC_X_NEG,
-    OC_X_POS,
-    OC_Y_NEG,
-    OC_Y_POS,
-    OC_Z_NEG,
-    OC_Z_POS,
-    PF_CLIPPED,
-    PF_INDEX_SHIFT,
-    PF_SWAPPED,
-    PIECE_DTYPE,
-    ST_BACKFACE,
-    ST_CLIPPED,
-    ST_DEGENERATE,
-    ST_INVALID,
-    ST_NO_SAMPLE,
-    ST_RASTER,
-    ST_TRIVIAL_REJECT,
-    STATUS_NAMES,
-    SUBPIXEL_BITS,
-    SUBPIXEL_ONE,
-    WINVERT_DTYPE,
-    WINXY_DTYPE,
-)
+from .layout import CLUSTER_MAX
 
 __all__ = [
-    "CLUSTER_LOG2", "CLUSTER_MAX", "COVER_KNOWN", "CULL_MODES", "DRAW_DTYPE", "DRAW_INSIDE",
-    "GUARD_BAND_PIXELS", "MAX_CLIP_VERTICES", "MAX_IMAGE_SIZE", "OC_FRUSTUM", "OC_GB_X_NEG",
-    "OC_GB_X_POS", "OC_GB_Y_NEG", "OC_GB_Y_POS", "OC_INVALID", "OC_NEEDS_CLIP", "OC_W_NONPOS",
-    "OC_X_NEG", "OC_X_POS", "OC_Y_NEG", "OC_Y_POS", "OC_Z_NEG", "OC_Z_POS", "PF_CLIPPED",
-    "PF_INDEX_SHIFT", "PF_SWAPPED", "PIECE_DTYPE", "ST_BACKFACE", "ST_CLIPPED", "ST_DEGENERATE",
-    "ST_INVALID", "ST_NO_SAMPLE", "ST_RASTER", "ST_TRIVIAL_REJECT", "STATUS_NAMES",
-    "SUBPIXEL_BITS", "SUBPIXEL_ONE", "WINVERT_DTYPE", "WINXY_DTYPE", "RasterConfig",
-    "guard_band_factors",
+    "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS", "DENSE_INSTANCES", "DENSE_PAIRS",
+    "FLAT_CLUSTERS", "FLAT_MAX_PAIRS", "GUARD_BAND_PIXELS", "HIZ_TEST_LOCAL",
+    "KERNEL_TUNABLES", "LINES_LOCAL", "MAX_IMAGE_SIZE", "MIN_CHUNK_TRIANGLES",
+    "OCCLUSION_FIRST_CLUSTERS", "QUERY_SPAN", "SCAN_CHUNKS", "SEG_TILES", "THREAD_PAIRS",
+    "TRIM_ROWS", "WIDE_RUN", "RasterConfig", "guard_band_factors",
 ]
+
+# ---- Rules the host checks (module docstring) ----------------------------------------------
 
 MAX_IMAGE_SIZE = 16384
 GUARD_BAND_PIXELS = 1 << 19
+
+# ---- Kernel tunables (-D options of every program; speed only) ----------------------------
+
+#: raster.cl: a piece spanning at least this many columns of a tile (x1 - x0 >= WIDE_RUN)
+#: finds each row's covered run by division (edge_columns); a narrower one tests its edges
+#: in lanes of eight. Pixels; any value >= 0 gives the same fragments.
+WIDE_RUN = 8
+#: raster.cl: a piece over at least this many rows of a tile (y1 - y0 >= TRIM_ROWS) first
+#: narrows its rows to those its edges can meet. Rows; any value >= 0.
+TRIM_ROWS = 4
+#: query.cl: columns per branch-free span of the occlusion query's pixel loop. Pixels; a
+#: power of two <= 8 (it must divide every tile size, 8..64).
+QUERY_SPAN = 8
+#: The constants above, in the order `RasterConfig.build_options` passes them.
+KERNEL_TUNABLES = ("WIDE_RUN", "TRIM_ROWS", "QUERY_SPAN")
+
+# ---- Launch shapes (host stages; speed only) -----------------------------------------------
+
+#: stages/raster.py: tiles per raster work-item, about (a row of tiles is cut into segments
+#: of this many). Tiles; >= 1. Fewer: more work-items, shorter runs of empty tiles to clear
+#: (256 px at 16 px tiles); more: whole rows, which leave a core idle when the work sits in
+#: a few rows (kernels/raster.cl).
+SEG_TILES = 16
+#: stages/setup.py: ranges of the clip-count scan, one work-item each. >= 1; a few per core.
+SCAN_CHUNKS = 64
+#: stages/bin.py: fewest triangles per bin chunk (RasterConfig.bin_chunks caps the count).
+#: Triangles; >= 1. The per-chunk rows of tile counts are a fixed cost per chunk that small
+#: meshes would otherwise pay 64 times.
+MIN_CHUNK_TRIANGLES = 1024
+#: stages/pyramid.py: work-group size of the Hi-Z box test (one work-item per 8 boxes).
+#: Work-items; >= 1 (PoCL compiles one specialization per local size).
+HIZ_TEST_LOCAL = 16
+#: stages/lines.py: work-group size of the three line kernels. Work-items; >= 1.
+LINES_LOCAL = 64
+
+# ---- Host culling paths (culling/cull.py; speed only: every path gives the same answer) ----
+
+#: Clusters per leaf of a mesh's cluster BVH. >= 1.
+CLUSTER_LEAF_SIZE = 32
+#: Instances of meshes with at most this many clusters take the flat path: their (instance,
+#: cluster) boxes are precomputed in world space and tested all at once. Clusters.
+FLAT_CLUSTERS = 64
+#: ... unless the scene has more such pairs than this (84 bytes each, kept with the scene).
+FLAT_MAX_PAIRS = 1 << 21
+#: Meshes with at most this many (bounded) clusters are tested densely, every cluster
+#: against every intersecting instance's planes (three matrix products), not through their
+#: BVH: for small meshes with many instances that is several times faster. Clusters.
+DENSE_CLUSTERS = 64
+#: ... and so are meshes whose (instances × clusters) grid is at most this large. Pairs.
+DENSE_PAIRS = 16384
+#: (instance, cluster) pairs per batch of the dense test: bounds its temporaries. >= 1.
+DENSE_CHUNK = 1 << 18
+#: Scenes with at most this many bounded instances classify them densely, every instance box
+#: against the planes, not through the instance BVH (whose traversal pays off when whole
+#: subtrees are culled among many more instances). Instances.
+DENSE_INSTANCES = 1 << 15
+#: Below this many (instance, cluster) pairs to look at, the culling paths run one after the
+#: other in the calling thread; above, on helper threads. Pairs; 0: always threads.
+THREAD_PAIRS = 32768
+
+# ---- Occlusion culling (pipeline/twophase.py) ----------------------------------------------
+
+#: First frame of occlusion culling: at least this many of the nearest clusters (or 1/8 of
+#: those that survive frustum culling, if more) are drawn before the first pyramid. Clusters;
+#: >= 0. Changes which clusters the counts call occlusion-culled, never the image.
+OCCLUSION_FIRST_CLUSTERS = 256
 
 
 @dataclass(frozen=True)
@@ -97,20 +128,16 @@ class RasterConfig:
             ``bin_chunks × tiles × 4`` bytes.
         batch_triangles: a frame's draws go through the stage chain (vertex → setup →
             bin → raster) in consecutive batches of at most this many triangles, each
-            rasterized into the same frame buffers (`clraster.pipeline.streaming`), so the vertex,
-            setup and bin buffers are sized by the batch, never by the scene: at most 346
-            bytes per triangle of the budget (`StageChain.budget_bounds`: draw records,
-            the vertex stream of three vertices, the setup record, status and tile words,
-            the list of slots to bin). A draw (one
-            cluster, ≤ CLUSTER_MAX triangles) is the smallest unit, so values below
-            CLUSTER_MAX are refused. Never changes the image or the counts. Each extra pass
-            costs a few launches and waits, and the raster reloads the tiles it touches.
-            Default ``1 << 20``, measured (bench/README.md, "Streamed frames"): at 1920×1080
-            2**16 was clearly slower (dragon min 203 vs 106 ms; 5M plant outside 1418 vs
-            1041–1120 ms), 2**18 a little slower, 2**20 and 2**22 alike within the noise;
-            2**20 keeps the dragon (871K triangles) in one pass and bounds these buffers to
-            ~346 MiB (207 MiB with the 64-byte records and float32 vertex stream this was
-            measured with), where 2**22 held 642 MiB on the plant.
+            rasterized into the same frame buffers (`clraster.pipeline.streaming`), so the
+            vertex, setup and bin buffers are sized by the batch, never by the scene: at
+            most 346 bytes per triangle of the budget (`StageChain.budget_bounds`: draw
+            records, the vertex stream of three vertices, the setup record, status and tile
+            words, the list of slots to bin). A draw (one cluster, ≤ CLUSTER_MAX triangles)
+            is the smallest unit, so values below CLUSTER_MAX are refused. Never changes the
+            image or the counts. Each extra pass costs a few launches and waits, and the
+            raster reloads the tiles it touches. Default ``1 << 20`` (346 MiB of these
+            buffers): the dragon (871K triangles) in one pass; smaller budgets were slower,
+            larger ones no faster (bench/README.md, "Streamed frames").
         batch_entries: the (piece, tile) entries of one pass's bin list, at most (clipped
             pieces count against it too). A batch whose count step finds more is split and
             drawn again in smaller batches (never truncated, never refused); a single draw
@@ -118,30 +145,27 @@ class RasterConfig:
             after the frame. Memory: 96 bytes per entry (the entries are copies of the
             96-byte setup records, which the raster reads sequentially) plus 132 per
             clipped piece. Default ``1 << 21`` (192 MiB of entries): ordinary scenes bin
-            ~0.5 entries per triangle (dragon 0.46, 5M plant 0.56 at 1080p), so a full
-            triangle batch needs ~2**19 and this never binds there (2**20..2**22 measured
-            alike); it splits only frames of huge overlapping triangles, whose passes are
-            raster work anyway. 2**22 would double the bound for no measured gain.
+            ~0.5 entries per triangle, so a full triangle batch needs ~2**19 and this never
+            binds there; it splits only frames of huge overlapping triangles, whose passes
+            are raster work anyway.
         tile_hiz: the raster skips a piece whose nearest depth is behind the farthest
             depth its tile holds at that moment (kernels/raster.cl): it could pass nowhere
             there. Never changes the image; it lowers ``fragments_tested`` and the overdraw
             map, which then count the fragments that reached the depth test (without it,
             every covered fragment, the scene's depth complexity). The twin takes the same
-            decisions. 10M plant first person with occlusion culling: 12.2M fragments
-            tested → 7.2M, raster 0.74×; no gain where back-face culling leaves little
-            overdraw (dragon, bunny, spot framed: tested ≈ passed), dragon raster ~1.02×.
-        occlusion_groups: hierarchical occlusion culling (`clraster.pipeline.twophase`): after the
-            first frame, each instance's clusters are taken in groups of at most this many
-            (neighbours in its mesh's cluster BVH; a small mesh's instance is one group),
-            the groups' world boxes are Hi-Z tested first, and only the clusters of the
-            groups not proved hidden are frustum-, cone- and Hi-Z tested one by one. Never
-            changes the image; the counts then say "occlusion culled" for clusters whose
-            group was hidden, where the flat scheme (0: every cluster that survives the
-            frustum and cone tests is Hi-Z tested) would have counted some of them
-            frustum- or cone-culled first. Default 16 (10M plant first person: 8.2K of
-            106K clusters left to test one by one; frame medians with groups of 16 / 32 /
-            64: 44.5 / 45.2 / 46.2 ms in one run, of 8 / 12 / 16 / 24: 45.1 / 44.9 / 44.8 /
-            45.3 in another, ~52 flat; bench/README.md).
+            decisions. It pays where overdraw survives culling (the plant seen from
+            inside); where back-face culling leaves little overdraw it neither gains nor
+            costs.
+        occlusion_groups: hierarchical occlusion culling (`clraster.pipeline.twophase`):
+            after the first frame, each instance's clusters are taken in groups of at most
+            this many (neighbours in its mesh's cluster BVH; a small mesh's instance is one
+            group), the groups' world boxes are Hi-Z tested first, and only the clusters of
+            the groups not proved hidden are frustum-, cone- and Hi-Z tested one by one.
+            Never changes the image; the counts then say "occlusion culled" for clusters
+            whose group was hidden, where the flat scheme (0: every cluster that survives
+            the frustum and cone tests is Hi-Z tested) would have counted some of them
+            frustum- or cone-culled first. Default 16: 8 to 64 measured alike, all faster
+            than flat (bench/README.md).
     """
 
     tile_log2: int = 4
@@ -178,9 +202,12 @@ class RasterConfig:
         return (width + t - 1) // t, (height + t - 1) // t
 
     def build_options(self) -> tuple[str, ...]:
-        """The ``-D`` options the kernels are built with (the tunables; the fixed constants
-        reach the kernels through clraster.base.layout's generated header)."""
-        return (f"-DTILE_LOG2={self.tile_log2}",)
+        """The ``-D`` options the kernels are built with: the tile size and the fixed
+        kernel tunables (`KERNEL_TUNABLES`). The rules and records reach the kernels through
+        clraster.base.layout's generated header instead."""
+        g = globals()
+        return (f"-DTILE_LOG2={self.tile_log2}",
+                *(f"-D{name}={g[name]}" for name in KERNEL_TUNABLES))
 
 
 def guard_band_factors(width: int, height: int) -> tuple[np.float32, np.float32]:

@@ -1,6 +1,6 @@
 """Object culling on the host: the draw list of (instance, cluster) pairs for one view.
 
-Step 1 of the pipeline (DESIGN.md): instances and clusters are classified against the six
+Step 1 of the pipeline (docs/ARCHITECTURE.md): instances and clusters are classified against the six
 frustum planes of the view-projection matrix (:mod:`clraster.culling.frustum`: planes, margins,
 eye), and clusters that face away are removed with their normal cones. The result is a
 :class:`DrawList` of (instance, cluster) pairs for the renderer.
@@ -51,7 +51,18 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ..base.config import CULL_MODES
+# the thresholds that choose a culling path (speed only): tunables, in clraster.base.config
+from ..base.config import (
+    CLUSTER_LEAF_SIZE,
+    DENSE_CHUNK,
+    DENSE_CLUSTERS,
+    DENSE_INSTANCES,
+    DENSE_PAIRS,
+    FLAT_CLUSTERS,
+    FLAT_MAX_PAIRS,
+    THREAD_PAIRS,
+)
+from ..base.layout import CULL_MODES
 from ..world.mesh import Mesh
 from ..world.scene import Scene
 from .bvh import (
@@ -299,26 +310,6 @@ def _prepare(scene: Scene, max_triangles: int, max_vertices: int) -> _SceneCull:
                       lambda: _SceneCull(scene, [mesh_data(i.mesh) for i in scene.instances]))
 
 
-#: Clusters per leaf of a mesh's cluster BVH.
-CLUSTER_LEAF_SIZE = 32
-#: Instances of meshes with at most this many clusters take the flat path: their
-#: (instance, cluster) boxes are precomputed in world space and tested all at once.
-FLAT_CLUSTERS = 64
-#: ... unless the scene has more such pairs than this (84 bytes each, kept with the scene).
-FLAT_MAX_PAIRS = 1 << 21
-#: Meshes with at most this many (bounded) clusters are tested densely, every cluster
-#: against every intersecting instance's planes (three matrix products), not through
-#: their BVH: for small meshes with many instances that is several times faster.
-DENSE_CLUSTERS = 64
-#: ... and so are meshes whose (instances × clusters) grid is at most this large.
-DENSE_PAIRS = 16384
-_DENSE_CHUNK = 1 << 18  # (instance, cluster) pairs per dense batch
-#: Scenes with at most this many bounded instances classify them densely, every instance
-#: box against the planes, not through the instance BVH (whose traversal pays off when
-#: whole subtrees are culled among many more instances).
-DENSE_INSTANCES = 1 << 15
-
-
 def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np.ndarray,
                      inside_margin: float | np.ndarray, outside_margin: float | np.ndarray):
     """(query, item, mask) of the non-OUTSIDE (instance, cluster) pairs, sorted; planes,
@@ -329,7 +320,7 @@ def _cluster_frustum(bvh: BVH, planes: np.ndarray, scales: np.ndarray, masks: np
                                         outside_margin=outside_margin)
         return q, item, mk
     out_q, out_i, out_m = [], [], []
-    step = max(1, _DENSE_CHUNK // max(bvh.n_items, 1))
+    step = max(1, DENSE_CHUNK // max(bvh.n_items, 1))
     for q0 in range(0, planes.shape[0], step):
         sl = slice(q0, q0 + step)
         st, mk = dense_row_states(planes[sl], scales[sl], masks[sl], bvh.dense_rows,
@@ -387,8 +378,8 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
         mask = np.repeat(mk[test], prep.flat_count[test])
         alive = np.empty(pos_t.size, bool)
         ins_t = np.empty(pos_t.size, bool)
-        for c0 in range(0, pos_t.size, _DENSE_CHUNK):  # bounded temporaries
-            sl = slice(c0, c0 + _DENSE_CHUNK)
+        for c0 in range(0, pos_t.size, DENSE_CHUNK):  # bounded temporaries
+            sl = slice(c0, c0 + DENSE_CHUNK)
             p = pos_t[sl]
             box = np.take(prep.flat_boxes, p, axis=1)
             dmin, dmax, mterm = box_extremes(view.planes[:6], view.scales[:6], box[0:3],
@@ -652,8 +643,7 @@ def _classify_instances(prep: _SceneCull, view: _ViewPlanes
         # by a user plane is culled by each of its clusters' object-space tests below.
         if prep.inst_root is not None:
             # one bounded instance: the root test `BVH.cull` makes, without its traversal
-            # machinery (same states and masks; spot, timeit medians interleaved with the
-            # old code: `_classify_instances` ~45 µs instead of ~110-130 µs a frame here)
+            # machinery (same states and masks; a third of the time for a framed mesh)
             box = prep.inst_root
             k = view.planes.shape[0]
             mask = np.full(1, view.start, np.uint8 if k <= 8 else np.uint16)
@@ -666,8 +656,8 @@ def _classify_instances(prep: _SceneCull, view: _ViewPlanes
                 inst_mask[i] = mk[0]
         elif prep.inst_ids.size <= DENSE_INSTANCES:
             # every instance box on its own (`BVH.cull` equals that by contract): three
-            # matrix products instead of a traversal (10M plant, 5,349 instances: 0.29 ms
-            # instead of 1.49, the same states and masks)
+            # matrix products instead of a traversal (the same states and masks; ~5× faster
+            # for the 10M plant's 5,349 instances)
             k = view.planes.shape[0]
             start = np.full(1, view.start, np.uint8 if k <= 8 else np.uint16)
             st, mk = dense_row_states(view.planes[None], view.scales[None], start,
@@ -791,9 +781,6 @@ class _PathResult:
     t_cones: float
 
 
-#: Below this many (instance, cluster) pairs to look at, the culling paths run one after
-#: the other in the calling thread; above, on `_pool`'s threads (`_run_tasks`).
-THREAD_PAIRS = 32768
 #: CPUs this process may run on (read once: os.cpu_count() took ~15 µs a call, a tenth of
 #: an empty frame's culling)
 _NCPU = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..base.config import (
+from ..base.layout import (
     ST_BACKFACE,
     ST_CLIPPED,
     ST_DEGENERATE,

@@ -14,8 +14,14 @@ from enum import IntEnum
 
 import numpy as np
 
-from ..base.config import CLUSTER_MAX, DRAW_DTYPE
-from ..base.layout import BOX_TRIS, OCC_OCCLUDED, OCC_VIEW_CULLED, OCC_VISIBLE
+from ..base.layout import (
+    BOX_TRIS,
+    CLUSTER_MAX,
+    DRAW_DTYPE,
+    OCC_OCCLUDED,
+    OCC_VIEW_CULLED,
+    OCC_VISIBLE,
+)
 from .draws import FrameDraws, depth_rows
 
 __all__ = ["BOX_FACES", "CLUSTER_BOXES", "BoxGeometry", "Occlusion", "box_corners",

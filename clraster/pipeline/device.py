@@ -11,9 +11,8 @@ compiled binaries on disk, so a second process skips the LLVM compile (cold vs w
 Worker threads: PoCL's CPU device runs kernels on one worker thread per core. Left to the
 Linux scheduler, the workers of this 2-core VM were often both placed on one core after the
 process had been idle for a few milliseconds (a Python pause, another library's frame): a
-kernel then ran on one core, twice as long (spot's raster at 1080p 2.3 ms back to back,
-4.1-4.2 ms in most frames after a 20 ms sleep; per-thread run times showed one worker doing
-the whole kernel). So `platforms` asks PoCL to pin worker i to CPU i (``POCL_AFFINITY=1``)
+kernel then ran on one core, twice as long (bench/README.md's performance log has the
+measurement). So `platforms` asks PoCL to pin worker i to CPU i (``POCL_AFFINITY=1``)
 when that is safe: on Linux, the process may run on every CPU, and no PoCL thread count
 other than the CPU count is set (with fewer, the process shares the machine, e.g. one of
 several Dask workers, and would pin its threads onto the same first CPUs as the others;
@@ -299,8 +298,7 @@ def shares_host_memory(ctx: cl.Context) -> bool:
     enqueued on such a buffer must show in its array without a map. Every map, unmap or
     read is a command of its own that PoCL's threads pick up one after another: the reads
     after a frame (the raster's counts, its three output maps, the bin summary, setup's
-    flag) returned ~0.3 ms after the raster ended on spot at 1080p (a scratch timeline of
-    60 frames), where the frame is ~4.4 ms."""
+    flag) came back a measurable share of a small frame after the raster ended."""
     cached = getattr(ctx, _SHARED_ATTR, None)
     if cached is None:
         cached = _probe_shared(ctx)
@@ -398,11 +396,10 @@ def kernel(prg: cl.Program, name: str) -> cl.Kernel:
     """Kernel ``name`` of ``prg``, with its scalar arguments' dtypes declared.
 
     pyopencl sets an undeclared scalar argument (a NumPy scalar) through a generic path that
-    took ~9 µs per argument on this machine, against ~0.5 µs for a buffer: a launch of the
-    setup kernel (11 scalars among 24 arguments) cost ~0.1 ms of host time, and a frame
-    launches 7 or more. With the dtypes declared (``set_scalar_arg_dtypes``, read here from
-    the kernel's argument info so they cannot drift from the source) pyopencl packs them
-    in one generated call: 92 → 8 µs for 22 arguments (bench/host_overhead.py).
+    costs ~20 times a buffer argument's, and a frame launches kernels of up to a dozen
+    scalars 7 or more times. With the dtypes declared (``set_scalar_arg_dtypes``, read here
+    from the kernel's argument info so they cannot drift from the source) pyopencl packs
+    them in one generated call, an order of magnitude cheaper (bench/host_overhead.py).
     Where the platform gives no argument info, the kernel is returned undeclared (slower,
     same results). Callers pass scalars as NumPy scalars of the kernel's types, as before.
     """
@@ -588,16 +585,10 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
     and is interrupted by signals, so KeyboardInterrupt gets through at once (the waiter
     goes on waiting for the abandoned marker).
 
-    History: the status polled for the whole wait with sleeps of 20 µs doubling to
-    250 µs was up to 250 µs late, with a wake-up every 250 µs on the kernels' cores. A
-    marker's completion callback setting the Event (pyopencl runs callbacks through a
-    thread of its own) returned 176–193 µs after the dragon's raster ended at 1080p,
-    against 79 µs for ``queue.finish()`` and 126 µs with the waiter (a scratch timeline
-    of 60 frames); bench/proc_ab.py, 15 rounds, waiter against callback: spot 0.961x,
-    bunny 0.977x, dragon 0.977x, plant 10M occlusion 0.999x, empty 1.008x (it waits
-    once). A helper thread blocked in ``Event.wait`` had been tried in session 12, before
-    PoCL's workers were pinned one per CPU (spot 1.07x slower, its raster too; the pinning
-    is the likely difference, not measured apart).
+    Why not the alternatives: polling the status with sleeps wakes up on the kernels' cores
+    and returns up to a sleep late; a marker's completion callback (pyopencl runs callbacks
+    through a thread of its own) returned later than this waiter. The measurements are in
+    bench/README.md's performance log.
     """
     ev = cl.enqueue_marker(queue)
     queue.flush()

@@ -16,8 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from ..base.checks import CameraLike, view_projection
-from ..base.config import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE
-from ..base.layout import DRAW_MIRRORED
+from ..base.layout import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE, DRAW_MIRRORED
 from ..culling.clusters import clusters_of
 from ..culling.cull import ViewCull
 from ..world.mesh import Mesh
@@ -86,9 +85,8 @@ class GeometryPool:
         last ``mats`` seen (by identity: `Scene.transforms` is memoized per scene version,
         a new version is a new array, and the one kept here stays alive, so its id cannot
         be reused): the draw layout remade them every frame (np.linalg.det, the origin
-        matrices, two matmuls); with this and its skip of empty draw records, an empty
-        frame of spot takes ~13 µs there instead of ~68 µs, spot framed ~42 µs instead of
-        ~70-100 µs (timeit medians, interleaved with the old code)."""
+        matrices, two matmuls), which was most of the draw layout's time for a small
+        scene."""
         kept = self.__dict__.get("_models")
         if kept is not None and kept[0] is mats:
             return kept[1], kept[2]

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..base.config import CULL_MODES, RasterConfig, guard_band_factors
+from ..base.config import RasterConfig, guard_band_factors
+from ..base.layout import CULL_MODES
 from ..output.frame import FrameStats, status_counts
 
 

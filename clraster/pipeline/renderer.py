@@ -56,8 +56,9 @@ class Renderer:
                        kept to make the next frames' arrays without page faults
                        (`clraster.arraypool`: a frame's arrays are its own as long as
                        anything refers to them)
-      + per pass       ≤ 342·M + 228·E bytes (798 MiB at the defaults; draws, vertex stream,
-                       setup records, clipped pieces, bin entries; `StageChain.budget_bounds`)
+      + per pass       ≤ 346·M + 228·E bytes (802 MiB at the defaults; draws, vertex stream,
+                       setup records, clipped pieces, bin entries; `StageChain.budget_bounds`
+                       computes them, tests/test_budget_text.py checks these figures)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
       + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and
                        96 bytes per instance (its matrix and depth rows) — not per drawn

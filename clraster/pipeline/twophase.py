@@ -43,6 +43,7 @@ from typing import Any, Protocol, cast
 
 import numpy as np
 
+from ..base.config import OCCLUSION_FIRST_CLUSTERS  # the first frame's budget (a tunable)
 from ..culling.bvh import OUTSIDE, concat_ranges
 from ..culling.cull import DrawList
 from ..culling.frustum import eye_from_view_proj
@@ -54,9 +55,6 @@ from .params import FrameTotals
 __all__ = ["OCCLUSION_FIRST_CLUSTERS", "KeyGroups", "OcclusionHistory", "TwoPhaseResult",
            "eye_position", "two_phase", "view_direction"]
 
-#: First frame of occlusion culling: at least this many of the nearest clusters (or 1/8 of
-#: those that survive frustum culling, if more) are drawn before the first pyramid.
-OCCLUSION_FIRST_CLUSTERS = 256
 
 
 def eye_position(view_proj: np.ndarray) -> np.ndarray | None:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...base.config import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE, RasterConfig
+from ...base.config import RasterConfig
+from ...base.layout import ST_CLIPPED, ST_RASTER, SUBPIXEL_BITS, SUBPIXEL_ONE
 from ..params import BinBudgetExceeded
 
 

@@ -16,15 +16,6 @@ import numpy as np
 import numpy.typing as npt
 
 from ...base.checks import check_clip_planes, check_size
-from ...base.config import (
-    OC_X_NEG,
-    OC_X_POS,
-    OC_Y_NEG,
-    OC_Y_POS,
-    OC_Z_NEG,
-    OC_Z_POS,
-    SUBPIXEL_BITS,
-)
 from ...base.layout import (
     LINE_DTYPE,
     LS_ACCEPTED,
@@ -34,6 +25,13 @@ from ...base.layout import (
     LS_CLIPPED_DEGENERATE,
     LS_INVALID,
     LS_REJECTED,
+    OC_X_NEG,
+    OC_X_POS,
+    OC_Y_NEG,
+    OC_Y_POS,
+    OC_Z_NEG,
+    OC_Z_POS,
+    SUBPIXEL_BITS,
     ZMIN_CLEAR,
 )
 from ..segments import (

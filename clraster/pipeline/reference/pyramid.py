@@ -17,16 +17,6 @@ from ..boxes import Occlusion
 F32 = np.float32
 
 
-def level_shapes(width: int, height: int) -> list[tuple[int, int]]:
-    """(height, width) of every level: level k+1 = ceil(w_k/2) × ceil(h_k/2), down to 1 × 1."""
-    w, h = int(width), int(height)
-    shapes = [(h, w)]
-    while w > 1 or h > 1:
-        w, h = (w + 1) // 2, (h + 1) // 2
-        shapes.append((h, w))
-    return shapes
-
-
 def _farther(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(a > b, a, b)
 

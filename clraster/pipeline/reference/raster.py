@@ -10,14 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...base.config import (
-    PF_CLIPPED,
-    PF_INDEX_SHIFT,
-    PF_SWAPPED,
-    SUBPIXEL_BITS,
-    SUBPIXEL_ONE,
-    RasterConfig,
-)
+from ...base.config import RasterConfig
+from ...base.layout import PF_CLIPPED, PF_INDEX_SHIFT, PF_SWAPPED, SUBPIXEL_BITS, SUBPIXEL_ONE
 
 F32 = np.float32
 _BATCH = 1 << 22  # candidate pixels per batch (memory bound, not a semantic limit)

@@ -11,9 +11,10 @@ from typing import cast
 
 import numpy as np
 
-from ...base.config import (
+from ...base.layout import (
     COVER_KNOWN,
     CULL_MODES,
+    DRAW_MIRRORED,
     OC_FRUSTUM,
     OC_GB_X_NEG,
     OC_GB_X_POS,
@@ -28,6 +29,7 @@ from ...base.config import (
     PF_INDEX_SHIFT,
     PF_SWAPPED,
     PIECE_DTYPE,
+    POLY_MAX,  # vertex slots of the clipper's polygon (kernels/setup.cl)
     ST_BACKFACE,
     ST_CLIPPED,
     ST_DEGENERATE,
@@ -38,10 +40,6 @@ from ...base.config import (
     SUBPIXEL_BITS,
     SUBPIXEL_ONE,
     WINVERT_DTYPE,
-)
-from ...base.layout import (
-    DRAW_MIRRORED,
-    POLY_MAX,  # vertex slots of the clipper's polygon (kernels/setup.cl)
 )
 from .vertex import viewport
 

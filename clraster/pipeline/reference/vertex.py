@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...base.config import (
+from ...base.layout import (
     DRAW_INSIDE,
     OC_GB_X_NEG,
     OC_GB_X_POS,

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import PIECE_DTYPE, RasterConfig
+from ...base.config import MIN_CHUNK_TRIANGLES, RasterConfig
+from ...base.layout import PIECE_DTYPE
 from ..device import kernel, program, wait
 from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
@@ -47,10 +48,6 @@ class BinBuffers:
     pending: bool = False
 
 
-#: Fewest triangles per bin chunk (above, the config's bin_chunks caps the count).
-MIN_CHUNK_TRIANGLES = 1024
-
-
 class BinStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         prg = program(ctx, "bin", config.build_options())
@@ -88,9 +85,9 @@ class BinStage:
         m = setup.n_tris
         tiles_x, n_tiles = params.tiles_x, params.n_tiles
         # Chunks of at least MIN_CHUNK_TRIANGLES: the per-chunk rows (chunks × tiles counts,
-        # cleared, then scanned per tile) are a fixed cost that 64 chunks of a small mesh
-        # paid in full (spot, 5.9K triangles, 1080p: bin_offsets 0.81 ms with 64 chunks,
-        # 0.08 with 8); a few chunks per core still balance the count and scatter.
+        # cleared, then scanned per tile) are a fixed cost per chunk, which a small mesh
+        # cut into 64 chunks would pay in full (bin_offsets ~10× on spot at 1080p); a few
+        # chunks per core still balance the count and scatter.
         chunks = max(1, min(self.config.bin_chunks, -(-m // MIN_CHUNK_TRIANGLES)))
         counts = b.counts.ensure(4 * chunks * n_tiles)
         common = (setup.status.buf, setup.clip_count.buf, setup.clip_offset.buf,

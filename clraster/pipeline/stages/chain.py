@@ -18,7 +18,8 @@ from typing import Any, cast
 
 import pyopencl as cl
 
-from ...base.config import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE, RasterConfig
+from ...base.config import RasterConfig
+from ...base.layout import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE
 from ..device import abandon, wait
 from ..draws import FrameDraws
 from ..params import BinBudgetExceeded, FrameParams, FrameTotals

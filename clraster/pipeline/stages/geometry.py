@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import DRAW_INSIDE
+from ...base.layout import DRAW_INSIDE
 from ..drawlist import GeometryPool
 from ..draws import FrameDraws
 from ._buffers import GrowBuffer

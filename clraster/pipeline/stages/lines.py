@@ -13,13 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import RasterConfig
+from ...base.config import LINES_LOCAL, RasterConfig
 from ...base.layout import LINE_DTYPE, ZMIN_CLEAR
 from ..device import kernel, program
 from ._buffers import GrowBuffer
 
-#: Work-group size of the three kernels (PoCL compiles one specialization per local size).
-LOCAL_SIZE = 64
 _CLEAR = np.array([ZMIN_CLEAR], np.uint32)  # ZMIN_CLEAR == IDMIN_CLEAR: both resolve buffers
 
 
@@ -79,8 +77,8 @@ class LineStage:
             cl.enqueue_copy(queue, dbuf, depth, is_blocking=False)
         cl.enqueue_fill_buffer(queue, zmin, _CLEAR, 0, 4 * npix)
         cl.enqueue_fill_buffer(queue, idmin, _CLEAR, 0, 4 * npix)
-        gsize = ((n + LOCAL_SIZE - 1) // LOCAL_SIZE * LOCAL_SIZE,)
-        lsize = (LOCAL_SIZE,)
+        gsize = ((n + LINES_LOCAL - 1) // LINES_LOCAL * LINES_LOCAL,)
+        lsize = (LINES_LOCAL,)
         w, h, nn = np.int32(width), np.int32(height), np.uint32(n)
         has = np.int32(depth is not None)
         self.k_setup(queue, gsize, lsize, pos, nn, mbuf, w, h, rec)

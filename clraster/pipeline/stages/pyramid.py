@@ -15,25 +15,15 @@ import numpy as np
 import pyopencl as cl
 
 from ...base.checks import check_boxes
-from ...base.config import RasterConfig
-from ...base.layout import PYR_LOG2  # levels made per launch of pyramid_reduce (kernels/pyramid.cl)
+from ...base.config import HIZ_TEST_LOCAL, RasterConfig
+
+# PYR_LOG2: levels made per launch of pyramid_reduce (kernels/pyramid.cl)
+from ...base.layout import PYR_LOG2, level_shapes
 from ..device import kernel, program
 from ._buffers import GrowBuffer
 
 #: Boxes per test call: the kernel indexes its (6, K) box array with int32.
 MAX_TEST_BOXES = 1 << 28
-#: Work-group size of the box test (one work-item per 8 boxes).
-TEST_LOCAL = 16
-
-
-def level_shapes(width: int, height: int) -> list[tuple[int, int]]:
-    """(height, width) of every pyramid level, level 0 first, down to (1, 1)."""
-    w, h = int(width), int(height)
-    shapes = [(h, w)]
-    while w > 1 or h > 1:
-        w, h = (w + 1) // 2, (h + 1) // 2
-        shapes.append((h, w))
-    return shapes
 
 
 def level_table(width: int, height: int) -> np.ndarray:
@@ -208,8 +198,8 @@ class PyramidStage:
         b.boxes.write(queue, soa)
         b.view_proj.write(queue, vp)
         n_wi = n_pad // 8
-        gsize = -(-n_wi // TEST_LOCAL) * TEST_LOCAL
-        ev = self.k_test(queue, (gsize,), (TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
+        gsize = -(-n_wi // HIZ_TEST_LOCAL) * HIZ_TEST_LOCAL
+        ev = self.k_test(queue, (gsize,), (HIZ_TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
                          np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
                          np.int32(pyramid.n_levels), np.float32(zoff), bres)
         # Waited for in one C call, not interruptibly (device.wait): the build and the test

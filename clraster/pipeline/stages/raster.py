@@ -1,4 +1,5 @@
-"""Tile raster host side (kernels/raster.cl): one work-item per row of tiles."""
+"""Tile raster host side (kernels/raster.cl): one work-item per segment of a row of tiles
+(`segments`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import RasterConfig
+from ...base.config import SEG_TILES, RasterConfig
 from ..arraypool import ArrayPool
 from ..device import kernel, program, shares_host_memory, wait
 from ..params import FrameParams
@@ -29,14 +30,10 @@ def zeros_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
     return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
-#: Tiles per work-item of the raster kernel, about: runs of up to 256 px to clear at 16 px
-#: tiles, 544 work-items at 1920x1080 (kernels/raster.cl says why not whole rows).
-SEG_TILES = 16
-
-
 def segments(params: FrameParams) -> int:
-    """Work-items of the raster kernel: rows of tiles × segments of each row (the kernel
-    reads the segments per row back from its global size)."""
+    """Work-items of the raster kernel: rows of tiles × segments of each row, a segment
+    being about `SEG_TILES` tiles (config; 544 work-items at 1920x1080 with 16 px tiles).
+    The kernel reads the segments per row back from its global size."""
     return params.tiles_y * -(-params.tiles_x // SEG_TILES)
 
 

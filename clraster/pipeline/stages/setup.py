@@ -9,7 +9,8 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import CLUSTER_MAX, PIECE_DTYPE, RasterConfig
+from ...base.config import SCAN_CHUNKS, RasterConfig
+from ...base.layout import CLUSTER_MAX, PIECE_DTYPE
 from ..device import kernel, program, wait
 from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
@@ -48,10 +49,6 @@ class SetupBuffers:
     tile1: GrowBuffer
     n_tris: int = 0
     n_clip_pieces: int = 0
-
-
-#: Ranges of the clip-count scan (one work-item each); a few per core is plenty.
-SCAN_CHUNKS = 64
 
 
 class SetupStage:
@@ -104,13 +101,10 @@ class SetupStage:
                            b.status.ensure(m),
                            np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag)]
         # Most passes clip nothing: then the clipper's count, the scan and their launches
-        # are skipped; the wait here replaces the one after the scan (bench/proc_ab.py, 21
-        # rounds: spot 0.985x, bunny 0.97x; the dragon, whose count kernel took ~0.5 ms,
-        # within noise). When no triangle can be clipped (geo.may_clip: every draw inside
-        # the frustum by a margin, no clipping user plane; a framed mesh) there is nothing
-        # to wait for: binning is enqueued behind setup at once. The wait, the flag's read
-        # and the launches behind it idled the device ~0.13-0.27 ms a pass (spot, dragon
-        # at 1080p: setup's end to bin_count's start, scratch timelines).
+        # are skipped; the wait here replaces the one after the scan. When no triangle can
+        # be clipped (geo.may_clip: every draw inside the frustum by a margin, no clipping
+        # user plane; a framed mesh) there is nothing to wait for: binning is enqueued
+        # behind setup at once, saving the device's idle time between the two.
         if geo.may_clip:
             wait(queue)   # interruptibly, with the GIL free (device.wait)
             total = self.flag.read(queue, np.int32, 1)

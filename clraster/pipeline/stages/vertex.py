@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import CLUSTER_MAX, WINXY_DTYPE, RasterConfig
-from ...base.layout import VERTEX_LANES
+from ...base.config import RasterConfig
+from ...base.layout import CLUSTER_MAX, VERTEX_LANES, WINXY_DTYPE
 from ..device import kernel, program
 from ..params import FrameParams
 from ._buffers import GrowBuffer
