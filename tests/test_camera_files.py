@@ -384,3 +384,72 @@ def test_cli_views_from_a_colmap_model(tmp_path):
     assert not (tmp_path / "o2").exists() or not any((tmp_path / "o2").iterdir())
     # options of the many-view path alone
     assert main(["render", "example", "--drop-distortion", "--out", str(tmp_path / "a.png")]) == 2
+
+
+# --- hostile and odd files: one clear CameraFileError, never a traceback or a silent loss ---
+
+def test_colmap_images_without_points_lines_are_refused_not_halved(tmp_path):
+    (tmp_path / "cameras.txt").write_text(f"7 PINHOLE {W} {H} 52 49 29 24\n")
+    (tmp_path / "images.txt").write_text("".join(
+        f"{i} 1 0 0 0 0 0 0 7 {c}.png\n" for i, c in enumerate("abcd", 1)))
+    with pytest.raises(CameraFileError, match=r"images.txt:2: expected the POINTS2D line"):
+        read_colmap(tmp_path, near=NEAR, far=FAR)
+
+
+@pytest.mark.parametrize("doc, match", [
+    ({"w": W, "h": H, "fl_x": 10 ** 400, "frames": [{"transform_matrix": np.eye(4).tolist()}]},
+     "finite number"),
+    ({"w": W, "h": H, "fl_x": 50, "is_fisheye": True, "k1": 0.1,
+      "frames": [{"transform_matrix": np.eye(4).tolist()}]}, "fisheye"),
+    ({"w": W, "h": H, "fl_x": 50, "camera_model": "EQUIRECTANGULAR",
+      "frames": [{"transform_matrix": np.eye(4).tolist()}]}, "'EQUIRECTANGULAR' is not a pinhole"),
+    ({"w": 640.5, "h": H, "fl_x": 50, "frames": [{"transform_matrix": np.eye(4).tolist()}]},
+     "positive whole number"),
+])
+def test_nerf_lenses_and_numbers_it_cannot_render(tmp_path, doc, match):
+    f = tmp_path / "t.json"
+    f.write_text(json.dumps(doc))
+    for drop in (False, True):      # dropping distortion never makes a fisheye a pinhole
+        with pytest.raises(CameraFileError, match=match):
+            read_nerf(f, near=NEAR, far=FAR, drop_distortion=drop)
+
+
+def test_npz_broken_files(tmp_path):
+    k, pose = np.eye(3), np.eye(4)[None]
+    np.savez(tmp_path / "good.npz", K=k, poses=pose, width=8, height=6, near=1, far=2)
+    data = (tmp_path / "good.npz").read_bytes()
+    (tmp_path / "trunc.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(CameraFileError, match="trunc.npz"):
+        read_npz(tmp_path / "trunc.npz")
+    np.savez(tmp_path / "obj.npz", K=np.array([k], dtype=object), poses=pose)
+    with pytest.raises(CameraFileError, match="array 'K' cannot be read"):
+        read_npz(tmp_path / "obj.npz", width=8, height=6, near=1, far=2)
+    np.savez(tmp_path / "frac.npz", K=k, poses=pose, width=640.9, height=6, near=1, far=2)
+    with pytest.raises(CameraFileError, match="whole number"):
+        read_npz(tmp_path / "frac.npz")
+    np.savez(tmp_path / "none.npz", K=k, poses=np.zeros((0, 4, 4)), width=8, height=6,
+             near=1, far=2)
+    with pytest.raises(CameraFileError, match="no pose"):
+        read_npz(tmp_path / "none.npz")
+
+
+def test_cli_broken_npz_is_one_line(tmp_path, capsys):
+    from clraster.cli import main
+
+    (tmp_path / "bad.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    assert main(["render", "example", "--views", str(tmp_path / "bad.npz"), "--near", "0.1",
+                 "--far", "10", "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "bad.npz" in err
+
+
+def test_render_views_refuses_cameras_of_another_size_once(tmp_path):
+    from clraster.batch import render_views
+
+    _write_colmap(tmp_path / "m")
+    cams, _ = read_colmap(tmp_path / "m", near=NEAR, far=FAR)
+    with pytest.raises(ValueError, match=rf"{W}x{H} images.*pass size=\({W}, {H}\)"):
+        render_views(MESH, cams, tmp_path / "out", size=(640, 480), progress=False)
+    ok = render_views(MESH, cams, tmp_path / "out", size=(W, H), progress=False,
+                      cull="none")
+    assert ok.rendered == 1 and not ok.failures

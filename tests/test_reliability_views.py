@@ -331,3 +331,48 @@ def test_dask_bad_render_values_raise_before_any_work(client, mesh, tmp_path, kw
     with pytest.raises(ValueError, match=match):
         dask_views(mesh, orbit(3), client, out, size=(W, H), **kw)
     assert not out.exists()
+
+
+def test_atomic_writer_never_follows_a_link_at_its_temporary_name(tmp_path):
+    """A link planted at the (predictable) temporary name neither redirects the write nor
+    ends up as the output."""
+    import os
+
+    from clraster.output.atomic import name_max, temporary_name, write_atomic
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    out = tmp_path / "view_00000_depth.npy"
+    tmp = tmp_path / temporary_name(out.name, name_max(tmp_path))
+    os.symlink(victim, tmp)
+    write_atomic(out, b"NEW")
+    assert victim.read_text() == "keep me"
+    assert not out.is_symlink() and out.read_bytes() == b"NEW"
+    assert not tmp.exists() and not tmp.is_symlink()
+
+
+def test_rerun_with_another_mesh_is_refused(mesh, tmp_path):
+    """The record holds the scene: views of an edited mesh are not taken for done."""
+    from clraster import Mesh
+
+    out = tmp_path / "views"
+    cams = orbit(2)
+    assert render_views(mesh, cams, out, size=(W, H), progress=False).rendered == 2
+    moved = Mesh(np.asarray(mesh.vertices) + np.float32(0.01), mesh.faces)
+    with pytest.raises(ValueError, match="scene:") as info:
+        render_views(moved, cams, out, size=(W, H), progress=False)
+    assert type(info.value).__name__ == "OutDirMismatchError"
+    again = render_views(moved, cams, out, size=(W, H), progress=False, overwrite=True)
+    assert again.rendered == 2
+    assert render_views(moved, cams, out, size=(W, H), progress=False).skipped == 2
+
+
+def test_overwrite_with_other_settings_leaves_no_views_of_the_old_ones(mesh, tmp_path):
+    out = tmp_path / "views"
+    assert render_views(mesh, orbit(4), out, size=(W, H), progress=False).rendered == 4
+    again = render_views(mesh, orbit(4)[:2], out, size=(W, H), progress=False,
+                         overwrite=True, cull="none")
+    assert again.rendered == 2
+    left = sorted(p.name for p in out.iterdir() if "view_" in p.name)
+    assert left == sorted([f"view_0000{k}_{o}.npy" for k in range(2) for o in ("depth", "ids")]
+                          + [f".view_0000{k}.key" for k in range(2)])

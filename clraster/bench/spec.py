@@ -39,8 +39,8 @@ MODES: dict[str, dict[str, Any]] = {
     "occlusion": {"frustum": True, "cones": True, "occlusion": True},
 }
 #: The culling mode the twin renders in each configuration: the same one. The twin runs the
-#: OpenCL renderer's two-phase occlusion schedule (`clraster.twophase`, with its own pyramid
-#: and Hi-Z test), so occlusion rows time the twin's occlusion culling too. (Results made
+#: OpenCL renderer's two-phase occlusion schedule (`clraster.pipeline.twophase`, with its
+#: own pyramid and Hi-Z test), so occlusion rows time the twin's occlusion culling too. (Results made
 #: before it had one show "[frustum]" where the twin rendered the frustum mode instead.)
 TWIN_MODE = {"off": "off", "frustum": "frustum", "occlusion": "occlusion"}
 
@@ -198,7 +198,7 @@ def _load_mesh(name: str, meshes: Path):
     if name == "example":
         from clraster.world.examples import example_mesh
 
-        return example_mesh(), "clraster.examples.example_mesh()"
+        return example_mesh(), "clraster.world.examples.example_mesh()"
     p = mesh_path(name, meshes)
     if p is None:
         raise SceneMissing(f"mesh {name!r} not found (looked for "

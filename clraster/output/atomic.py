@@ -105,12 +105,17 @@ def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], object] | 
                       f"file name is {len(os.fsencode(p.name))} bytes long; this file system "
                       f"allows at most {limit}: choose a shorter name", str(p))
     tmp = p.with_name(temporary_name(p.name, limit))
+    fd = _create_new(tmp)
     try:
-        with open(tmp, "wb") as fh:
+        with os.fdopen(fd, "wb") as fh:
             if isinstance(write, (bytes, bytearray, memoryview)):
                 fh.write(write)
             else:
                 write(fh)
+            # on disk before it takes the final name: after a power loss the final name holds
+            # the old file or the whole new one, never an empty or partial one
+            fh.flush()
+            os.fsync(fh.fileno())
         os.replace(tmp, p)
     except BaseException:
         try:
@@ -118,6 +123,24 @@ def write_atomic(path: str | os.PathLike, write: Callable[[BinaryIO], object] | 
         except OSError:
             pass
         raise
+
+
+def _create_new(tmp: Path) -> int:
+    """A new file at ``tmp`` for writing, never through a link and never someone else's.
+
+    The temporary name is predictable, so in a folder others can write to, a link planted
+    at it would redirect the write (and then be renamed onto the output). O_EXCL|O_NOFOLLOW
+    refuse to open anything that exists; what exists at the name (a leftover of a process
+    whose id was reused, or a planted link) is removed, never followed, and the creation
+    tried once more — where it cannot be removed (another user's file in a sticky folder)
+    the error says so."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) \
+        | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        return os.open(tmp, flags, 0o666)
+    except FileExistsError:
+        tmp.unlink()        # a link is removed, not its target
+        return os.open(tmp, flags, 0o666)
 
 
 def stale_temporary(name: str, *, any_writer: bool = False) -> str | None:

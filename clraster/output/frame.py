@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 
 def status_counts(status: np.ndarray) -> np.ndarray:
     """int64 (8,): how many triangles have each setup status code (``status`` uint8 (M,),
-    config.ST_*)."""
+    layout.ST_*)."""
     # one pass per code: ~4x faster than np.bincount, which first widens the uint8
     # codes to intp (1 ms per frame on the 871K-triangle dragon)
     if not status.size:   # a frame with nothing in view: 8 passes over nothing cost ~8 µs

@@ -88,6 +88,7 @@ from ..base.checks import check_flag
 from ..output.atomic import stale_temporary, write_atomic
 from ..output.outputs import FORMATS, check_depth_scale, check_writable, write_output
 from ..world.inputs import as_target
+from ..world.mesh import Mesh
 from ..world.views import BrokenCamera, ViewError, camera_from_entry, frames, iter_cameras
 
 if TYPE_CHECKING:
@@ -95,6 +96,7 @@ if TYPE_CHECKING:
 
     from ..output.frame import Frame
     from ..pipeline.renderer import Renderer
+    from ..world.scene import Scene
 
 __all__ = ["MANIFEST_FILE", "OUTPUTS", "OutDirMismatchError", "RenderSummary", "ViewFailure",
            "iter_views", "output_formats", "render_views", "view_arrays", "view_files"]
@@ -140,6 +142,8 @@ _OWN_FILE = re.compile(r"^(view_\d+_[a-z_]+\.(" + _EXTS + r")|\.view_\d+\.key|"
 _OLD_TEMPORARY = re.compile(r"^\.(view_\d+_[a-z]+\.(npy|png)|"
                             + re.escape(FAILURES_FILE) + r")\.(?P<pid>\d+)\.tmp$")
 #: view files (of any output) in an out_dir
+#: a view's key file (`view_key`): ``.view_00042.key``
+_KEY_FILE = re.compile(r"^\.view_\d+\.key$")
 _VIEW_FILE = re.compile(r"^view_\d+_(" + "|".join(OUTPUTS) + r")\.(" + _EXTS + r")$")
 
 
@@ -301,11 +305,51 @@ def _jsonable(value: Any) -> Any:
     return repr(value)
 
 
-def run_settings(width: int, height: int, render_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """What `MANIFEST_FILE` records for a run (JSON data): ``size`` [width, height] and every
-    `Renderer.render` option but `IMAGE_NEUTRAL` ones, defaults filled in (``cull="back"``
-    given or left out records the same). ``render_kwargs`` must have passed
-    `clraster.renderer.check_render_kwargs`."""
+def check_camera_size(cameras: Sequence[Any], width: int, height: int) -> None:
+    """ValueError now, not one failed view per camera, when the size-bound cameras of the
+    list (intrinsics cameras: `clraster.world.camera_files.common_size`) are for images of
+    another size than ``width`` × ``height``."""
+    from ..world.camera_files import common_size
+
+    own = common_size([c for c in cameras if not isinstance(c, BrokenCamera)])
+    if own is not None and own != (width, height):
+        raise ValueError(f"the cameras are for {own[0]}x{own[1]} images (their K is in those "
+                         f"pixels), not the {width}x{height} asked for: pass size={own}")
+
+
+def scene_fingerprint(target: Mesh | Scene) -> str:
+    """A hash of what ``target`` draws (every mesh's vertices and faces, every instance's
+    mesh and transform, in order), recorded as the run's ``scene``: a re-run with an edited
+    or another scene is a mismatch, not a folder of done views. ~10 ms per million
+    triangles."""
+    h = hashlib.blake2b(digest_size=16)
+
+    def mesh(m: Mesh) -> None:
+        for a in (m.vertices, m.faces):
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+
+    # a Mesh hashes as the one-instance scene it renders like (a file loaded as a Mesh on
+    # one machine and as a Scene on a Dask worker is the same scene)
+    placed = ([(target, np.eye(4))] if isinstance(target, Mesh)
+              else [(inst.mesh, inst.transform) for inst in target.instances])
+    seen: dict[int, int] = {}
+    for m, transform in placed:
+        k = seen.get(id(m))
+        if k is None:       # a mesh shared by many instances is hashed once
+            k = seen[id(m)] = len(seen)
+            mesh(m)
+        h.update(f"i{k}".encode())
+        h.update(np.ascontiguousarray(transform, dtype="<f8").tobytes())
+    return h.hexdigest()
+
+
+def run_settings(width: int, height: int, render_kwargs: dict[str, Any],
+                 scene: str | None = None) -> dict[str, Any]:
+    """What `MANIFEST_FILE` records for a run (JSON data): ``size`` [width, height], the
+    ``scene`` (`scene_fingerprint`, where given) and every `Renderer.render` option but
+    `IMAGE_NEUTRAL` ones, defaults filled in (``cull="back"`` given or left out records the
+    same). ``render_kwargs`` must have passed `clraster.renderer.check_render_kwargs`."""
     import inspect
 
     from ..base.checks import check_clip_planes
@@ -322,6 +366,7 @@ def run_settings(width: int, height: int, render_kwargs: dict[str, Any]) -> dict
         poly = as_polygon(options["window"])
         options["window"] = {"exterior": poly.exterior, "holes": list(poly.holes)}
     return {"size": [int(width), int(height)],
+            **({} if scene is None else {"scene": scene}),
             **{k: _jsonable(v) for k, v in sorted(options.items())}}
 
 
@@ -431,6 +476,12 @@ def prepare_out_dir(out_dir: str | os.PathLike, settings: dict[str, Any], *,
             raise OutDirMismatchError(
                 f"out_dir {str(out)!r} holds views rendered with other settings "
                 f"({'; '.join(diff)}; recorded in {MANIFEST_FILE}): {what}")
+    elif there != settings:
+        # overwrite with other settings: the folder's views all go, not only this run's
+        # cameras', so that no file is left under a record that does not describe it
+        for p in out.iterdir():
+            if _VIEW_FILE.match(p.name) or _KEY_FILE.match(p.name):
+                p.unlink(missing_ok=True)
     write_atomic(path, text.encode("utf-8"))
 
 
@@ -705,8 +756,15 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         renderer = Renderer(*size)
     check_render_kwargs(renderer, render_kwargs)   # names and values, once for all views
     check_flag(overwrite, "overwrite")
-    settings = run_settings(renderer.width, renderer.height, render_kwargs)
+    settings = run_settings(renderer.width, renderer.height, render_kwargs,
+                            scene_fingerprint(geometry))
     render_kwargs = _render_outputs(outs, render_kwargs)
+    if isinstance(cameras, (str, os.PathLike)):
+        from ..world.views import load_cameras
+
+        cameras = load_cameras(cameras, strict=False, size=(renderer.width, renderer.height))
+    cams = cameras if isinstance(cameras, Sequence) else list(cameras)
+    check_camera_size(cams, renderer.width, renderer.height)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ValueError(f"out_dir {str(out)!r} exists and is not a folder")
@@ -719,11 +777,6 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         # Not per chunk (failures_file=False): each would scan the whole folder, and
         # clraster.distributed.render_views deletes them all once its tasks are done
         remove_temporaries(out)
-    if isinstance(cameras, (str, os.PathLike)):
-        from ..world.views import load_cameras
-
-        cameras = load_cameras(cameras, strict=False, size=(renderer.width, renderer.height))
-    cams = cameras if isinstance(cameras, Sequence) else list(cameras)
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = _Progress(sys.stderr, len(cams)) if show else None
 

@@ -674,16 +674,21 @@ def _finish_out_dir(out_dir: str, failures: list[ViewFailure]) -> int:
 
 
 def _prepare_out_dir(out_dir: str, settings: dict[str, Any], overwrite: bool,
-                     outputs: dict[str, dict] | None = None) -> bool:
+                     outputs: dict[str, dict] | None = None,
+                     scene_path: str | None = None) -> bool:
     """Run on every worker before the chunks of `render_views`: make ``out_dir``, refuse
     one rendered with other settings or output options (`clraster.batch.prepare_out_dir`:
     OutDirMismatchError, raised by ``client.run`` on the client) and record this run's.
-    False on a worker that does not see the folder's parent."""
-    from .batch import prepare_out_dir
+    ``scene_path``: the scene file the chunks load, whose `scene_fingerprint` is made here
+    (the client does not load it). False on a worker that does not see the folder's
+    parent."""
+    from .batch import prepare_out_dir, scene_fingerprint
 
     out = Path(out_dir)
     if not out.parent.is_dir() or (out.exists() and not out.is_dir()):
         return False   # not seen from here, or not a folder: the chunk tasks say which
+    if scene_path is not None:
+        settings = {**settings, "scene": scene_fingerprint(worker_target(scene_path))}
     out.mkdir(exist_ok=True)
     prepare_out_dir(out, settings, overwrite=overwrite, outputs=outputs)
     return True
@@ -779,13 +784,16 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     from ..base.checks import check_flag, check_size
     from ..pipeline.renderer import Renderer, check_render_kwargs
     from ..world.camera import Camera
+    from ..world.inputs import as_target
     from ..world.views import check_target, load_cameras
     from .batch import (
         FAILURES_FILE,
+        check_camera_size,
         check_outputs,
         check_writable_outputs,
         outputs_record,
         run_settings,
+        scene_fingerprint,
     )
 
     outs = check_outputs(outputs)
@@ -806,13 +814,17 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
                                        width=width, height=height)
     check_render_kwargs(probe, render_kwargs)
     check_flag(overwrite, "overwrite")
-    settings = run_settings(width, height, render_kwargs)
+    # the scene's fingerprint as the chunks will record it: a file's is made where it is
+    # loaded (_prepare_out_dir, on the workers)
+    scene = None if isinstance(target, str) else scene_fingerprint(as_target(target))
+    settings = run_settings(width, height, render_kwargs, scene)
     if isinstance(cameras, (str, os.PathLike)):
         cameras = load_cameras(cameras, strict=False, size=(width, height))
     elif isinstance(cameras, (dict, Camera)):
         raise ValueError("cameras must be a list of cameras (or a camera list file), got one "
                          f"{type(cameras).__name__}; wrap it in a list")
     cams = list(cameras)
+    check_camera_size(cams, width, height)
     out = os.path.abspath(out_dir)
     n_workers = require_workers(client)   # none: the chunk tasks would wait forever
     step = chunk or _chunk_size(len(cams), n_workers)
@@ -821,7 +833,8 @@ def render_views(target, cameras, client, out_dir: str | os.PathLike,
     t0 = time.perf_counter()
     # the folder's record checked (and written) where the files go, before any work; an
     # OutDirMismatchError on a worker is raised here
-    client.run(_prepare_out_dir, out, settings, overwrite, record)
+    client.run(_prepare_out_dir, out, settings, overwrite, record,
+               target if isinstance(target, str) else None)
     if isinstance(target, str):
         held = target
     else:

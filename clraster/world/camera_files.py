@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,8 @@ _COLMAP_MODELS: dict[str, tuple[str, ...]] = {
 _FISHEYE = ("FISHEYE", "FOV")
 #: NeRF / instant-ngp / nerfstudio distortion keys (transforms.json).
 _NERF_DISTORTION = ("k1", "k2", "k3", "k4", "p1", "p2")
+#: transforms.json camera models with a pinhole projection (plus distortion coefficients)
+_NERF_PINHOLE_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
 
 
 def _clip_range(near: float | None, far: float | None, where: str) -> tuple[float, float]:
@@ -233,7 +236,22 @@ def read_colmap(path: str | os.PathLike, *, near: float | None = None,
         cameras.append(_make(k, width, height, pose, "opencv", near, far,
                              f"{where} (image {f[9]!r}, camera {cam_id})"))
         image_names.append(f[9])
-        i += 2                  # the POINTS2D line that follows (possibly empty or absent)
+        # the POINTS2D line that follows: empty, absent at the end, or X Y POINT3D_ID triples.
+        # Anything else is a file written one line per image, whose every other image would
+        # otherwise be read as points and lost
+        if i + 1 < len(lines):
+            n2, pts = lines[i + 1]
+            fields = pts.split()
+            try:
+                [float(x) for x in fields]
+                ok = len(fields) % 3 == 0
+            except ValueError:
+                ok = False
+            if not ok:
+                raise CameraFileError(f"{ifile}:{n2}: expected the POINTS2D line of the image "
+                                      f"on line {n} (X Y POINT3D_ID triples, or an empty "
+                                      f"line); COLMAP writes two lines per image")
+        i += 2
     if not cameras:
         raise CameraFileError(f"{ifile}: no images")
     return cameras, image_names
@@ -243,9 +261,23 @@ def _nerf_number(d: dict, key: str, where: str) -> float | None:
     v = d.get(key)
     if v is None:
         return None
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+    try:
+        f = float(v) if not isinstance(v, bool) and isinstance(v, (int, float)) else math.nan
+    except OverflowError:   # an integer beyond float64
+        f = math.inf
+    if not math.isfinite(f):
         raise CameraFileError(f"{where}: {key!r} must be a finite number, got {v!r:.60}")
-    return float(v)
+    return f
+
+
+def _pixels(v: float | None, key: str, where: str) -> int | None:
+    """An image dimension: a positive whole number (never truncated)."""
+    if v is None:
+        return None
+    if not (v > 0 and float(v).is_integer()):
+        raise CameraFileError(f"{where}: {key!r} is an image size in pixels and must be a "
+                              f"positive whole number, got {v:g}")
+    return int(v)
 
 
 def read_nerf(path: str | os.PathLike, *, width: int | None = None, height: int | None = None,
@@ -293,13 +325,13 @@ def nerf_cameras(doc: Any, p: Path, *, width: int | None = None, height: int | N
         def num(key: str, d: dict = d, where: str = where) -> float | None:
             return _nerf_number(d, key, where)
 
-        w, h = num("w"), num("h")
+        w, h = _pixels(num("w"), "w", where), _pixels(num("h"), "h", where)
         for key, given, val in (("w", width, w), ("h", height, h)):
-            if val is not None and given is not None and int(val) != given:
+            if val is not None and given is not None and val != given:
                 raise CameraFileError(f"{where}: {key!r} = {val:g} differs from the size "
                                       f"asked for ({width}x{height})")
-        w_px = int(w) if w is not None else width
-        h_px = int(h) if h is not None else height
+        w_px = w if w is not None else width
+        h_px = h if h is not None else height
         if w_px is None or h_px is None:
             raise CameraFileError(f"{where}: no image size ('w', 'h'): pass width= and "
                                   f"height= (CLI: --size)")
@@ -323,6 +355,12 @@ def nerf_cameras(doc: Any, p: Path, *, width: int | None = None, height: int | N
         cx = 0.5 * w_px if cx is None else cx
         cy = 0.5 * h_px if cy is None else cy
         model = str(d.get("camera_model", "OPENCV"))
+        if d.get("is_fisheye") or model not in _NERF_PINHOLE_MODELS:
+            # instant-ngp marks a fisheye lens with is_fisheye; nerfstudio names its models
+            what = "a fisheye lens (is_fisheye)" if d.get("is_fisheye") else f"model {model!r}"
+            raise CameraFileError(f"{where}: {what} is not a pinhole camera; clraster renders "
+                                  f"pinhole cameras only (known: "
+                                  f"{', '.join(_NERF_PINHOLE_MODELS)})")
         coeffs = {k: num(k) or 0.0 for k in _NERF_DISTORTION}
         _distortion(model, coeffs, drop_distortion, where)
         m = frame.get("transform_matrix")
@@ -348,7 +386,11 @@ def nerf_cameras(doc: Any, p: Path, *, width: int | None = None, height: int | N
 def _npz_array(z: Any, key: str, where: str) -> np.ndarray | None:
     if key not in z.files:
         return None
-    a = z[key]
+    try:
+        a = z[key]
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
+        # an object array (needs pickle, refused), a corrupt member
+        raise CameraFileError(f"{where}: array {key!r} cannot be read ({exc})") from None
     if a.dtype.kind not in "fiu" and key not in ("convention",):
         raise CameraFileError(f"{where}: array {key!r} must be numeric, got {a.dtype}")
     return a
@@ -364,7 +406,7 @@ def read_npz(path: str | os.PathLike, *, width: int | None = None, height: int |
     p = Path(path)
     try:
         z = np.load(p, allow_pickle=False)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
         raise CameraFileError(f"{p}: not a NumPy .npz file ({exc})") from None
     if not hasattr(z, "files"):
         raise CameraFileError(f"{p}: a .npy array, not an .npz with 'K' and 'poses'")
@@ -377,6 +419,8 @@ def read_npz(path: str | os.PathLike, *, width: int | None = None, height: int |
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise CameraFileError(f"{p}: 'poses' must be (N, 4, 4), got {poses.shape}")
         n = poses.shape[0]
+        if n == 0:
+            raise CameraFileError(f"{p}: 'poses' holds no pose")
         if k.shape == (3, 3):
             k = np.broadcast_to(k, (n, 3, 3))
         if k.shape != (n, 3, 3):
@@ -384,7 +428,7 @@ def read_npz(path: str | os.PathLike, *, width: int | None = None, height: int |
                                   f"got {k.shape}")
         conv = "opencv"
         if "convention" in z.files:
-            conv = str(z["convention"])
+            conv = str(_npz_array(z, "convention", str(p)))
             if conv not in CONVENTIONS:
                 raise CameraFileError(f"{p}: 'convention' must be one of {list(CONVENTIONS)}, "
                                       f"got {conv!r}")
@@ -397,8 +441,10 @@ def read_npz(path: str | os.PathLike, *, width: int | None = None, height: int |
                 stored[key] = float(a.reshape(()))
     size = {}
     for key, given in (("width", width), ("height", height)):
-        if key in stored and given is not None and int(stored[key]) != given:
-            raise CameraFileError(f"{p}: {key} {int(stored[key])} differs from the size asked "
+        if key in stored:
+            stored[key] = float(_pixels(stored[key], key, str(p)) or 0)
+        if key in stored and given is not None and stored[key] != given:
+            raise CameraFileError(f"{p}: {key} {stored[key]:g} differs from the size asked "
                                   f"for ({width}x{height})")
         val = given if given is not None else stored.get(key)
         if val is None:

@@ -129,7 +129,8 @@ def _number(entry: dict, key: str, index: int) -> float:
 
 def _array(entry: dict, key: str, index: int, shape: tuple[int, ...]) -> np.ndarray:
     v = entry[key]
-    what = "3 numbers [x, y, z]" if shape == (3,) else "a 4x4 matrix (4 rows of 4 numbers)"
+    what = ("3 numbers [x, y, z]" if shape == (3,) else
+            f"a {shape[0]}x{shape[1]} matrix ({shape[0]} rows of {shape[1]} numbers)")
     try:
         a = np.asarray(v)
     except (TypeError, ValueError):   # ragged nested lists
