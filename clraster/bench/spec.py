@@ -40,8 +40,9 @@ MODES: dict[str, dict[str, Any]] = {
 }
 #: The culling mode the twin renders in each configuration: the same one. The twin runs the
 #: OpenCL renderer's two-phase occlusion schedule (`clraster.pipeline.twophase`, with its
-#: own pyramid and Hi-Z test), so occlusion rows time the twin's occlusion culling too. (Results made
-#: before it had one show "[frustum]" where the twin rendered the frustum mode instead.)
+#: own pyramid and Hi-Z test), so occlusion rows time the twin's occlusion culling too.
+#: (Results made before it had one show "[frustum]" where the twin rendered the frustum mode
+#: instead.)
 TWIN_MODE = {"off": "off", "frustum": "frustum", "occlusion": "occlusion"}
 
 #: The sweeps `--sweeps` may name (see :func:`build_matrix`); ``all`` names every one.
