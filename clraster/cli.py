@@ -7,6 +7,8 @@
   ADDRESS`` on a running Dask cluster (`clraster.distributed.render_views`, same files).
 - ``clraster demo ...``: the built-in plant demo with the culling inspector
   (`clraster.demo.main`).
+- ``clraster devices``: list the OpenCL devices, whether each compiles clraster's probe
+  kernel, and which one clraster would use and why (`clraster.pipeline.device`).
 - ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
   docs in the repository's ``bench/`` folder).
 
@@ -309,6 +311,9 @@ def _parser() -> argparse.ArgumentParser:
     for name, (_module, text) in DELEGATED.items():
         # listed for --help only: main() hands these to their modules before parsing
         sub.add_parser(name, help=text, add_help=False)
+    # listed for --help only: main() runs it before parsing (`_devices`)
+    sub.add_parser("devices", help="list the OpenCL devices and the one clraster would use",
+                   add_help=False)
     r = sub.add_parser(
         "render", help="render a mesh to a shaded PNG (and optionally depth / ids)",
         description="Render MESH and write a flat-shaded image. Without --eye/--target the "
@@ -582,11 +587,46 @@ def _delegate(name: str, argv: list[str]) -> int:
     return int(module.main(argv) or 0)
 
 
+def _devices(argv: list[str]) -> int:
+    """``clraster devices``: every OpenCL device, whether it compiles the probe kernel, and
+    the one a Renderer made now would use (CLRASTER_DEVICE > PYOPENCL_CTX > default)."""
+    p = argparse.ArgumentParser(
+        prog="clraster devices",
+        description="List the OpenCL devices clraster can see and the one it would use. "
+                    "Choose with CLRASTER_DEVICE (pocl, intel, oclgrind, or a part of a "
+                    "platform or device name; case-insensitive) or Renderer(device=...); "
+                    "precedence: device= > CLRASTER_DEVICE > PYOPENCL_CTX > default (the "
+                    "first CPU device that compiles, PoCL first, never Oclgrind).")
+    try:
+        p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+    def body() -> int:
+        from .pipeline.device import choose_context, describe_choice, list_devices
+
+        rows = list_devices()
+        print("OpenCL devices (* the one clraster uses):" if rows else "OpenCL devices: none")
+        ctx, reason = choose_context()
+        for r in rows:
+            state = "compiles" if r.compiles else f"does not compile: {r.compile_error}"
+            if "oclgrind" in r.platform.lower():
+                state += " (a simulator, ~1000x slower)"
+            mark = "*" if r.device == ctx.devices[0] else " "
+            print(f"{mark} {r.label}  [{r.kind}; {r.platform_version}]  {state}")
+        print(f"clraster uses: {describe_choice(ctx, reason)}")
+        return 0
+
+    return run_guarded("clraster devices", body)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with `argv` (default ``sys.argv[1:]``); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in DELEGATED:
         return _delegate(argv[0], argv[1:])
+    if argv and argv[0] == "devices":
+        return _devices(argv[1:])
     parser = _parser()
     if argv and argv[0] == "render":
         argv = _join_vectors(argv)

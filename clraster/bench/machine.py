@@ -83,9 +83,10 @@ def _git(repo: Path) -> dict[str, Any]:
 
 def _opencl() -> dict[str, Any]:
     try:
-        from clraster.pipeline.device import default_context
+        from clraster.pipeline.device import choose_context
 
-        dev = default_context().devices[0]
+        ctx, reason = choose_context()
+        dev = ctx.devices[0]
         plat = dev.platform
     except Exception as exc:  # no device: the benchmark will fail later with the reason
         return {"error": f"{type(exc).__name__}: {exc}"}
@@ -95,6 +96,8 @@ def _opencl() -> dict[str, Any]:
         "driver_version": dev.driver_version.strip(),
         "compute_units": int(dev.max_compute_units),
         "global_mem_gib": round(dev.global_mem_size / 2**30, 1),
+        # why this device (CLRASTER_DEVICE, PYOPENCL_CTX or the default rule)
+        "device_choice": reason,
     }
     # PoCL names its LLVM in the platform version ("... LLVM 15.0.6, RELOC, ...").
     m = re.search(r"LLVM\s+([\d.]+)", plat.version)

@@ -1,9 +1,19 @@
 """OpenCL context selection and the program cache.
 
-Device choice: ``PYOPENCL_CTX`` is honoured when set (pyopencl's own syntax, e.g. ``0`` or
-``"Portable"``); otherwise the first PoCL CPU device. We never call
-``create_some_context()`` blindly: with Oclgrind installed it may pick the *simulator*
-first, which is ~1000× slower.
+Device choice, first match wins (`choose_context`, `list_devices`, ``clraster devices``):
+
+1. ``device=`` (a `Renderer`'s argument): a name (below) or a ``pyopencl.Device``;
+2. ``CLRASTER_DEVICE``: ``pocl``, ``intel``, ``oclgrind``, or any other case-insensitive
+   substring of a platform or device name; the first matching device that compiles a
+   probe kernel is used, and a name that matches none is a `NoDeviceError` listing the
+   devices there are;
+3. ``PYOPENCL_CTX`` (pyopencl's own syntax, e.g. ``0`` or ``"Portable"``);
+4. default: the first CPU device that compiles a probe kernel, PoCL platforms first, never
+   the Oclgrind simulator.
+
+We never call ``create_some_context()`` blindly: with Oclgrind installed it may pick the
+*simulator* first, which is ~1000× slower (choosing it on purpose warns, `SimulatorWarning`).
+Every choice keeps its reason (e.g. ``"CLRASTER_DEVICE=pocl"``): `describe_choice`.
 
 Programs are built once per (context, stage, build options) and cached here; PoCL also keeps
 compiled binaries on disk, so a second process skips the LLVM compile (cold vs warm start).
@@ -33,6 +43,7 @@ import threading
 import time
 import warnings
 import weakref
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -199,14 +210,18 @@ class SimulatorWarning(UserWarning):
     """The selected OpenCL device is a simulator (Oclgrind): correct but ~1000× slower."""
 
 
-def _warn_if_simulator(ctx: cl.Context) -> cl.Context:
+def _warn_if_simulator(ctx: cl.Context, reason: str | None = None) -> cl.Context:
+    """Warn (`SimulatorWarning`) when ``ctx``'s device is Oclgrind; ``reason`` says what
+    chose it (default: PYOPENCL_CTX, the only way before CLRASTER_DEVICE)."""
     plat = ctx.devices[0].platform.name
     if "oclgrind" in plat.lower():
+        if reason is None:
+            reason = f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX')!r}"
         warnings.warn(
-            f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX')!r} selected the {plat.strip()} "
+            f"{reason} selected the {plat.strip()} "
             f"simulator, which checks memory accesses and runs ~1000x slower than PoCL; "
-            f"unset PYOPENCL_CTX to let clraster pick PoCL, or select the PoCL platform "
-            f"(see `python -c 'import pyopencl as cl; print(cl.get_platforms())'`)",
+            f"unset it to let clraster pick PoCL, or select the PoCL platform "
+            f"(`clraster devices` lists them)",
             SimulatorWarning, stacklevel=3)
     return ctx
 
@@ -223,20 +238,35 @@ def _platform_list() -> str:
 
 
 def default_context() -> cl.Context:
-    """The context clraster uses when none is given (see module docstring); made once per
-    process.
+    """The context clraster uses when none is given (see module docstring: CLRASTER_DEVICE,
+    else PYOPENCL_CTX, else the first CPU device that compiles); made once per process.
 
     Raises:
-        NoDeviceError: no usable OpenCL CPU device, or PYOPENCL_CTX selects none.
+        NoDeviceError: no usable OpenCL CPU device, or CLRASTER_DEVICE / PYOPENCL_CTX
+            selects none.
         ForkedProcessError: OpenCL was started in the parent of this fork() child.
     """
     check_process()
-    ctx = _default_context()
+    ctx = _default_choice()[0]
     mark_opencl_use()
     return ctx
 
 
+#: why the default context has the device it has (the reason `default_context` chose it)
+_DEFAULT_REASON = "default: first CPU runtime that compiles the kernels"
+
+
 @functools.lru_cache(maxsize=1)
+def _default_choice() -> tuple[cl.Context, str]:
+    spec = os.environ.get("CLRASTER_DEVICE", "").strip()
+    if spec:
+        dev = find_device(spec, source="CLRASTER_DEVICE")
+        reason = f"CLRASTER_DEVICE={spec}"
+        return _warn_if_simulator(cl.Context([dev]), reason), reason
+    return _default_context(), (f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']}"
+                                if os.environ.get("PYOPENCL_CTX") else _DEFAULT_REASON)
+
+
 def _default_context() -> cl.Context:
     if os.environ.get("PYOPENCL_CTX"):
         try:
@@ -267,11 +297,9 @@ def _default_context() -> cl.Context:
         if not devs:
             continue
         ctx = cl.Context([devs[0]])
-        try:
-            cl.Program(ctx, _PROBE_SRC).build()
-        except cl.Error as exc:
-            first = str(exc).strip().splitlines()[-1] if str(exc).strip() else repr(exc)
-            failures.append(f"{plat.version}: {first}")
+        error = _probe_error(ctx)
+        if error is not None:
+            failures.append(f"{plat.version}: {error}")
             continue
         log.debug("clraster: using %s / %s", plat.version, devs[0].name)
         return ctx
@@ -280,6 +308,152 @@ def _default_context() -> cl.Context:
            if failures else "")
     raise NoDeviceError(f"no usable OpenCL CPU device (platforms: {names}){why}. "
                         f"{_INSTALL_HINT}")
+
+
+def _probe_error(ctx: cl.Context) -> str | None:
+    """None if ``ctx``'s device compiles the probe kernel, else the last line of the error
+    (several PoCLs may be installed side by side, and an old one may be unable to target
+    this CPU)."""
+    try:
+        cl.Program(ctx, _PROBE_SRC).build()
+    except cl.Error as exc:
+        return str(exc).strip().splitlines()[-1] if str(exc).strip() else repr(exc)
+    return None
+
+
+#: CLRASTER_DEVICE / ``device=`` short names → the platform-name substring they stand for
+DEVICE_ALIASES = {"pocl": "portable computing language", "intel": "intel",
+                  "oclgrind": "oclgrind"}
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """One OpenCL device as `list_devices` sees it."""
+
+    platform: str           #: platform name, e.g. "Portable Computing Language"
+    platform_version: str   #: e.g. "OpenCL 3.0 PoCL 3.0-rc2 ... LLVM 14.0.6 ..."
+    name: str               #: device name, e.g. "pthread-AMD EPYC"
+    kind: str               #: "CPU", "GPU", "ACCELERATOR" or "OTHER"
+    compile_error: str | None   #: None when the device compiled the probe kernel
+    device: cl.Device       #: the pyopencl device itself (for ``Renderer(device=...)``)
+
+    @property
+    def compiles(self) -> bool:
+        return self.compile_error is None
+
+    @property
+    def label(self) -> str:
+        return f"{self.platform} / {self.name}"
+
+
+def _kind(dev: cl.Device) -> str:
+    t = dev.type
+    for name in ("GPU", "CPU", "ACCELERATOR"):
+        if t & getattr(cl.device_type, name):
+            return name
+    return "OTHER"
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device of every platform, in the ICD loader's order, each with whether
+    it compiles a probe kernel (one small build per device; a broken device is listed with
+    its error, never raised). Empty when there is no OpenCL platform at all."""
+    check_process()
+    try:
+        found = platforms()
+    except cl.Error:
+        return []
+    mark_opencl_use()
+    rows = []
+    for plat in found:
+        try:
+            devs = plat.get_devices()
+        except cl.Error:
+            continue
+        for dev in devs:
+            try:
+                error = _probe_error(cl.Context([dev]))
+            except cl.Error as exc:   # not even a context
+                error = str(exc).strip() or repr(exc)
+            rows.append(DeviceInfo(plat.name.strip(), plat.version.strip(), dev.name.strip(),
+                                   _kind(dev), error, dev))
+    return rows
+
+
+def _matches(spec: str, info: DeviceInfo) -> bool:
+    s = spec.strip().lower()
+    alias = DEVICE_ALIASES.get(s)
+    if alias is not None:
+        return alias in info.platform.lower()
+    return s in info.platform.lower() or s in info.name.lower()
+
+
+def find_device(spec: str, source: str = "device") -> cl.Device:
+    """The first device (ICD order) whose platform or device name contains ``spec``
+    (case-insensitive; ``pocl``, ``intel`` and ``oclgrind`` name their platforms) and that
+    compiles a probe kernel.
+
+    Raises:
+        NoDeviceError: nothing matches, or nothing that matches compiles; the message lists
+            every device there is (``source`` names where ``spec`` came from).
+    """
+    rows = list_devices()
+    hits = [r for r in rows if _matches(spec, r)]
+    for r in hits:
+        if r.compiles:
+            return r.device
+    listing = "; ".join(f"{r.label} ({r.kind}"
+                        + ("" if r.compiles else f", does not compile: {r.compile_error}")
+                        + ")" for r in rows) or "none"
+    if hits:
+        raise NoDeviceError(f"{source}={spec!r}: no matching device compiles the probe "
+                            f"kernel; devices here: {listing}")
+    raise NoDeviceError(f"{source}={spec!r} matches no OpenCL device (give 'pocl', 'intel', "
+                        f"'oclgrind' or a part of a platform or device name); devices here: "
+                        f"{listing}. {_INSTALL_HINT if not rows else ''}".rstrip())
+
+
+#: contexts made for ``device=`` choices, one per device: a Renderer made with the same
+#: device again reuses its context and so its built programs (bounded by the devices there are)
+_device_contexts: dict[int, cl.Context] = {}
+
+
+def choose_context(device: str | cl.Device | None = None) -> tuple[cl.Context, str]:
+    """(context, reason) for a renderer: ``device`` if given (a `find_device` name or a
+    ``pyopencl.Device``), else `default_context`'s choice (CLRASTER_DEVICE, PYOPENCL_CTX,
+    default), the reason saying which (module docstring).
+
+    Raises:
+        NoDeviceError: the choice matches no usable device.
+        ForkedProcessError: OpenCL was started in the parent of this fork() child.
+    """
+    if device is None:
+        ctx = default_context()
+        return ctx, _default_choice()[1]
+    check_process()
+    if isinstance(device, cl.Device):
+        dev, reason = device, "device=<pyopencl.Device>"
+    elif isinstance(device, str) and device.strip():
+        dev, reason = find_device(device, source="device"), f"device={device.strip()}"
+    else:
+        raise TypeError(f"device must be a device name or a pyopencl.Device, got {device!r}")
+    mark_opencl_use()
+    # a context this device already has (its programs are built): an earlier device=
+    # choice's, else the default context when it exists and has this device
+    default = _default_choice()[0] if _default_choice.cache_info().currsize else None
+    with _lock:
+        known = _device_contexts.get(dev.int_ptr)
+        if known is None:
+            known = (default if default is not None and default.devices[0] == dev
+                     else cl.Context([dev]))
+            _device_contexts[dev.int_ptr] = known
+    return _warn_if_simulator(known, reason), reason
+
+
+def describe_choice(ctx: cl.Context, reason: str) -> str:
+    """One line: ``"<platform> / <device> (<reason>)"``."""
+    dev = ctx.devices[0]
+    return f"{dev.platform.name.strip()} / {dev.name.strip()} ({reason})"
 
 
 #: Whether a context's device works in the memory of CL_MEM_USE_HOST_PTR buffers itself

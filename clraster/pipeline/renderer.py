@@ -20,7 +20,7 @@ from ..output.frame import Frame
 from ..world.camera import Camera
 from ..world.inputs import Target, as_target
 from ..world.views import ViewError, frames
-from .device import check_process, default_context, event_ms
+from .device import check_process, choose_context, describe_choice, event_ms
 from .drawlist import GeometryPool, PlanCache
 from .draws import FrameDraws
 from .driver import FrameBuffers, FrameOptions, HiZ, check_options, render_frame
@@ -40,7 +40,13 @@ class Renderer:
         width, height: image size in pixels, 1..16384.
         config: tunables (tile size, bin chunks); they never change the output.
         context: an OpenCL context; default `clraster.device.default_context()` (honours
-            PYOPENCL_CTX, else the first PoCL CPU device).
+            CLRASTER_DEVICE, then PYOPENCL_CTX, else the first CPU device that compiles,
+            PoCL first).
+        device: the device instead of a context: ``"pocl"``, ``"intel"``, ``"oclgrind"``,
+            a case-insensitive part of a platform or device name, or a ``pyopencl.Device``;
+            it takes precedence over CLRASTER_DEVICE and PYOPENCL_CTX
+            (`clraster.pipeline.device.choose_context`). Not with ``context``. What was
+            chosen and why: ``device_description``. The device never changes the output.
 
     Device buffers are kept and grown between frames; programs are built once per context
     and config. Frames are streamed: the draws go through the stage chain in consecutive
@@ -78,10 +84,19 @@ class Renderer:
     """
 
     def __init__(self, width: int, height: int, *, config: RasterConfig | None = None,
-                 context: cl.Context | None = None) -> None:
+                 context: cl.Context | None = None,
+                 device: str | cl.Device | None = None) -> None:
         self.width, self.height = check_size(width, height)
         self.config = config or RasterConfig()
-        self.context = context or default_context()
+        if context is not None and device is not None:
+            raise ValueError("give either context= or device=, not both")
+        if context is not None:
+            self.context, reason = context, "context= given"
+        else:
+            self.context, reason = choose_context(device)
+        #: the device used and why, e.g. "Portable Computing Language / pthread-AMD EPYC
+        #: (CLRASTER_DEVICE=pocl)"
+        self.device_description = describe_choice(self.context, reason)
         self._pid = os.getpid()
         self._lock = threading.Lock()
         _check_frame_fits(self.context.devices[0], self.width, self.height, self.config)
