@@ -13,7 +13,7 @@ python3 -m venv .venv
 python -m pip install -q --upgrade pip >/dev/null || true
 python -m pip install ".${extras:+[$extras]}"
 
-probe() { python -c "from clraster.device import default_context; print(default_context().devices[0].platform.version)"; }
+probe() { python -c "from clraster.pipeline.device import default_context; print(default_context().devices[0].platform.version)"; }
 if ! probe 2>/dev/null; then
     echo "setup: the pip PoCL cannot compile kernels on this CPU; installing the system PoCL" >&2
     if command -v apt-get >/dev/null 2>&1; then
