@@ -34,6 +34,7 @@ off. The variables are set only while PoCL starts, so child processes do not inh
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import functools
 import logging
 import os
@@ -359,24 +360,33 @@ def list_devices() -> list[DeviceInfo]:
     it compiles a probe kernel (one small build per device; a broken device is listed with
     its error, never raised). Empty when there is no OpenCL platform at all."""
     check_process()
+    rows = _unprobed_devices()
+    if rows:
+        mark_opencl_use()
+    for k, r in enumerate(rows):
+        try:
+            error = _probe_error(cl.Context([r.device]))
+        except cl.Error as exc:   # not even a context
+            error = str(exc).strip() or repr(exc)
+        rows[k] = dataclasses.replace(r, compile_error=error)
+    return rows
+
+
+def _unprobed_devices() -> list[DeviceInfo]:
+    """Every device of every platform, named but not yet probed (``compile_error`` None
+    until `list_devices` fills it in)."""
     try:
         found = platforms()
     except cl.Error:
         return []
-    mark_opencl_use()
-    rows = []
+    rows: list[DeviceInfo] = []
     for plat in found:
         try:
             devs = plat.get_devices()
         except cl.Error:
             continue
-        for dev in devs:
-            try:
-                error = _probe_error(cl.Context([dev]))
-            except cl.Error as exc:   # not even a context
-                error = str(exc).strip() or repr(exc)
-            rows.append(DeviceInfo(plat.name.strip(), plat.version.strip(), dev.name.strip(),
-                                   _kind(dev), error, dev))
+        rows.extend(DeviceInfo(plat.name.strip(), plat.version.strip(), dev.name.strip(),
+                               _kind(dev), None, dev) for dev in devs)
     return rows
 
 
@@ -397,11 +407,18 @@ def find_device(spec: str, source: str = "device") -> cl.Device:
         NoDeviceError: nothing matches, or nothing that matches compiles; the message lists
             every device there is (``source`` names where ``spec`` came from).
     """
-    rows = list_devices()
-    hits = [r for r in rows if _matches(spec, r)]
+    # only the devices that match are probed (a context and a build each): a runtime the
+    # user did not ask for is never started (Oclgrind's LLVM, say, beside another LLVM
+    # already in this process)
+    hits = [r for r in _unprobed_devices() if _matches(spec, r)]
     for r in hits:
-        if r.compiles:
-            return r.device
+        try:
+            if _probe_error(cl.Context([r.device])) is None:
+                return r.device
+        except cl.Error:
+            continue
+    rows = list_devices()   # the error lists everything, probed
+    hits = [r for r in rows if _matches(spec, r)]
     listing = "; ".join(f"{r.label} ({r.kind}"
                         + ("" if r.compiles else f", does not compile: {r.compile_error}")
                         + ")" for r in rows) or "none"
