@@ -145,6 +145,21 @@ def get_renderer(width: int, height: int, tile_log2: int = 4, hiz: bool = True):
     return r
 
 
+@pytest.fixture(scope="module")
+def client():
+    """A Dask client on a LocalCluster of two worker processes (one PoCL thread each), one
+    per test module that asks for it (a module that kills a worker leaves the next a fresh
+    cluster)."""
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import Client
+
+    from clraster.scale.distributed import local_cluster
+
+    with local_cluster(2, threads_per_worker=1, pocl_threads=1) as cluster, \
+            Client(cluster) as c:
+        yield c
+
+
 @pytest.fixture(scope="session")
 def renderer_for():
     """``renderer_for(width, height, tile_log2=4)`` → a cached Renderer."""

@@ -362,17 +362,6 @@ def test_cli_outputs_with_formats(mesh, renderer, tmp_path, capsys):
 
 # -- Dask --------------------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def client():
-    pytest.importorskip("dask.distributed")
-    from dask.distributed import Client
-
-    from clraster.scale.distributed import local_cluster
-
-    with local_cluster(2, threads_per_worker=1, pocl_threads=1) as cluster, \
-            Client(cluster) as c:
-        yield c
-
 
 def test_dask_writes_the_same_bytes(client, mesh, renderer, tmp_path):
     from clraster.scale.distributed import render_views as dask_views

@@ -232,17 +232,6 @@ def test_partition_covers_every_triangle_once(parts):
 
 # -- on a LocalCluster -------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def client():
-    pytest.importorskip("dask.distributed")
-    from dask.distributed import Client
-
-    from clraster.scale.distributed import local_cluster
-
-    with local_cluster(2, threads_per_worker=1, pocl_threads=1) as cluster, \
-            Client(cluster) as c:
-        yield c
-
 
 @pytest.fixture(scope="module")
 def one_machine():

@@ -80,14 +80,6 @@ def test_partition_with_more_parts_than_clusters(make, parts, faces):
 
 # -- sort-last on a LocalCluster ---------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def client():
-    from dask.distributed import Client
-
-    with cd.local_cluster(2, threads_per_worker=1, pocl_threads=1) as cluster, \
-            Client(cluster) as c:
-        yield c
-
 
 @pytest.fixture(scope="module")
 def one_machine():

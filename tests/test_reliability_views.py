@@ -279,17 +279,6 @@ def test_killed_writers_temporary_is_removed_by_the_next_run(mesh, renderer, tmp
 
 # -- the same on Dask --------------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def client():
-    pytest.importorskip("dask.distributed")
-    from dask.distributed import Client
-
-    from clraster.scale.distributed import local_cluster
-
-    with local_cluster(1, threads_per_worker=1, pocl_threads=1) as cluster, \
-            Client(cluster) as c:
-        yield c
-
 
 def test_dask_rerun_with_other_settings_is_refused(client, mesh, renderer, tmp_path):
     from clraster.scale.distributed import render_views as dask_views
