@@ -55,7 +55,12 @@ def test_json_schema(quick):
     assert "commit" in m["git"]
 
     configs = res["configs"]
-    assert {"triangles", "pixels", "culling"} <= {s for c in configs for s in c["sweeps"]}
+    assert {"triangles", "pixels", "culling", "fill"} <= {s for c in configs
+                                                           for s in c["sweeps"]}
+    # the fill sweep: a quad framed close covers much of the frame, the empty one none
+    fill = {c["scene"]["name"]: c["opencl"] for c in configs if "fill" in c["sweeps"]}
+    assert fill["quad"]["covered_fraction"] > 0.25 and fill["empty"]["covered_pixels"] == 0
+    assert fill["quad"]["fragments_per_s"] > 0
     assert {"off", "frustum", "occlusion"} <= {c["mode"] for c in configs}
     assert len({tuple(c["size"]) for c in configs}) >= 2
     for c in configs:
@@ -64,7 +69,11 @@ def test_json_schema(quick):
         assert len(cl["runs_ms"]) == res["settings"]["repeat"]
         assert all(_positive(t) for t in cl["runs_ms"]) and _positive(cl["median_ms"])
         assert _positive(cl["triangles_per_s"]) and _positive(cl["pixels_per_s"])
-        assert {"vertex", "setup", "bin", "raster"} <= set(cl["stages_median_ms"])
+        # (an empty frame draws nothing: no stage runs)
+        assert c["scene"]["name"] == "empty" or (
+            {"vertex", "setup", "bin", "raster"} <= set(cl["stages_median_ms"]))
+        assert 0.0 <= cl["covered_fraction"] <= 1.0
+        assert cl["covered_pixels"] == round(cl["covered_fraction"] * c["pixels"])
         assert cl["counts"]["triangles_total"] == c["triangles"]
         lean = cl["lean"]   # the same frames with depth and ids only (llvmpipe's outputs)
         assert lean["outputs"] == ["depth", "ids"]
@@ -92,18 +101,27 @@ def test_json_schema(quick):
             assert pe["skipped"].startswith("peer skipped") and res["peer"]["reason"]
 
     targets = {t["name"]: t for t in res["targets"]}
-    every = {"every_config_vs_llvmpipe", "every_config_vs_llvmpipe_lean"}
+    every = {"every_config_vs_llvmpipe": 1.0, "every_config_vs_llvmpipe_lean": 1.0,
+             "every_config_vs_llvmpipe_0.8": 0.8}
     assert set(targets) == {"dragon_vs_twin", "dragon_vs_llvmpipe",
                             "plant10m_occlusion_vs_llvmpipe", "dragon_vs_llvmpipe_0.2",
                             "plant10m_occlusion_vs_llvmpipe_20", "plant10m_occlusion_vs_off",
+                            "dragon_vs_llvmpipe_0.15", "plant10m_occlusion_vs_llvmpipe_30",
+                            "fill_vs_llvmpipe", "empty_frame_ms",
                             "scale_200m_renders", "scale_200m_peak_rss", "scale_linear", *every}
+    fills = [c for c in configs if "fill" in c["sweeps"] and c["peer"].get("median_ms")
+             and c["opencl"]["covered_fraction"] >= 0.25]
     for name, t in targets.items():
         if name in every and res["peer"]["available"]:
             # the largest ratio over the configurations, and which one it is
-            key = "ratio_clraster_over_llvmpipe" if name == "every_config_vs_llvmpipe" \
-                else "ratio_lean_over_llvmpipe"
+            key = "ratio_lean_over_llvmpipe" if name.endswith("_lean") \
+                else "ratio_clraster_over_llvmpipe"
             assert t["value"] == max(c["peer"][key] for c in configs)
-            assert t["met"] is (t["value"] <= 1.0) and t["config"]
+            assert t["met"] is (t["value"] <= every[name]) and t["config"]
+        elif name == "fill_vs_llvmpipe" and fills:
+            # the largest ratio over the fill frames at least a quarter covered
+            worst = max(fills, key=lambda c: c["peer"]["ratio_clraster_over_llvmpipe"])
+            assert t["config"] == worst["id"] and t["met"] is (t["value"] <= 0.8)
         else:   # quick mode has neither the dragon at 1080p nor a 10M plant, and the
             assert t["met"] is None and t["note"]   # scale sweep runs only when named
     assert res["scale"] is None

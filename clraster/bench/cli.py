@@ -41,6 +41,7 @@ from clraster.bench.scale import (
 )
 from clraster.bench.spec import (
     DEFAULT_SWEEPS,
+    FULL_FILL_SCENES,
     FULL_PIXEL_SIZES,
     FULL_TRIANGLE_SCENES,
     FULL_TWIN_MAX_TRIANGLES,
@@ -208,7 +209,7 @@ def _parser() -> argparse.ArgumentParser:
                         "the first of ../shared/meshes and ./shared/meshes from the current "
                         "folder and ../shared/meshes next to a checkout that exists)")
     p.add_argument("--sweeps", type=_sweeps, default=list(DEFAULT_SWEEPS),
-                   help="comma-separated subset of triangles,pixels,culling,scale, or all "
+                   help="comma-separated subset of triangles,pixels,culling,fill,scale, or all "
                         f"(default {','.join(DEFAULT_SWEEPS)}: the scale sweep, 10M-200M "
                         "triangles, runs only when named)")
     p.add_argument("--scenes", type=_list, help="scenes of the triangles sweep (comma-"
@@ -220,6 +221,10 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"sizes of the pixels sweep (default {','.join(FULL_PIXEL_SIZES)})")
     p.add_argument("--culling-scene", help="scene of the culling sweep (default "
                                            "plant:10.1M@inside, ≥ 10M triangles)")
+    p.add_argument("--fill-scenes", type=_list,
+                   help="scenes of the fill sweep, at --size (comma-separated; default "
+                        f"{','.join(FULL_FILL_SCENES)}: meshes seen from close by, one large "
+                        "quad, an empty frame)")
     p.add_argument("--modes", type=_list, help="culling modes of the culling sweep "
                                                "(default off,frustum,occlusion)")
     p.add_argument("--scale-scenes", type=_list,
@@ -266,6 +271,7 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.pixels_scene = a.pixels_scene or small
         a.sizes = a.sizes or [(320, 240), (640, 480)]
         a.culling_scene = a.culling_scene or "plant:20K@inside"
+        a.fill_scenes = a.fill_scenes or [f"{small}@close", "quad", "empty"]
         a.repeat = a.repeat or 2
         a.scale_scenes = a.scale_scenes or quick_scale_scenes(
             lambda m: mesh_path(m, a.meshes) is not None)
@@ -278,6 +284,7 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.pixels_scene = a.pixels_scene or "dragon"
         a.sizes = a.sizes or [parse_size(s) for s in FULL_PIXEL_SIZES]
         a.culling_scene = a.culling_scene or "plant:10.1M@inside"
+        a.fill_scenes = a.fill_scenes or list(FULL_FILL_SCENES)
         a.repeat = a.repeat or 5
         a.scale_scenes = a.scale_scenes or list(FULL_SCALE_SCENES)
         a.scale_repeat = a.scale_repeat or FULL_SCALE_REPEAT

@@ -183,6 +183,11 @@ def run_config(cfg: Config, sc: LoadedScene, a: argparse.Namespace, peer: PeerRu
         # the triangles that survived object culling, per second (what the stages process)
         "setup_triangles_per_s": _rate(counts["triangles_in"], cl_med),
         "counts": counts,
+        # fill rate: pixels the frame covers, and fragments depth-tested, per second
+        "covered_pixels": int(np.count_nonzero(f.triangle_id >= 0)),
+        "covered_fraction": float(np.count_nonzero(f.triangle_id >= 0)) / (w * h),
+        "covered_pixels_per_s": _rate(int(np.count_nonzero(f.triangle_id >= 0)), cl_med),
+        "fragments_per_s": _rate(counts.get("fragments_tested", 0), cl_med),
         "lean": {"outputs": list(LEAN_OUTPUTS), "runs_ms": lean_ms,
                  "median_ms": _median(lean_ms)},
     }

@@ -33,6 +33,7 @@ def make_all(res: dict[str, Any], out: Path) -> tuple[list[str], str | None]:
     for name, fn in (("time_vs_triangles.png", _vs_triangles), ("time_vs_pixels.png",
                                                                _vs_pixels),
                      ("stages.png", _stages), ("funnel.png", _funnel),
+                     ("fill_rate.png", _fill_rate),
                      ("scale.png", _scale)):
         fig = fn(res, plt)
         if fig is None:
@@ -115,6 +116,32 @@ def _vs_pixels(res, plt):
     return _line_plot(res, plt, cs, "pixels", "pixels per frame (log)",
                       f"Frame time vs pixels: {name}",
                       lambda c: f"{c['size'][0]}×{c['size'][1]}")
+
+
+def _fill_rate(res, plt):
+    """Covered pixels per second of frame time, clraster beside llvmpipe, per fill scene."""
+    cs = [c for c in res["configs"] if "fill" in c["sweeps"]
+          and (c["opencl"].get("covered_pixels") or 0) > 0]
+    if not cs:
+        return None
+    import numpy as np
+
+    names = [f"{c['scene']['name']}\n{100 * c['opencl']['covered_fraction']:.0f}% covered"
+             for c in cs]
+    ours = [c["opencl"]["covered_pixels_per_s"] or 0.0 for c in cs]
+    peer = [c["opencl"]["covered_pixels"] / (c["peer"]["median_ms"] / 1e3)
+            if c["peer"].get("median_ms") else 0.0 for c in cs]
+    x = np.arange(len(cs))
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.bar(x - 0.2, np.array(ours) / 1e6, 0.4, label="clraster")
+    if any(peer):
+        ax.bar(x + 0.2, np.array(peer) / 1e6, 0.4, label="llvmpipe")
+    ax.set_xticks(x, names)
+    ax.set_ylabel("covered pixels per second of frame time (M/s)")
+    ax.set_title(_title(res, f"Fill rate at {cs[0]['size'][0]}×{cs[0]['size'][1]}"))
+    ax.legend()
+    fig.tight_layout()
+    return fig
 
 
 def _stages(res, plt):

@@ -118,7 +118,7 @@ def _si(v: float | None) -> str:
 def markdown(res: dict) -> str:
     """results.md of a results dict: one section after another, each a list of lines."""
     L: list[str] = []
-    for section in (_md_header, _md_targets, _md_configs, _md_stages, _md_funnel,
+    for section in (_md_header, _md_targets, _md_configs, _md_fill, _md_stages, _md_funnel,
                     _md_scale, _md_startup, _md_memory, _md_lists):
         L += section(res)
     return "\n".join(L) + "\n"
@@ -219,6 +219,31 @@ def _md_configs(res: dict) -> list[str]:
           "(temporal history warm)."]
     if notes:
         L += [""] + notes
+    return L
+
+
+def _md_fill(res: dict) -> list[str]:
+    """The fill sweep: per-pixel rates of clraster and llvmpipe on the same frames."""
+    rows = [c for c in res["configs"] if "fill" in c["sweeps"]]
+    if not rows:
+        return []
+    L = ["", "## Fill rate", "",
+         "| scene | size | covered | fragments tested | clraster ms | llvmpipe ms | ratio | "
+         "clraster covered px/s | llvmpipe covered px/s | clraster fragments/s | "
+         "frame px/s |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for c in rows:
+        o, pe = c["opencl"], c["peer"]
+        lp = pe.get("median_ms")
+        lrate = (o.get("covered_pixels", 0) / (lp / 1e3)) if lp else None
+        L.append(f"| {c['scene']['name']} | {c['size'][0]}×{c['size'][1]} | "
+                 f"{_f(100 * (o.get('covered_fraction') or 0.0))}% | "
+                 f"{o['counts'].get('fragments_tested', 0):,} | {_f(o['median_ms'], '.2f')} | "
+                 f"{_f(lp, '.2f')} | {_f(pe.get('ratio_clraster_over_llvmpipe'), '.2f')} | "
+                 f"{_si(o.get('covered_pixels_per_s'))} | {_si(lrate)} | "
+                 f"{_si(o.get('fragments_per_s'))} | {_si(o['pixels_per_s'])} |")
+    L += ["", "covered: pixels with a triangle; covered px/s: those pixels per second of the "
+          "whole frame (raster, clear, resolve and read-back for clraster; draw and finish for "
+          "llvmpipe); frame px/s: all the frame's pixels per second of clraster's frame."]
     return L
 
 

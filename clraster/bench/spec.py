@@ -46,10 +46,18 @@ MODES: dict[str, dict[str, Any]] = {
 TWIN_MODE = {"off": "off", "frustum": "frustum", "occlusion": "occlusion"}
 
 #: The sweeps `--sweeps` may name (see :func:`build_matrix`); ``all`` names every one.
-SWEEPS = ("triangles", "pixels", "culling", "scale")
+SWEEPS = ("triangles", "pixels", "culling", "fill", "scale")
 #: The sweeps of a run without `--sweeps`: the scale sweep (10M-200M triangles, ~4.5 min on
 #: its own with its memory probes on 2 cores, see bench/README.md) runs only when named.
-DEFAULT_SWEEPS = ("triangles", "pixels", "culling")
+DEFAULT_SWEEPS = ("triangles", "pixels", "culling", "fill")
+
+#: Scenes of the fill sweep: frames a few large triangles fill (per-pixel work: raster,
+#: clear, resolve), each mesh seen from close by (`close_camera`; the record keeps the
+#: fraction of the frame covered), and an empty frame (a quad behind the camera: the fixed
+#: cost of a frame).
+FULL_FILL_SCENES = ["spot@close", "bunny@close", "quad", "empty"]
+#: A frame at least this much covered counts as "filling the screen" (issue 34's targets).
+FILL_COVERAGE = 0.25
 
 # plant(10_000_000) has 9,999,960 triangles: ask for a little more to be >= 10M.
 FULL_TRIANGLE_SCENES = ["spot", "bunny", "armadillo", "lucy", "dragon202k", "dragon",
@@ -82,15 +90,17 @@ class SceneSpec:
     is `grid_camera` (no suffix: view "grid", or "overview") or
     `clraster.bench.scale.grid_inside_camera`), ``plant:N[@inside|@overview]``
     (`clraster.scenes.plant`, N may end in K or M; the camera is `plant_inside_camera`
-    (default) or `plant_overview_camera`).
+    (default) or `plant_overview_camera`), ``NAME@close`` (a mesh seen from close by:
+    `close_camera`), ``quad`` (one large quad, two triangles, seen from close by) and
+    ``empty`` (the same quad behind the camera: nothing drawn).
     """
 
     text: str
-    kind: str                     # mesh | example | grid | plant
+    kind: str                     # mesh | example | grid | plant | quad
     mesh: str = ""                # mesh name (mesh, grid)
     count: int = 0                # plant triangles
     grid: tuple[int, int, int] = (1, 1, 1)
-    view: str = "framing"         # framing | grid | inside | overview
+    view: str = "framing"         # framing | grid | inside | overview | close | away
 
     @property
     def geometry(self) -> tuple:
@@ -103,6 +113,8 @@ class SceneSpec:
         t = text.strip()
         if t == "example":
             return SceneSpec(t, "example")
+        if t in ("quad", "empty"):
+            return SceneSpec(t, "quad", view="close" if t == "quad" else "away")
         if t.startswith("plant:"):
             body, _, view = t[6:].partition("@")
             view = view or "inside"
@@ -122,6 +134,12 @@ class SceneSpec:
             return SceneSpec(t, "grid", mesh=parts[1], grid=dims, view=view or "grid")
         if not t:
             raise ValueError("empty scene name")
+        name, at, view = t.partition("@")
+        if at:
+            if view != "close":
+                raise ValueError(f"a mesh's view must be close (NAME@close), got {view!r}")
+            return SceneSpec(t, "example" if name == "example" else "mesh", mesh=name,
+                             view="close")
         return SceneSpec(t, "mesh", mesh=t)
 
 
@@ -145,6 +163,8 @@ def estimated_triangles(spec: SceneSpec, meshes: Path) -> int:
         return spec.count
     if spec.kind == "example":
         return 60_000
+    if spec.kind == "quad":
+        return 2
     n = 100_000
     p = mesh_path(spec.mesh, meshes) if spec.mesh != "example" else None
     try:
@@ -171,6 +191,9 @@ class LoadedScene:
         from clraster.world import generators as sc
 
         v = view or self.spec.view
+        if v in ("close", "away"):
+            lo, hi = self.target.bounds()
+            return close_camera(lo, hi, width, height, away=v == "away")
         if self.spec.kind == "grid":
             if v == "inside":
                 from clraster.bench.scale import grid_inside_camera
@@ -193,6 +216,36 @@ class LoadedScene:
                 "instances": self.instances, "build_s": round(self.build_s, 4)}
 
 
+def close_camera(lo, hi, width: int, height: int, away: bool = False):
+    """A camera close to the box [lo, hi]: it looks at the box centre, slightly from above
+    and the side, from 0.6 of the distance at which the box's bounding sphere would just
+    fit the vertical field of view (45°), so the object fills much of the frame (the record
+    keeps how much). ``away``: the same camera turned round, seeing nothing of it."""
+    import numpy as np
+
+    from clraster import Camera
+
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    centre, radius = (lo + hi) / 2.0, max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
+    d = np.array([0.25, 0.2, 1.0]) / np.linalg.norm([0.25, 0.2, 1.0])
+    dist = 0.6 * radius / math.tan(math.radians(45.0) / 2.0)
+    eye = centre + dist * d
+    target = eye + (eye - centre) if away else centre
+    return Camera.look_at(eye=eye, target=target, fov_y=45.0,
+                          near=max(dist - radius, 0.02 * radius) * 0.5, far=dist + 2 * radius)
+
+
+def quad_mesh():
+    """One large quad: the square [-1, 1]² at z = 0, two counter-clockwise triangles seen
+    from +z (the fill sweep's "quad" and "empty" scenes)."""
+    import numpy as np
+
+    import clraster
+
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    return clraster.Mesh(v, np.array([[0, 1, 2], [0, 2, 3]], np.int32))
+
+
 def _load_mesh(name: str, meshes: Path):
     import clraster
 
@@ -212,7 +265,9 @@ def load_scene(spec: SceneSpec, meshes: Path) -> LoadedScene:
     from clraster.world import generators as sc
 
     t0 = time.perf_counter()
-    if spec.kind == "plant":
+    if spec.kind == "quad":
+        target, source = quad_mesh(), "clraster.bench.spec.quad_mesh()"
+    elif spec.kind == "plant":
         target = sc.plant(spec.count)
         source = f"clraster.scenes.plant({spec.count})"
     elif spec.kind == "grid":
@@ -266,6 +321,9 @@ def build_matrix(a: argparse.Namespace) -> list[Config]:
     if "culling" in a.sweeps:
         for m in a.modes:
             add(a.culling_scene, a.size, m, "culling")
+    if "fill" in a.sweeps:
+        for s in getattr(a, "fill_scenes", None) or []:
+            add(s, a.size, "frustum", "fill")
     if "scale" in a.sweeps:
         for s in getattr(a, "scale_scenes", None) or []:
             for view in SCALE_VIEWS:
@@ -292,12 +350,12 @@ def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dic
     the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`)."""
     out = []
 
-    def target(name, desc, cfg, value, threshold, ok_if, why_none):
+    def target(name, desc, cfg, value, threshold, ok_if, why_none, unit="×"):
         met = None if value is None else bool(value >= threshold if ok_if == ">=" else
                                                value <= threshold)
         out.append({"name": name, "description": desc, "config": cfg["id"] if cfg else None,
                     "value": value, "threshold": threshold, "comparison": ok_if, "met": met,
-                    "note": None if value is not None else why_none})
+                    "unit": unit, "note": None if value is not None else why_none})
 
     dragon = _find(configs, lambda c: c["scene"]["source"].endswith("stanford_dragon_vrip.ply")
                    and c["scene"]["kind"] == "mesh" and c["size"] == [1920, 1080]
@@ -328,6 +386,33 @@ def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dic
         target(f"every_config_vs_llvmpipe{'' if what == 'all outputs' else '_lean'}",
                f"every configuration ({what}): largest clraster time / llvmpipe time",
                worst, worst["peer"][key] if worst else None, 1.0, "<=", none_timed)
+    # issue 34 (performance on every CPU)
+    target("dragon_vs_llvmpipe_0.15", "dragon at 1920x1080: clraster time / llvmpipe time "
+           "(issue 34)", dragon, pr, 0.15, "<=", nodragon if not dragon else
+           (dragon.get("peer") or {}).get("skipped") or "llvmpipe not measured")
+    worst = max((c for c in timed if c["peer"].get("ratio_clraster_over_llvmpipe")),
+                default=None, key=lambda c: c["peer"]["ratio_clraster_over_llvmpipe"])
+    target("every_config_vs_llvmpipe_0.8", "every configuration: largest clraster time / "
+           "llvmpipe time (issue 34)", worst,
+           worst["peer"]["ratio_clraster_over_llvmpipe"] if worst else None, 0.8, "<=",
+           none_timed)
+    fills = [c for c in timed if "fill" in c["sweeps"]
+             and (c["opencl"].get("covered_fraction") or 0.0) >= FILL_COVERAGE]
+    wf = max(fills, default=None, key=lambda c: c["peer"]["ratio_clraster_over_llvmpipe"])
+    target("fill_vs_llvmpipe", f"frames ≥ {FILL_COVERAGE:.0%} covered (fill sweep): largest "
+           "clraster time / llvmpipe time (issue 34)", wf,
+           wf["peer"]["ratio_clraster_over_llvmpipe"] if wf else None, 0.8, "<=",
+           "no fill configuration with an llvmpipe time in this run")
+    target("plant10m_occlusion_vs_llvmpipe_30",
+           "plant ≥ 10M triangles, occlusion culling: llvmpipe time / clraster time "
+           "(issue 34)", plant, ps, 30.0, ">=",
+           "no plant ≥ 10M triangles with occlusion mode in this run" if not plant else
+           (plant.get("peer") or {}).get("skipped") or "llvmpipe not measured")
+    empty = _find(configs, lambda c: c["scene"]["name"] == "empty"
+                  and c["size"] == [1920, 1080])
+    target("empty_frame_ms", "empty frame at 1920x1080: clraster median time, ms (issue 34)",
+           empty, empty["opencl"]["median_ms"] if empty else None, 1.0, "<=",
+           "no empty configuration at 1920x1080 in this run", unit="ms")
     target("dragon_vs_llvmpipe_0.2", "dragon at 1920x1080: clraster time / llvmpipe time "
            "(issue 15)", dragon, pr, 0.2, "<=", nodragon if not dragon else
            (dragon.get("peer") or {}).get("skipped") or "llvmpipe not measured")
