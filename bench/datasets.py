@@ -3,7 +3,8 @@ views of one mesh — with clraster and with Open3D's RaycastingScene (Embree), 
 
     python bench/datasets.py ../shared/meshes/stanford_dragon_vrip.ply --views 200
 
-The job per view, as a user writes it: clraster renders (``cull`` back or none) and takes
+The job per view, as a user writes it: clraster renders (``cull`` back or none) with
+``outputs=("ids", "linear_depth", "normals")`` — made on the device — and takes
 ``Frame.linear_depth(camera)`` and ``Frame.normals(mesh)``; Open3D casts one ray per pixel
 (``create_rays_pinhole``, whose rays have z = 1 in the camera frame, so ``t_hit`` is the
 linear depth) and returns ``t_hit``, ``primitive_ids`` and ``primitive_normals``. The same
@@ -67,7 +68,9 @@ def clraster_job(mesh: Mesh, k: np.ndarray, poses: list[np.ndarray], width: int,
             for p in poses]
 
     def one(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        fr = r.render(mesh, cam, cull=cull, outputs=("depth", "ids"))
+        # metric depth and normals made on the device (the resolve stage), as the batch
+        # paths ask for them; Frame.linear_depth / normals return those arrays
+        fr = r.render(mesh, cam, cull=cull, outputs=("ids", "linear_depth", "normals"))
         return fr.linear_depth(cam), fr.triangle_id, fr.normals(mesh)
 
     first = one(cams[0])[1].copy()

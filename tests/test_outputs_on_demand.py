@@ -65,7 +65,7 @@ def test_empty_frame_outputs(scene):
         f.need_barycentrics()
 
 
-@pytest.mark.parametrize("bad", [(), ("depth", "depth"), ("normals",), 3, ("ids", None)])
+@pytest.mark.parametrize("bad", [(), ("depth", "depth"), ("normal",), 3, ("ids", None)])
 def test_bad_outputs(scene, bad):
     cam = plant_inside_camera(scene, 32, 32)
     with pytest.raises(ValueError, match="outputs must be"):

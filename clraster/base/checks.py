@@ -172,14 +172,21 @@ def mvp_matrix(camera: CameraLike, width: int, height: int) -> np.ndarray:
     return np.ascontiguousarray(m32)
 
 
-#: Frame outputs `Renderer.render(outputs=...)` can choose among, in Frame field order.
-RENDER_OUTPUTS = ("depth", "ids", "bary")
+#: Per-pixel outputs the resolve stage makes on the device from ids, barycentrics and the
+#: scene's geometry, only when asked for (`Renderer.render(outputs=...)`; the
+#: `clraster.Frame` methods return them): names as the batch outputs
+#: (`clraster.scale.batch.OUTPUTS`) call them.
+RESOLVE_OUTPUTS = ("mask", "linear_depth", "distance", "points", "normals", "smooth_normals",
+                   "camera_normals", "smooth_camera_normals")
+#: Frame outputs `Renderer.render(outputs=...)` can choose among: the raster's buffers in
+#: Frame field order, then the resolve stage's.
+RENDER_OUTPUTS = ("depth", "ids", "bary") + RESOLVE_OUTPUTS
 
 
-def check_render_outputs(outputs: object) -> bool:
+def check_render_outputs(outputs: object) -> tuple[str, ...]:
     """``outputs`` of `Renderer.render`: a name or a sequence of distinct names out of
-    `RENDER_OUTPUTS`, at least one. Returns whether barycentrics were asked for (depth
-    and ids are always made: the depth test needs both)."""
+    `RENDER_OUTPUTS`, at least one. Returns the names, as a tuple (depth and ids are
+    always made: the depth test needs both)."""
     names = (outputs,) if isinstance(outputs, str) else outputs
     out: tuple = ()
     try:
@@ -190,7 +197,7 @@ def check_render_outputs(outputs: object) -> bool:
             or not all(isinstance(o, str) and o in RENDER_OUTPUTS for o in out)):
         raise ValueError(f"outputs must be distinct names out of {', '.join(RENDER_OUTPUTS)}"
                          f" (at least one), got {outputs!r}")
-    return "bary" in out
+    return out
 
 
 def check_flag(value: object, name: str) -> bool:

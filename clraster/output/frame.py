@@ -198,6 +198,23 @@ class Frame:
         fates: the fate of every cluster of the scene (`clraster.fates.ClusterFates`),
             when asked for (``render(..., fates=True)``); else None.
         reversed_z: whether ``depth`` is reversed-Z (see depth).
+        resolved: the per-pixel outputs made on the device by the renderer's resolve stage
+            when asked for (``render(..., outputs=("linear_depth", "normals", ...))``,
+            names out of `clraster.base.checks.RESOLVE_OUTPUTS`): name → array. "mask"
+            bool (H, W); "linear_depth", "distance" float32 (H, W), inf on the background;
+            "points" float64 (H, W, 3) world positions, 0 on the background; "normals",
+            "smooth_normals", "camera_normals", "smooth_camera_normals" float32 (H, W, 3)
+            unit normals, 0 on the background. The methods below (`linear_depth`,
+            `distance`, `normals`, `points`, `point_normals`, `mask`, `save`) return these
+            arrays when the frame has them (and, for those that take a camera, the camera
+            is the one it was rendered with), and compute on the host otherwise.
+            `clraster.pipeline.resolving` says how each is made: from the exact surface
+            point in float64, so the device's metric depth equals
+            ``linear_depth(camera, target)``'s host value to float32 rounding.
+        resolved_camera: (view, projection) float64 (4, 4) each: the camera the resolved
+            outputs were made with, when one of them needs it; else None.
+        source: a weak reference to the OpenCL renderer that made the frame (None from the
+            NumPy twin): `clraster.shade.shade` shades on its device.
     """
 
     depth: np.ndarray
@@ -207,6 +224,9 @@ class Frame:
     overdraw: np.ndarray | None = None
     fates: ClusterFates | None = None
     reversed_z: bool = False
+    resolved: dict[str, np.ndarray] = field(default_factory=dict)
+    resolved_camera: tuple[np.ndarray, np.ndarray] | None = None
+    source: Any = field(default=None, repr=False, compare=False)
 
     @classmethod
     def empty(cls, width: int, height: int, stats: FrameStats | None = None,
@@ -240,8 +260,10 @@ class Frame:
 
     @property
     def mask(self) -> np.ndarray:
-        """(H, W) bool: pixels covered by some triangle."""
-        return self.triangle_id >= 0
+        """(H, W) bool: pixels covered by some triangle (the device-made "mask" when the
+        frame has it)."""
+        got = self.resolved.get("mask")
+        return got if got is not None else self.triangle_id >= 0
 
     def visible_faces(self) -> np.ndarray:
         """Sorted int32 array of the face indices visible in at least one pixel."""
@@ -261,6 +283,10 @@ class Frame:
                 depth then comes from the exact surface points (ids + barycentrics,
                 float64) instead of the float32 window depth, whose metric error grows as
                 distance² · (far − near) / (far · near) (~1e-6 relative at moderate range).
+
+        A frame rendered with ``outputs=(..., "linear_depth")`` returns its device-made
+        array (exact surface points, as with a target) when ``camera`` is the one it was
+        rendered with (`resolved`), whether or not ``target`` is given.
         """
         return linear_depth(self, camera, target)
 

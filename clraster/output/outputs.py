@@ -7,8 +7,11 @@ The command line, `Frame.save` and the batch paths (`clraster.scale.batch`,
     write_output(path, frame, what, *, target=None, camera=None, depth_scale=None,
                  smooth=None, space=None, **shade_options) -> Path
 
-All of it runs on the host, in NumPy, from the frame's buffers (ids, barycentrics, window
-depth) and the target's geometry; no output here is resolved on the device.
+A frame rendered with these outputs asked for (``render(..., outputs=("linear_depth",
+"normals", ...))``) carries them made on the device (`clraster.Frame.resolved`, by the
+resolve stage: `clraster.pipeline.resolving`), and every function here returns those
+arrays (`resolved_output`); otherwise they are computed on the host, in NumPy, from the
+frame's buffers (ids, barycentrics, window depth) and the target's geometry.
 
 ``what`` (`OUTPUTS`) and what it needs:
 
@@ -81,10 +84,12 @@ from ..world.mesh import Mesh
 from ..world.scene import Scene
 from .atomic import write_atomic
 from .shade import pixel_normals, shade
+from .surface import affine_rows, blend_rows, dot_rows, mat3_rows, unit_rows
 
-__all__ = ["FORMATS", "OUTPUTS", "FrameBuffers", "FramePoints", "check_output_options",
-           "check_output_path", "check_writable", "distance", "linear_depth", "normals",
-           "point_normals", "points", "write_output"]
+__all__ = ["FORMATS", "OUTPUTS", "FrameBuffers", "FramePoints", "camera_axes",
+           "check_output_options", "check_output_path", "check_writable", "distance",
+           "linear_depth", "normals", "point_normals", "points", "resolved_output",
+           "write_output"]
 
 #: What `write_output` can write.
 OUTPUTS = ("depth", "linear_depth", "distance", "ids", "normals", "shaded", "points", "bary",
@@ -144,6 +149,29 @@ class FramePoints(NamedTuple):
 
 # -- geometry of the visible surface --------------------------------------------------------
 
+def resolved_output(frame: Any, name: str, camera: Any = None) -> np.ndarray | None:
+    """The output ``name`` the device made for ``frame`` (`clraster.Frame.resolved`), or
+    None when the frame has none: it was not asked for, or ``camera`` (given for the
+    outputs that depend on it: metric depths, camera-space normals) is not the camera it
+    was made with (its ``view`` and ``projection`` differ from `Frame.resolved_camera`)."""
+    got = getattr(frame, "resolved", None)
+    if not got or name not in got:
+        return None
+    if camera is not None:
+        made = getattr(frame, "resolved_camera", None)
+        if made is None:
+            return None
+        h, w = np.shape(frame.triangle_id)
+        try:
+            view = np.asarray(camera.view, np.float64)
+            proj = np.asarray(camera.projection(w, h), np.float64)
+        except (AttributeError, TypeError, ValueError):
+            return None
+        if not (np.array_equal(view, made[0]) and np.array_equal(proj, made[1])):
+            return None
+    return got[name]
+
+
 def _as_geometry(target: Any) -> Mesh | Scene:
     """`target` as the Mesh or Scene the renderer drew: trimesh objects through the same
     cached conversion as the renderer (`clraster.inputs.as_target`), so ids match."""
@@ -169,13 +197,25 @@ def points(frame: FrameBuffers, target: Any, space: str = "world",
     ``space="camera"``: those world points mapped by the camera's view matrix into OpenGL eye
     space (x right, y up, z towards the viewer; needs `camera`)."""
     _check_space(space, camera, "points")
+    made = resolved_output(frame, "points")
+    if made is not None:   # the device's surface points: gathered, row-major
+        ids_img = np.asarray(frame.triangle_id)
+        ys, xs = np.nonzero(ids_img >= 0)
+        world = made[ys, xs]
+        pixels = np.stack([xs, ys], axis=1).astype(np.int32)
+        if space == "camera":
+            h, w = ids_img.shape
+            view = _camera_frame(camera, w, h)[0]
+            world = world @ view[:3, :3].T + view[:3, 3]
+        return FramePoints(world, ids_img[ys, xs].astype(np.int32), pixels)
     geom = _as_geometry(target)
     n_faces = geom.n_faces
     ys, xs, ids = _covered(frame, n_faces)
     bary = np.asarray(frame.need_barycentrics(), np.float64)[ys, xs]   # (N, 3)
+    # in the resolve kernel's order (clraster.output.surface): the same bits as the device
     if isinstance(geom, Mesh):
         tri = geom.vertices.astype(np.float64)[geom.faces[ids]]      # (N, 3, 3)
-        world = np.einsum("nk,nkc->nc", bary, tri)
+        world = blend_rows(bary, tri[:, 0], tri[:, 1], tri[:, 2])
     else:
         inst, face = geom.split_ids(ids)
         world = np.empty((len(ids), 3))
@@ -184,9 +224,9 @@ def points(frame: FrameBuffers, target: Any, space: str = "world",
             instance = geom.instances[int(i)]
             m = instance.mesh
             tri = m.vertices.astype(np.float64)[m.faces[face[sel]]]
-            local = np.einsum("nk,nkc->nc", bary[sel], tri)
-            t = instance.transform
-            world[sel] = local @ t[:3, :3].T + t[:3, 3]
+            local = blend_rows(bary[sel], tri[:, 0], tri[:, 1], tri[:, 2])
+            world[sel] = affine_rows(np.asarray(instance.transform, np.float64)[:3].reshape(-1),
+                                     local)
     pixels = np.stack([xs, ys], axis=1).astype(np.int32)
     if space == "camera":
         h, w = frame.triangle_id.shape
@@ -236,13 +276,27 @@ def _view_axis(view: np.ndarray) -> np.ndarray:
     return fwd / np.linalg.norm(fwd)
 
 
+def camera_axes(camera: Any, width: int, height: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """(view float64 (4, 4), projection float64 (4, 4), eye float64 (3,), unit view axis
+    float64 (3,), orthographic) of a `clraster.Camera`-like object (``view`` and
+    ``projection(width, height)``): what the metric outputs are measured from, here and in
+    the device's resolve stage. ValueError for a camera without them or a non-affine view."""
+    view, proj, eye, ortho = _camera_frame(camera, width, height)
+    return view, proj, eye, _view_axis(view), ortho
+
+
 def _metric(frame: FrameBuffers, camera: Any, target: Any, kind: str) -> np.ndarray:
     """(H, W) float32 linear depth or distance (`kind`), inf on the background."""
+    made = resolved_output(frame, kind, camera)
+    if made is not None:
+        return made
     h, w = frame.triangle_id.shape
     view, proj, eye, ortho = _camera_frame(camera, w, h)
     fwd = _view_axis(view)
     out = np.full((h, w), np.inf, np.float32)
-    if target is not None:
+    exact = target is not None
+    if exact:
         pts = points(frame, target)
         ys, xs = pts.pixels[:, 1], pts.pixels[:, 0]
         offset = pts.points - eye
@@ -257,13 +311,15 @@ def _metric(frame: FrameBuffers, camera: Any, target: Any, kind: str) -> np.ndar
         e = ndc @ np.linalg.inv(proj).T
         e = e[:, :3] / e[:, 3:]
         offset = e @ np.linalg.inv(view[:3, :3]).T     # eye-space origin is the eye
-    along = offset @ fwd
+    # (the resolve kernel's sums: the exact path gives the device's bits)
+    along = dot_rows(offset, fwd) if exact else offset @ fwd
     if kind == "linear_depth" or ortho:
         # an orthographic camera's rays are parallel to the view axis: the distance along
         # a ray is the depth from the image plane through the eye
         out[ys, xs] = along
     else:
-        out[ys, xs] = np.linalg.norm(offset, axis=1)
+        out[ys, xs] = np.sqrt(dot_rows(offset, offset)) if exact else np.linalg.norm(offset,
+                                                                                      axis=1)
     return out
 
 
@@ -290,15 +346,17 @@ def normals(frame: FrameBuffers, target: Any, smooth: bool = False, space: str =
     inverse transpose of the view's 3×3 part, renormalized.
     """
     _check_space(space, camera, "normals")
+    name = ("smooth_" if smooth else "") + ("camera_normals" if space == "camera" else "normals")
+    made = resolved_output(frame, name, camera if space == "camera" else None)
+    if made is not None:
+        return made
     n = pixel_normals(frame, _as_geometry(target), smooth=smooth)
     if space == "world":
         return n
     h, w = frame.triangle_id.shape
     view, _, _, _ = _camera_frame(camera, w, h)
-    m = np.linalg.inv(view[:3, :3]).T
-    flat = n.reshape(-1, 3).astype(np.float64) @ m.T
-    length = np.linalg.norm(flat, axis=1, keepdims=True)
-    flat = np.divide(flat, length, out=np.zeros_like(flat), where=length > 0)
+    m = np.linalg.inv(view[:3, :3]).T.reshape(-1)
+    flat = unit_rows(mat3_rows(m, n.reshape(-1, 3).astype(np.float64)))
     return flat.reshape(n.shape).astype(np.float32)
 
 
@@ -429,7 +487,8 @@ def _image_array(frame: FrameBuffers, what: str, ext: str, *, target: Any, camer
     if what == "bary":
         return np.asarray(frame.need_barycentrics(), np.float32)
     if what == "mask":
-        m = np.asarray(frame.triangle_id) >= 0
+        m = resolved_output(frame, "mask")
+        m = np.asarray(frame.triangle_id) >= 0 if m is None else m
         return m if ext in (".npy", ".npz") else m.astype(np.uint8) * np.uint8(255)
     if what in _NEEDS_CAMERA:
         a = _metric(frame, camera, target, what)

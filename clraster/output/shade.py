@@ -34,6 +34,9 @@ from ..base.checks import check_flag
 from ..world.inputs import as_target
 from ..world.mesh import Mesh
 from ..world.scene import Instance, Scene
+from .effects import Effects
+from .lights import Light
+from .surface import blend_rows, dot_rows, mat3_rows, unit_rows
 from .textures import (
     Texture,
     as_colors,
@@ -42,7 +45,7 @@ from .textures import (
     texture_from_trimesh,
 )
 
-__all__ = ["DEFAULT_LIGHT_DIR", "depth_image", "pixel_normals", "render_shaded", "shade",
+__all__ = ["DEFAULT_LIGHT_DIR", "Light", "depth_image", "pixel_normals", "render_shaded", "shade",
            "vertex_normals"]
 
 #: World-space direction *towards* the light used when none is given: up, right, front.
@@ -319,7 +322,9 @@ def _normal_matrices(scene: Scene) -> np.ndarray:
 
 def _world_normals(res: _Resolved, px: _Pixels, smooth: bool) -> np.ndarray:
     """float64 (K, 3) unit world-space normals of the covered pixels (zero for degenerate
-    faces)."""
+    faces), rounded to float32 values: ``normalize(M⁻ᵀ n)`` of the float32 face normal or
+    the blended vertex normals, in the order of kernels/resolve.cl
+    (`clraster.output.surface`), so a frame's device-made normals are these bits."""
     n = np.zeros((px.face.size, 3))
     for i, sel in px.groups:
         mesh = res.parts[i].mesh
@@ -327,17 +332,17 @@ def _world_normals(res: _Resolved, px: _Pixels, smooth: bool) -> np.ndarray:
         if smooth:
             assert px.bary is not None
             tri = mesh.faces[px.face[sel]]
-            sn = np.einsum("kj,kjc->kc", px.bary[sel], vertex_normals(mesh)[tri].astype(
-                np.float64))
+            vn = vertex_normals(mesh)[tri].astype(np.float64)
+            sn = blend_rows(px.bary[sel], vn[:, 0], vn[:, 1], vn[:, 2])
             # vertex normals that cancel (a fold, a crease of opposite windings) give no
             # direction: keep the face's own there
-            weak = np.linalg.norm(sn, axis=1) < 1e-6
+            weak = ~(np.sqrt(dot_rows(sn, sn)) >= 1e-6)
             sn[weak] = fn[weak]
             fn = sn
         n[sel] = fn
     if res.scene is not None:
-        n = np.einsum("kij,kj->ki", _normal_matrices(res.scene)[px.inst], n)
-    return _normalize(n) if (smooth or res.scene is not None) else n
+        n = mat3_rows(_normal_matrices(res.scene).reshape(-1, 9)[px.inst], n)
+    return unit_rows(n).astype(np.float32).astype(np.float64)
 
 
 def _base_colors(res: _Resolved, px: _Pixels, per_instance_colors: Any) -> np.ndarray:
@@ -405,6 +410,28 @@ def _shade_covered(frame: _FrameLike, res: _Resolved, *, smooth: bool,
     lam = np.abs(lam) if two_sided else np.maximum(lam, 0.0)
     base = _base_colors(res, px, per_instance_colors)
     return px.covered, base * (_AMBIENT + (1.0 - _AMBIENT) * lam[:, None])
+
+
+def _shade_on_device(frame: _FrameLike, res: _Resolved, *, smooth: bool,
+                     per_instance_colors: Any, light: np.ndarray, two_sided: bool,
+                     background: np.ndarray, alpha: bool) -> np.ndarray | None:
+    """`_compose`'s image (k = 1) made on the device of the OpenCL renderer that rendered
+    ``frame`` (``frame.source``; kernels/resolve.cl shade_pixels, this module's NumPy path
+    being its twin, equal within 1/255), or None where the host path shades: a frame from
+    the twin, colour sources (vertex or face colours, textures), a callable
+    ``per_instance_colors``, smooth shading of a frame without barycentrics."""
+    src = getattr(frame, "source", None)
+    renderer = src() if src is not None else None
+    if (renderer is None or callable(per_instance_colors) or any(p.colored for p in res.parts)
+            or (smooth and getattr(frame, "barycentrics", None) is None)):
+        return None
+    _ids(frame, res.n_faces)   # ids out of range: the host's error
+    tints = (None if per_instance_colors is None
+             else as_colors(per_instance_colors, len(res.parts), "per_instance_colors"))
+    return renderer.shade_frame(frame, res.geometry, smooth=smooth, light=light,
+                                ambient=_AMBIENT, albedo=_ALBEDO, two_sided=two_sided,
+                                tints=tints, flat_raw=not smooth and res.scene is None,
+                                background=background, alpha=alpha)
 
 
 def _to_u8(rgb: np.ndarray) -> np.ndarray:
@@ -479,6 +506,12 @@ def _compose(frame: _FrameLike, res: _Resolved, k: int, *, smooth: bool,
              two_sided: bool) -> np.ndarray:
     """The output image of a frame k× the output size in each axis (k = 1: `shade`)."""
     bg = _background(background)
+    if k == 1:
+        img = _shade_on_device(frame, res, smooth=smooth,
+                               per_instance_colors=per_instance_colors, light=light,
+                               two_sided=two_sided, background=bg, alpha=alpha)
+        if img is not None:
+            return img
     covered, rgb = _shade_covered(frame, res, smooth=smooth,
                                   per_instance_colors=per_instance_colors, light=light,
                                   two_sided=two_sided)
@@ -602,7 +635,10 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
                   colors: Any = None, texture: Any = True, per_instance_colors: Any = None,
                   background: tuple[int, int, int] = (255, 255, 255), alpha: bool = False,
                   light_dir: npt.ArrayLike | None = None, light: npt.ArrayLike | None = None,
-                  two_sided: bool = True) -> np.ndarray:
+                  two_sided: bool = True, lights: Any = None, shadows: bool = False,
+                  ssao: Any = False, aa: str | None = None, style: str = "lambert",
+                  outlines: Any = False, normal_map: Any = True, return_layers: bool = False
+                  ) -> Any:
     """Render `target` and shade it, optionally with supersampled anti-aliasing.
 
     With ``ssaa = k > 1`` the frame is rendered at k·width × k·height with the *same* view
@@ -632,9 +668,25 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
             ``clip_planes`` and the flags pass as given. The dict is not modified.
         smooth, colors, texture, per_instance_colors, background, alpha, light_dir, light,
             two_sided: as in `shade`.
+        lights: a `clraster.output.lights.Light` or a list of them (directional, spot)
+            instead of the one light of `light_dir`; `clraster.output.effects` gives the
+            lighting sum.
+        shadows: shadow maps for every light (a depth pass each through a renderer of the
+            same type; `clraster.output.lights`).
+        ssao: screen-space ambient occlusion: True (radius 3% of the target's bounding
+            diagonal), a radius in world units, or a `clraster.output.post.SSAO`.
+        aa: ``"fxaa"`` (FXAA 3.11 on the output image, after any ssaa) or None.
+        style: ``"lambert"`` or ``"cel"`` (each light's term in bands).
+        outlines: True or a `clraster.output.post.Outlines`: depth and normal
+            discontinuities and silhouettes drawn in a colour.
+        normal_map: True (a trimesh target's own glTF ``normalTexture``), False, or a
+            `clraster.output.textures.NormalMap` (a list: one per instance).
+        return_layers: also return a `clraster.output.effects.ShadeLayers` (lit fraction
+            per light, ambient occlusion, normals).
 
     Returns:
-        (height, width, 3) uint8 RGB, or (height, width, 4) RGBA with ``alpha=True``.
+        (height, width, 3) uint8 RGB, or (height, width, 4) RGBA with ``alpha=True``;
+        with ``return_layers=True`` the pair (image, layers).
 
     Raises:
         ValueError: `ssaa` not an integer in 1..`MAX_SSAA`, no size for a factory, a
@@ -673,9 +725,23 @@ def render_shaded(renderer: Any, target: Any, camera: Any, *, ssaa: int = 1,
         vp = np.asarray(camera.view_projection(w, h), np.float64)
         if not np.array_equal(vp, np.asarray(camera.view_projection(k * w, k * h))):
             cam = _FixedViewCamera(vp)
+    fx = Effects.make(lights=lights, shadows=shadows, ssao=ssao, aa=aa, style=style,
+                      outlines=outlines, normal_map=normal_map, return_layers=return_layers)
     frame = r.render(res.geometry, cam, **kwargs)
-    return _compose(frame, res, k, smooth=smooth, per_instance_colors=per_instance_colors,
-                    background=background, alpha=alpha, light=light_vec, two_sided=two_sided)
+    if not fx.active(target):
+        return _compose(frame, res, k, smooth=smooth, per_instance_colors=per_instance_colors,
+                        background=background, alpha=alpha, light=light_vec,
+                        two_sided=two_sided)
+    # the effects (clraster.output.effects) take over from the surface colour and normals
+    px = _pixels(frame, res, frame.barycentrics is not None)
+    return fx.finish(renderer=r, frame=frame, target=target,
+                     vp=np.asarray(cam.view_projection(k * w, k * h), np.float64),
+                     covered=px.covered, inst=px.inst, face=px.face, bary=px.bary,
+                     base=_base_colors(res, px, per_instance_colors),
+                     normals=_world_normals(res, px, smooth), k=k,
+                     background=_background(background), alpha=alpha, ambient=_AMBIENT,
+                     light_towards=light_vec, two_sided=two_sided,
+                     render_kwargs=render_kwargs)
 
 
 def _depth_buffer(depth: Any, reversed_z: Any, what: str = "depth"

@@ -26,8 +26,8 @@ import numpy.typing as npt
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["Texture", "as_colors", "colors_from_trimesh", "sample_bilinear",
-           "texture_from_trimesh"]
+__all__ = ["NormalMap", "Texture", "as_colors", "colors_from_trimesh", "normal_map_from_trimesh",
+           "perturb_normals", "sample_bilinear", "texture_from_trimesh", "vertex_tangents"]
 
 
 def as_colors(value: npt.ArrayLike, rows: int, name: str) -> np.ndarray:
@@ -197,3 +197,128 @@ def texture_from_trimesh(tm: trimesh.Trimesh) -> Texture | None:
     if image is not None and uv is None:
         image = None  # no usable UVs: fall back to the factor alone
     return Texture.make(uv, image, factor, n_vertices=n)
+
+
+# -- tangent-space normal maps -------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class NormalMap:
+    """A tangent-space normal map on a mesh (glTF ``normalTexture``).
+
+    A texel ``c`` (RGB in [0, 1]) encodes the normal ``(2c − 1)`` in the surface's tangent
+    frame: x along the tangent (the direction of increasing u), y along the bitangent
+    (increasing v: glTF's "+Y up", OpenGL's convention), z along the surface normal.
+    The xy part is multiplied by `scale` (glTF ``normalTexture.scale``). Sampled bilinearly
+    with repeat wrapping at the interpolated UVs, as `sample_bilinear`.
+
+    Attributes:
+        uv: float64 (N, 2) per-vertex UVs (v up). image: float64 (H, W, 3) in [0, 1].
+        scale: float.
+    """
+
+    uv: np.ndarray
+    image: np.ndarray
+    scale: float = 1.0
+
+    @classmethod
+    def make(cls, uv: npt.ArrayLike, image: Any, scale: float = 1.0, *,
+             n_vertices: int | None = None) -> NormalMap:
+        """Validated `NormalMap`; `uv` and `image` as for `Texture.make`.
+
+        Raises:
+            ValueError: wrong shapes or dtypes, non-finite UVs or scale.
+        """
+        tex = Texture.make(uv, image, n_vertices=n_vertices)
+        if not np.isfinite(scale):
+            raise ValueError(f"normal map scale must be finite, got {scale}")
+        assert tex.uv is not None and tex.image is not None
+        return cls(tex.uv, tex.image, float(scale))
+
+
+def normal_map_from_trimesh(tm: trimesh.Trimesh) -> NormalMap | None:
+    """The tangent-space normal map of a trimesh mesh whose material has one (glTF PBR
+    ``normalTexture``, loaded by trimesh), or None (no map, or no per-vertex UVs)."""
+    visual = getattr(tm, "visual", None)
+    if getattr(visual, "kind", None) != "texture":
+        return None
+    image = getattr(getattr(visual, "material", None), "normalTexture", None)
+    uv = getattr(visual, "uv", None)
+    if image is None or uv is None or len(uv) != len(tm.vertices):
+        return None
+    return NormalMap.make(uv, image, n_vertices=len(tm.vertices))
+
+
+def vertex_tangents(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray,
+                    normals: np.ndarray | None = None) -> np.ndarray:
+    """float64 (N, 4) per-vertex tangents from UVs (Lengyel's method): xyz the unit tangent
+    (direction of increasing u in the surface, orthogonalized against the vertex normal
+    `normals` (N, 3); default the area-weighted one), w = ±1 the handedness, so that the
+    bitangent is ``w · (n × t)`` (glTF's rule). Each face adds its (UV-area-weighted)
+    ∂p/∂u and ∂p/∂v to its vertices; faces with degenerate UVs add nothing; a vertex with
+    no usable tangent gets any unit vector orthogonal to its normal and w = 1."""
+    v = vertices.astype(np.float64)
+    tri = v[faces]
+    tuv = uv[faces]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    d1, d2 = tuv[:, 1] - tuv[:, 0], tuv[:, 2] - tuv[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-20
+    sign = np.where(det < 0, -1.0, 1.0)[:, None]
+    # ∂p/∂u, ∂p/∂v times |det| (= 2·UV area): a face weighs by its UV area, never divided
+    sdir = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * sign
+    tdir = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * sign
+    sdir[~ok] = 0.0
+    tdir[~ok] = 0.0
+    n_v = v.shape[0]
+    t_acc = np.zeros((n_v, 3))
+    b_acc = np.zeros((n_v, 3))
+    for k in range(3):
+        for c in range(3):
+            t_acc[:, c] += np.bincount(faces[:, k], weights=sdir[:, c], minlength=n_v)
+            b_acc[:, c] += np.bincount(faces[:, k], weights=tdir[:, c], minlength=n_v)
+    if normals is None:
+        cross = np.cross(e1, e2)
+        acc = np.zeros((n_v, 3))
+        for k in range(3):
+            for c in range(3):
+                acc[:, c] += np.bincount(faces[:, k], weights=cross[:, c], minlength=n_v)
+        ln = np.linalg.norm(acc, axis=1, keepdims=True)
+        normals = np.divide(acc, ln, out=np.zeros_like(acc), where=ln > 0)
+    n = normals.astype(np.float64)
+    t = t_acc - n * np.einsum("kc,kc->k", n, t_acc)[:, None]
+    length = np.linalg.norm(t, axis=1)
+    weak = length < 1e-12
+    if weak.any():   # any direction orthogonal to the normal
+        alt = np.where(np.abs(n[weak, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t[weak] = alt - n[weak] * np.einsum("kc,kc->k", n[weak], alt)[:, None]
+        length[weak] = np.linalg.norm(t[weak], axis=1)
+    length[length == 0] = 1.0
+    out = np.empty((n_v, 4))
+    out[:, :3] = t / length[:, None]
+    out[:, 3] = np.where(np.einsum("kc,kc->k", np.cross(n, out[:, :3]), b_acc) < 0.0, -1.0, 1.0)
+    return out
+
+
+def perturb_normals(nmap: NormalMap, tangents: np.ndarray, faces: np.ndarray,
+                    face: np.ndarray, bary: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """float64 (K, 3) unit normals of K surface points with the normal map applied.
+
+    Args:
+        nmap: the map. tangents: (N, 4) from `vertex_tangents`. faces: the mesh's (M, 3).
+        face: (K,) face index per point. bary: (K, 3) barycentrics in the face's vertex
+            order. normals: (K, 3) unit surface normals at the points (face or smooth), in
+            the same space as the mesh's vertices.
+    """
+    tri = faces[face]
+    uv = np.einsum("kj,kjc->kc", bary, nmap.uv[tri])
+    t4 = np.einsum("kj,kjc->kc", bary, tangents[tri])
+    c = sample_bilinear(nmap.image, uv) * 2.0 - 1.0
+    c[:, :2] *= nmap.scale
+    n = normals
+    t = t4[:, :3] - n * np.einsum("kc,kc->k", n, t4[:, :3])[:, None]
+    tl = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.divide(t, tl, out=np.zeros_like(t), where=tl > 0)
+    b = np.cross(n, t) * np.where(t4[:, 3:4] < 0.0, -1.0, 1.0)
+    out = c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n
+    ol = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, ol, out=n.copy(), where=ol > 0)

@@ -11,11 +11,18 @@ from one body.
 
 `FrameOptions.make` checks a frame's options once, for both renderers, before anything is
 planned.
+
+After the last pass, the per-pixel outputs asked for beyond depth, ids and barycentrics
+(`clraster.base.checks.RESOLVE_OUTPUTS`: mask, metric depth, points, normals) are made by
+the backend's resolve step from the frame buffers and the scene's geometry
+(`clraster.pipeline.resolving`), only when asked for; the frame carries them
+(`Frame.resolved`).
 """
 
 from __future__ import annotations
 
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
@@ -23,6 +30,7 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 
 from ..base.checks import (
+    RESOLVE_OUTPUTS,
     CameraLike,
     check_clip_planes,
     check_cull,
@@ -38,6 +46,14 @@ from ..world.scene import Scene
 from .drawlist import GeometryPool, PlanCache, plan_frame
 from .draws import FrameDraws
 from .params import FrameParams, FrameTotals, finish_depth
+from .resolving import (
+    NEED_BARY,
+    ResolveTables,
+    ResolveView,
+    check_resolve_camera,
+    resolve_tables,
+    resolve_view,
+)
 from .streaming import stream_draws
 from .twophase import OcclusionHistory, two_phase
 
@@ -61,7 +77,10 @@ class FrameOptions:
     clip_planes: float64 (K, 4) world-space user clip planes, or None. window: bool (H, W)
     mask of the pixels a polygon window lets through (`window_mask`), or None. cull_planes:
     float64 (K', 4) planes bounding that window for this camera (`window_planes_for`): they
-    cull and reject, never clip. bary: whether barycentrics are made (``outputs``)."""
+    cull and reject, never clip. bary: whether barycentrics are made (asked for in
+    ``outputs``, or needed by a resolve output); keep_bary: whether the frame returns them.
+    resolve: the resolve outputs asked for (`clraster.base.checks.RESOLVE_OUTPUTS`), in
+    ``outputs``' order."""
 
     cull: str = "back"
     frustum: bool = True
@@ -74,6 +93,8 @@ class FrameOptions:
     clip_planes: np.ndarray | None = None
     window: np.ndarray | None = None
     cull_planes: np.ndarray | None = None
+    keep_bary: bool = True
+    resolve: tuple[str, ...] = ()
 
     @classmethod
     def make(cls, width: int, height: int, camera: CameraLike, *, cull: Any = "back",
@@ -82,25 +103,30 @@ class FrameOptions:
              clip_planes: Any = None, window: Any = None,
              outputs: Any = ("depth", "ids", "bary")) -> FrameOptions:
         """Check `Renderer.render`'s options for a ``width`` × ``height`` frame seen by
-        ``camera`` (ValueError naming a bad one, `check_options`) and make the window's
-        culling planes for that camera."""
+        ``camera`` (ValueError naming a bad one, `check_options`; a resolve output that
+        needs the camera's view with a camera that has none, `check_resolve_camera`) and
+        make the window's culling planes for that camera."""
         flags = {"frustum": frustum, "cones": cones, "occlusion": occlusion,
                  "overdraw": overdraw, "fates": fates, "reversed_z": reversed_z}
-        planes, mask, bary = check_options(width, height, cull, clip_planes, window, outputs,
-                                           flags)
+        planes, mask, names = check_options(width, height, cull, clip_planes, window, outputs,
+                                            flags)
+        resolve = tuple(n for n in names if n in RESOLVE_OUTPUTS)
+        check_resolve_camera(resolve, camera, width, height)
+        keep = "bary" in names
         cull_planes = None
         if window is not None:   # planes that cut the work outside the window's mask
             cull_planes = window_planes_for(window, camera, width, height, planes)
         return cls(cull, bool(frustum), bool(cones), bool(occlusion), bool(overdraw),
-                   bool(fates), bool(reversed_z), bary, planes, mask, cull_planes)
+                   bool(fates), bool(reversed_z), keep or any(n in NEED_BARY for n in resolve),
+                   planes, mask, cull_planes, keep, resolve)
 
 
 def check_options(width: int, height: int, cull: Any, clip_planes: Any, window: Any,
                   outputs: Any, flags: dict[str, Any]
-                  ) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
+                  ) -> tuple[np.ndarray | None, np.ndarray | None, tuple[str, ...]]:
     """The checks made on a frame's options, whatever the camera: (clip planes float64
-    (K, 4) or None, window mask bool (height, width) or None, whether barycentrics are
-    made). ValueError naming the option otherwise."""
+    (K, 4) or None, window mask bool (height, width) or None, the output names asked for).
+    ValueError naming the option otherwise."""
     check_cull(cull)
     planes = check_clip_planes(clip_planes)
     mask = None if window is None else window_mask(window, width, height)
@@ -144,6 +170,13 @@ class Backend(Protocol[Out]):
         """After the passes of a frame, even a failed one."""
         ...
 
+    def _resolve(self, pool: GeometryPool, tables: ResolveTables, view: ResolveView,
+                 out: Out) -> tuple[dict[str, np.ndarray], float]:
+        """The resolve outputs ``view.names`` of the finished frame buffers ``out`` (name →
+        array, `clraster.pipeline.reference.resolve.resolve` gives shapes and dtypes) and
+        the milliseconds it took."""
+        ...
+
 
 def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike,
                  options: FrameOptions) -> Frame:
@@ -165,9 +198,11 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
     params = FrameParams.make(w, h, config, o.cull, o.reversed_z, o.window)
     if fd is not None and plan.empty:
         # nothing in view: the cleared frame
-        return _frame(backend._buffers(backend._clear(params, o)),
-                      FrameStats.from_counts(counts, np.zeros(0, np.uint8)),
-                      ClusterFates.from_plan(plan) if o.fates else None, o)
+        out = backend._clear(params, o)
+        stats = FrameStats.from_counts(counts, np.zeros(0, np.uint8))
+        return _frame(backend._buffers(out), stats,
+                      ClusterFates.from_plan(plan) if o.fates else None, o,
+                      _resolve(backend, plan, camera, o, out, stats.timings_ms), backend)
     totals = FrameTotals(timings_ms={"cull (host)": t_cull})
     occluded = None
 
@@ -191,12 +226,35 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
             occluded = res.occluded_keys if o.fates else None
     finally:
         backend._end_frame()
+    resolved = _resolve(backend, plan, camera, o, out, totals.timings_ms)
     return _frame(backend._buffers(out), totals.stats(counts),
-                  ClusterFates.from_plan(plan, occluded) if o.fates else None, o)
+                  ClusterFates.from_plan(plan, occluded) if o.fates else None, o, resolved,
+                  backend)
+
+
+def _resolve(backend: Backend[Out], plan: Any, camera: CameraLike, o: FrameOptions, out: Out,
+             timings_ms: dict[str, float]) -> tuple[dict[str, np.ndarray], ResolveView | None]:
+    """The resolve outputs asked for (none: nothing runs) and the view they were made for;
+    their time goes to ``timings_ms["resolve"]``."""
+    if not o.resolve:
+        return {}, None
+    tables = resolve_tables(plan.pool, plan.scene)
+    view = resolve_view(plan.pool, plan.scene, camera, backend.width, backend.height,
+                        o.resolve)
+    arrays, ms = backend._resolve(plan.pool, tables, view, out)
+    timings_ms["resolve"] = timings_ms.get("resolve", 0.0) + ms
+    return arrays, view
 
 
 def _frame(buffers: FrameBuffers, stats: FrameStats, fates: ClusterFates | None,
-           o: FrameOptions) -> Frame:
+           o: FrameOptions, resolved: tuple[dict[str, np.ndarray], ResolveView | None],
+           backend: Any = None) -> Frame:
     depth, ids, bary, overdraw = buffers
-    return Frame(finish_depth(depth, ids, o.reversed_z), ids, bary if o.bary else None, stats,
-                 overdraw=overdraw, fates=fates, reversed_z=o.reversed_z)
+    # a backend that shades on its device (the OpenCL renderer's `shade_frame`), weakly
+    source = weakref.ref(backend) if hasattr(backend, "shade_frame") else None
+    arrays, view = resolved
+    cam = (None if view is None or view.view is None or view.projection is None
+           else (view.view, view.projection))
+    return Frame(finish_depth(depth, ids, o.reversed_z), ids, bary if o.keep_bary else None,
+                 stats, overdraw=overdraw, fates=fates, reversed_z=o.reversed_z,
+                 resolved=arrays, resolved_camera=cam, source=source)

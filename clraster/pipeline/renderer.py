@@ -25,9 +25,15 @@ from .drawlist import GeometryPool, PlanCache
 from .draws import FrameDraws
 from .driver import FrameBuffers, FrameOptions, HiZ, check_options, render_frame
 from .params import FrameParams, FrameTotals
+from .resolving import ResolveTables, ResolveView, resolve_tables
+
+# imported for its effect: it registers the device SSAO, FXAA and shadow passes with
+# clraster.output.post, which render_shaded then uses
+from .stages import post as _post_passes  # noqa: F401
 from .stages.chain import StageChain
 from .stages.pyramid import Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
+from .stages.resolve import ResolveStage
 from .twophase import OcclusionHistory
 
 __all__ = ["Renderer", "check_render_kwargs", "check_render_options"]
@@ -107,6 +113,7 @@ class Renderer:
         self._plans = PlanCache()   # the last target's scene and geometry pool
         self._history = OcclusionHistory()   # two-phase occlusion culling's memory
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
+        self._resolver: ResolveStage | None = None   # built on the first resolve output
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
@@ -159,10 +166,19 @@ class Renderer:
                 rasterized, and fragments at shut pixels of the others are tested but never
                 pass (counted in fragments_tested, unless the tile Hi-Z skips their piece).
             outputs: which of "depth", "ids", "bary" to make. Without "bary" the
-                barycentrics are neither computed nor stored (``frame.barycentrics`` is
-                None): 8 bytes per pixel instead of 20, for depth, visibility and
-                occlusion users. Depth and ids are always made (the depth test needs
-                both), and they are the same with or without "bary".
+                barycentrics are not returned (``frame.barycentrics`` is None) and, unless
+                an output below needs them, neither computed nor stored: 8 bytes per pixel
+                instead of 20, for depth, visibility and occlusion users. Depth and ids
+                are always made (the depth test needs both), and they are the same with
+                or without "bary". Also, made on the device after the last pass by the
+                resolve stage (kernels/resolve.cl) only when named, into
+                ``frame.resolved`` (the `Frame` methods return them): "mask";
+                "linear_depth", "distance" and "points" (from the exact surface point in
+                float64: ids, float32 barycentrics and the scene's vertices; they need a
+                camera with ``view`` and ``projection``); "normals", "smooth_normals",
+                "camera_normals", "smooth_camera_normals" (face or interpolated vertex
+                normals, world or OpenGL eye space). Conventions and precision:
+                `clraster.pipeline.resolving`.
 
         Returns:
             A `Frame` (depth, triangle_id, barycentrics, stats); see its docstring for the
@@ -235,6 +251,40 @@ class Renderer:
 
     def _end_frame(self) -> None:
         self.chain.trim()   # an outsized pass's buffers go back to the budget's bound
+
+    def _resolve(self, pool: GeometryPool, tables: ResolveTables, view: ResolveView,
+                 out: RasterOutput) -> tuple[dict[str, np.ndarray], float]:
+        if self._resolver is None:
+            self._resolver = ResolveStage(self.context, self.config)
+        geometry = self.chain.geometry
+        geometry.upload_pool(self.queue, pool)   # (a frame with nothing drawn skipped it)
+        bary = out.bufs[2] if out.bary is not None else None
+        arrays, ev = self._resolver.run(self.queue, geometry.buffers, pool, tables, view,
+                                        out.bufs[1], bary, self.width, self.height,
+                                        cast(RasterStage, self.chain.raster).pool)
+        return arrays, event_ms([ev])
+
+    def shade_frame(self, frame: Frame, target: Any, *, smooth: bool, light: np.ndarray,
+                    ambient: float, albedo: np.ndarray, two_sided: bool,
+                    tints: np.ndarray | None, flat_raw: bool, background: np.ndarray,
+                    alpha: bool) -> np.ndarray:
+        """The Lambert image `clraster.output.shade.shade` makes of ``frame`` (rendered from
+        ``target``, a Mesh or Scene) for surfaces without colour sources, made on this
+        renderer's device (kernels/resolve.cl shade_pixels; arguments as
+        `ResolveStage.shade`). The scene's tables are the resolve stage's, kept per
+        geometry pool (this renderer's last target's, or made for ``target``)."""
+        check_process(self._pid)
+        with self._lock:
+            if self._resolver is None:
+                self._resolver = ResolveStage(self.context, self.config)
+            scene, pool = self._plans.scene_and_pool(target)
+            tables = resolve_tables(pool, scene)
+            img, _ = self._resolver.shade(
+                self.queue, pool, tables, frame.triangle_id,
+                frame.barycentrics, light=light, ambient=ambient, albedo=albedo,
+                two_sided=two_sided, tints=tints, smooth=smooth, flat_raw=flat_raw,
+                background=background, alpha=alpha)
+            return img
 
     def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
              same_depth: bool = False) -> tuple[np.ndarray, float]:

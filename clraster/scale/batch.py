@@ -29,9 +29,10 @@ points                  ply     the covered pixels' world positions with their f
 An output takes another format as ``"name:format"`` (``"linear_depth:npy"``,
 ``"normals:png"``; any extension `clraster.output.outputs.FORMATS` allows for it: png, tif,
 tiff, exr, npy, npz, ply), and its file ends in that extension (``view_00000_normals.png``).
-The metric depths, normals, masks and point clouds are computed on the host from the
-frame's ids and barycentrics with the `clraster.Frame` methods (exact surface points,
-float64), not on the device, and written by `clraster.output.outputs.write_output`.
+The metric depths, normals, masks and point clouds are made on the device by the renderer's
+resolve stage (``Renderer.render(..., outputs=...)`` asks for them: `_render_outputs`; exact
+surface points in float64, `clraster.pipeline.resolving`), taken through the
+`clraster.Frame` methods and written by `clraster.output.outputs.write_output`.
 Row 0 is the top row, as in `clraster.Frame`.
 
 Each file is written to a temporary name in ``out_dir`` and renamed into place
@@ -118,9 +119,15 @@ _WRITTEN_AS = {"depth": ("depth", None, None), "ids": ("ids", None, None),
                "camera_normals": ("normals", None, "camera"),
                "smooth_camera_normals": ("normals", True, "camera"),
                "mask": ("mask", None, None), "points": ("points", None, None)}
-#: outputs made from the barycentrics (the others need only depth and ids)
-_NEEDS_BARY = frozenset({"bary", "shaded", "linear_depth", "distance", "smooth_normals",
-                         "smooth_camera_normals", "points"})
+#: outputs read from the frame's barycentrics on the host (the others need only depth and ids,
+#: or are made on the device: `_RESOLVED`)
+_NEEDS_BARY = frozenset({"bary", "shaded"})
+#: output → the renderer's resolve outputs it is made from (`Renderer.render(outputs=...)`)
+_RESOLVED = {"linear_depth": ("linear_depth",), "distance": ("distance",),
+             "normals": ("normals",), "smooth_normals": ("smooth_normals",),
+             "camera_normals": ("camera_normals",),
+             "smooth_camera_normals": ("smooth_camera_normals",), "mask": ("mask",),
+             "points": ("points", "normals")}
 #: outputs whose PNG is scaled by ``depth_scale``
 _SCALED = frozenset({"linear_depth", "distance"})
 #: every view file extension (lower case, no dot)
@@ -545,8 +552,9 @@ def _write_view(files: dict[str, Path], frame: Frame, target: Any, camera: Any,
 
 def view_arrays(frame: Frame, camera: Any, target: Any, outputs: Sequence[str]
                 ) -> dict[str, np.ndarray]:
-    """Output name → array of one rendered view, from the `clraster.Frame` methods (host
-    NumPy, float64 surface points; the same values the files of `render_views` hold before
+    """Output name → array of one rendered view, from the `clraster.Frame` methods (the
+    device-made arrays where the frame has them, `_render_outputs`, else host NumPy; float64
+    surface points either way; the same values the files of `render_views` hold before
     encoding): depth, ids (int32), bary, mask (bool), shaded (uint8) as the frame has them;
     linear_depth / distance float32 (H, W) scene units, inf background
     (``frame.linear_depth(camera, target)``); normals and its variants float32 (H, W, 3);
@@ -582,11 +590,17 @@ def view_arrays(frame: Frame, camera: Any, target: Any, outputs: Sequence[str]
 
 
 def _render_outputs(outs: Sequence[str], render_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``render_kwargs`` with the renderer's ``outputs`` narrowed to depth and ids when no
-    output needs the barycentrics (8 bytes a pixel are made instead of 20)."""
-    if "outputs" in render_kwargs or any(_split(o)[0] in _NEEDS_BARY for o in outs):
+    """``render_kwargs`` with the renderer's ``outputs`` (unless the caller gave them): depth
+    and ids, the barycentrics only where an output reads them on the host (shaded, bary;
+    else 8 bytes a pixel are kept instead of 20), and the resolve outputs the device makes
+    for the others (`_RESOLVED`: no host pass over the frame)."""
+    if "outputs" in render_kwargs:
         return render_kwargs
-    return {**render_kwargs, "outputs": ("depth", "ids")}
+    names = [_split(o)[0] for o in outs]
+    want = ["depth", "ids"] + (["bary"] if any(n in _NEEDS_BARY for n in names) else [])
+    for n in names:
+        want += [r for r in _RESOLVED.get(n, ()) if r not in want]
+    return {**render_kwargs, "outputs": tuple(want)}
 
 
 def _checked_cameras(cams: Sequence[Any], width: int, height: int) -> list[Any]:

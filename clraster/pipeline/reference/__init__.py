@@ -30,11 +30,13 @@ from ..drawlist import GeometryPool, PlanCache
 from ..draws import FrameDraws
 from ..driver import FrameBuffers, FrameOptions, HiZ, render_frame
 from ..params import BinBudgetExceeded, FrameParams, FrameTotals
+from ..resolving import ResolveTables, ResolveView
 from ..streaming import stream_draws
 from ..twophase import OcclusionHistory
 from . import bin as bin_
 from . import pyramid as pyramid_
 from . import raster as raster_
+from . import resolve as resolve_
 from . import setup as setup_
 from . import vertex as vertex_
 
@@ -74,7 +76,8 @@ class Renderer:
                reversed_z: bool = False, clip_planes: Any = None, window: Any = None,
                outputs: Sequence[str] = ("depth", "ids", "bary")) -> Frame:
         """Render ``target`` (Mesh or Scene, or a trimesh Trimesh or Scene); arguments and
-        outputs as `clraster.Renderer.render` (no overdraw or fates)."""
+        outputs as `clraster.Renderer.render` (no overdraw or fates; the resolve outputs
+        made by the twin of kernels/resolve.cl, `clraster.pipeline.reference.resolve`)."""
         options = FrameOptions.make(
             self.width, self.height, camera, cull=cull, frustum=frustum, cones=cones,
             occlusion=occlusion, reversed_z=reversed_z, clip_planes=clip_planes,
@@ -101,6 +104,12 @@ class Renderer:
 
     def _end_frame(self) -> None:
         pass
+
+    def _resolve(self, pool: GeometryPool, tables: ResolveTables, view: ResolveView,
+                 out: Images) -> tuple[dict[str, np.ndarray], float]:
+        t0 = time.perf_counter()
+        arrays = resolve_.resolve(pool, tables, view, out[1], out[2])
+        return arrays, (time.perf_counter() - t0) * 1e3
 
 
 def render(target: Target, camera: CameraLike, width: int, height: int, *,

@@ -1,0 +1,210 @@
+"""What the resolve stage reads besides the frame's buffers, made once for both of its
+mirrors (kernels/resolve.cl through `clraster.pipeline.stages.resolve`, and the NumPy twin
+`clraster.pipeline.reference.resolve`): the scene's face table and instance tables
+(`ResolveTables`, once per geometry pool) and one view's camera-relative instance matrices
+(`ResolveView`, per frame).
+
+The resolve stage turns each pixel's (triangle id, barycentrics) into the outputs of
+`clraster.base.checks.RESOLVE_OUTPUTS`. Per covered pixel, in float64:
+
+* instance i: the last one whose first triangle id (``Scene.face_base``) is ≤ the id;
+  face f = id − face_base[i]; its three vertices a, b, c are pool positions
+  (`GeometryPool.positions`, object space relative to the mesh's pool origin), found
+  through the face table.
+* the surface point ``q = (b0·a + b1·b) + b2·c`` in object space (barycentrics relative to
+  the face's own vertex order, as the raster writes them), moved to the world by the
+  instance's model matrix (its transform, with the mesh's pool origin folded in):
+  points = ``M·q + t``; off = points − eye; linear_depth = ``off · fwd`` (fwd: the unit
+  world view axis); distance = ``|off|``, or linear_depth for an orthographic camera
+  (parallel rays). This is the exact surface point of `clraster.Frame.points`: its error
+  is the float32 barycentrics' (~1e-7 of the triangle's size; float64 adds ~1e-16 of the
+  coordinates), not the float32 window depth run back through the projection, whose
+  metric error grows as distance² (~1e-6 relative at moderate range).
+* normals: the face normal ``normalize((b − a) × (c − a))`` of `Mesh.face_normals`
+  (float32, a table per scene), or (smooth) the barycentric blend of the mesh's area-weighted
+  vertex normals (`clraster.output.shade.vertex_normals`; the face normal where that blend
+  is shorter than 1e-6), then ``normalize(M⁻ᵀ n)`` — glTF's rule, no sign change for a
+  mirroring instance — rounded to float32; for camera space, that times V⁻ᵀ (V the view's
+  3×3 part), normalized. Zero for degenerate faces.
+
+Every sum is written in one order (`clraster.output.surface`), which the host outputs of
+`clraster.output.outputs` follow too: a frame's device-made outputs are the bits the host
+computes from the same frame.
+
+Background pixels (id −1): mask False, metric depths inf, points and normals 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..output.outputs import camera_axes
+from ..output.shade import vertex_normals
+from ..world.scene import Scene
+from .drawlist import GeometryPool
+
+__all__ = ["OUTPUT_BITS", "RESOLVE_SPAN", "ResolveTables", "ResolveView", "resolve_bits",
+           "resolve_tables", "resolve_view"]
+
+#: resolve output → its bit in the kernel's ``want`` mask (generated as -D options).
+OUTPUT_BITS = {"mask": 1, "linear_depth": 2, "distance": 4, "points": 8, "normals": 16,
+               "smooth_normals": 32, "camera_normals": 64, "smooth_camera_normals": 128}
+#: Pixels per work-item of the resolve kernel (consecutive, row-major): large enough that
+#: a frame is a few hundred work-items (each launch of one costs PoCL a loop iteration, not
+#: a thread), small enough that 1080p still spreads over every core. Speed only.
+RESOLVE_SPAN = 512
+#: outputs made from the barycentrics (the surface point, or interpolated vertex normals)
+NEED_BARY = frozenset({"linear_depth", "distance", "points", "smooth_normals",
+                       "smooth_camera_normals"})
+#: outputs that need the camera's view (eye, view axis, eye-space rotation)
+NEED_CAMERA = frozenset({"linear_depth", "distance", "points", "camera_normals",
+                         "smooth_camera_normals"})
+NEED_SMOOTH = frozenset({"smooth_normals", "smooth_camera_normals"})
+
+
+def resolve_bits(names: tuple[str, ...]) -> int:
+    """The kernel's ``want`` mask of the resolve outputs ``names``."""
+    bits = 0
+    for n in names:
+        bits |= OUTPUT_BITS[n]
+    return bits
+
+
+@dataclass(frozen=True)
+class ResolveTables:
+    """One scene's tables for the resolve stage (I instances, U unique meshes, F faces of
+    the unique meshes, V pool vertices).
+
+    inst_base: int32 (I,) triangle id of each instance's face 0 (``Scene.face_base``).
+    inst_mesh: int32 (I,) unique mesh (pool order) of each instance.
+    mesh_fbase: int32 (U,) row of each unique mesh's face 0 in ``face_verts``.
+    face_verts: int32 (F, 3) pool vertex indices (rows of `GeometryPool.positions`) of each
+        face's three vertices, in the face's own order.
+    face_normals: float32 (F, 3) unit object-space face normals, rows as ``face_verts``
+        (each mesh's `Mesh.face_normals`: what the host shades and outputs with).
+    normal_mats: float64 (I, 9) row-major M⁻ᵀ of each instance's 3×3 part (zero for a
+        singular one: its normals are zero).
+    vnormals: float32 (V, 3) area-weighted unit vertex normals in pool order (made on the
+        first smooth request: `smooth_normals`).
+    """
+
+    inst_base: np.ndarray
+    inst_mesh: np.ndarray
+    mesh_fbase: np.ndarray
+    face_verts: np.ndarray
+    face_normals: np.ndarray
+    normal_mats: np.ndarray
+    meshes: tuple[Any, ...]
+
+    def smooth_normals(self, pool: GeometryPool) -> np.ndarray:
+        """float32 (V, 3) vertex normals parallel to ``pool.positions`` (cached)."""
+        got = self.__dict__.get("_vnormals")
+        if got is None:
+            from ..culling.clusters import clusters_of
+
+            parts = [vertex_normals(m)[clusters_of(m).vert_ids] for m in self.meshes]
+            got = (np.ascontiguousarray(np.concatenate(parts), np.float32) if parts
+                   else np.zeros((0, 3), np.float32))
+            object.__setattr__(self, "_vnormals", got)
+        return got
+
+
+def resolve_tables(pool: GeometryPool, scene: Scene) -> ResolveTables:
+    """The `ResolveTables` of ``scene`` drawn from ``pool`` (`GeometryPool.build(scene)`),
+    made once and kept on the pool (a pool belongs to one scene version)."""
+    got = pool.__dict__.get("_resolve_tables")
+    if got is not None:
+        return got
+    n_inst = len(scene.instances)
+    inst_mesh = np.asarray(pool.instance_mesh, np.int64)
+    n_mesh = int(pool.mesh_cluster_base.size)
+    meshes: list[Any] = [None] * n_mesh
+    for i in range(n_inst):
+        u = int(inst_mesh[i])
+        if meshes[u] is None:
+            meshes[u] = scene.instances[i].mesh
+    n_faces = np.array([m.n_faces for m in meshes], np.int64)
+    mesh_fbase = np.zeros(n_mesh, np.int64)
+    if n_mesh:
+        np.cumsum(n_faces[:-1], out=mesh_fbase[1:])
+    total = int(n_faces.sum())
+    face_verts = np.zeros((total, 3), np.int32)
+    cl = np.asarray(pool.clusters, np.int64)
+    if cl.shape[0]:
+        n_tris = cl[:, 1]
+        cluster = np.repeat(np.arange(cl.shape[0]), n_tris)       # cluster of each triangle
+        mesh = np.searchsorted(pool.mesh_cluster_base, cluster, side="right") - 1
+        rows = mesh_fbase[mesh] + np.asarray(pool.face_ids, np.int64)
+        verts = cl[cluster, 2][:, None] + np.asarray(pool.local_tris[:, :3], np.int64)
+        face_verts[rows] = verts
+    face_normals = (np.concatenate([m.face_normals() for m in meshes]) if meshes
+                    else np.zeros((0, 3), np.float32))
+    tables = ResolveTables(
+        np.ascontiguousarray(scene.face_base, np.int32).reshape(-1),
+        inst_mesh.astype(np.int32), mesh_fbase.astype(np.int32), face_verts,
+        np.ascontiguousarray(face_normals, np.float32), _normal_matrices(scene.transforms()),
+        tuple(meshes))
+    object.__setattr__(pool, "_resolve_tables", tables)
+    return tables
+
+
+def _normal_matrices(mats: np.ndarray) -> np.ndarray:
+    """float64 (I, 9): M⁻ᵀ of each transform's 3×3 part, row-major; zero where singular."""
+    m3 = np.asarray(mats, np.float64).reshape(-1, 4, 4)[:, :3, :3]
+    out = np.zeros((m3.shape[0], 3, 3))
+    ok = np.abs(np.linalg.det(m3)) > 0.0 if m3.shape[0] else np.zeros(0, bool)
+    if ok.any():
+        out[ok] = np.transpose(np.linalg.inv(m3[ok]), (0, 2, 1))
+    return np.ascontiguousarray(out.reshape(-1, 9))
+
+
+@dataclass(frozen=True)
+class ResolveView:
+    """One frame's view for the resolve stage.
+
+    names: the resolve outputs asked for (`clraster.base.checks.RESOLVE_OUTPUTS`); want:
+    their bits (`OUTPUT_BITS`). model: float64 (I, 12) row-major 3×4 ``[M₃ | t]`` per
+    instance (model matrix with the mesh's pool origin folded in,
+    `GeometryPool.models`): object point → world point. cam: float64 (16,)
+    the view axis fwd (3), the eye (3), V⁻ᵀ row-major (9, world → eye-space normals), and
+    1.0 for an orthographic camera (else 0.0). view, projection: float64 (4, 4) the
+    camera's matrices (the frame keeps them: `clraster.Frame.resolved_camera`), or None
+    when no output needs the camera.
+    """
+
+    names: tuple[str, ...]
+    want: int
+    model: np.ndarray
+    cam: np.ndarray
+    view: np.ndarray | None
+    projection: np.ndarray | None
+
+
+def check_resolve_camera(names: tuple[str, ...], camera: Any, width: int, height: int
+                         ) -> None:
+    """ValueError now, before anything is drawn, when a resolve output asked for needs a
+    camera with ``view`` and ``projection`` (`camera_axes`) and ``camera`` has none."""
+    need = [n for n in names if n in NEED_CAMERA]
+    if need:
+        try:
+            camera_axes(camera, width, height)
+        except ValueError as exc:
+            raise ValueError(f"outputs {', '.join(need)}: {exc}") from None
+
+
+def resolve_view(pool: GeometryPool, scene: Scene, camera: Any, width: int, height: int,
+                 names: tuple[str, ...]) -> ResolveView:
+    """The `ResolveView` of ``camera`` for the resolve outputs ``names``."""
+    model, _ = pool.models(scene.transforms())
+    cam = np.zeros(16)
+    view = proj = None
+    if any(n in NEED_CAMERA for n in names):
+        view, proj, eye, fwd, ortho = camera_axes(camera, width, height)
+        cam[0:3], cam[3:6] = fwd, eye
+        cam[6:15] = np.linalg.inv(view[:3, :3]).T.reshape(-1)
+        cam[15] = 1.0 if ortho else 0.0
+    return ResolveView(names, resolve_bits(names),
+                       np.ascontiguousarray(model[:, :3, :].reshape(-1, 12)), cam, view, proj)

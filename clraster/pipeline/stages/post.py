@@ -1,0 +1,182 @@
+"""Per-pixel passes on the device, host side (kernels/post.cl: SSAO and FXAA; the
+shadow-map lookups of kernels/shadow.cl through `clraster.pipeline.stages.shadow`).
+
+`DevicePasses` runs render_shaded's passes (`clraster.output.post.Passes`) for frames of an
+OpenCL renderer, in its context, on a queue of its own; importing this module registers it
+with `clraster.output.post.register_passes`, so render_shaded finds it for any renderer that
+has an OpenCL ``context``. The NumPy twins are `clraster.output.post.ssao_inputs` /
+`ssao_taps_pass` / `fxaa` and `clraster.output.lights.shadow_lookup`. Each pass is one
+blocking call. Inputs and results are the caller's arrays themselves where the device works
+in host memory (CL_MEM_USE_HOST_PTR on PoCL's CPU devices: no copies), copies elsewhere;
+intermediate buffers (SSAO's half-resolution positions, normals and factor, FXAA's luma)
+are `GrowBuffer`s kept from frame to frame.
+"""
+
+from __future__ import annotations
+
+import weakref
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+
+from ...base.config import RasterConfig
+from ...output.lights import Light, ShadowMap
+from ...output.post import (
+    SSAO,
+    SSAO_UPSAMPLE_DEPTH,
+    Passes,
+    register_passes,
+    ssao_origin,
+    ssao_taps,
+)
+from ..device import kernel, program, shares_host_memory
+from ._buffers import GrowBuffer
+from .shadow import ShadowStage
+
+__all__ = ["DevicePasses", "device_passes"]
+
+#: Work-group shape of the per-pixel kernels (x, y): a row of 16 pixels, 4 rows.
+LOCAL = (16, 4)
+MF = cl.mem_flags
+
+
+#: FXAA: one work-item per FXAA_SPAN pixels of a row (kernels/post.cl), 64 per group.
+FXAA_SPAN = 8
+FXAA_LOCAL = (64, 1)
+
+
+def _global(w: int, h: int) -> tuple[int, int]:
+    return (-(-w // LOCAL[0]) * LOCAL[0], -(-h // LOCAL[1]) * LOCAL[1])
+
+
+def _fxaa_global(w: int, h: int) -> tuple[int, int]:
+    n = -(-w // FXAA_SPAN)
+    return (-(-n // FXAA_LOCAL[0]) * FXAA_LOCAL[0], h)
+
+
+class DevicePasses:
+    """The passes of `clraster.output.post.Passes` in one OpenCL context."""
+
+    def __init__(self, ctx: cl.Context) -> None:
+        self.ctx = ctx
+        self.queue = cl.CommandQueue(ctx)
+        opts = RasterConfig().build_options()
+        post = program(ctx, "post", opts)
+        self.k_prepare = kernel(post, "ssao_prepare")
+        self.k_ssao = kernel(post, "ssao")
+        self.k_luma = kernel(post, "luma")
+        self.k_fxaa = kernel(post, "fxaa")
+        self.k_upsample = kernel(post, "ssao_upsample")
+        self.host = shares_host_memory(ctx)
+        # reused frame to frame (grown when a frame is larger)
+        self.params = GrowBuffer(ctx, MF.READ_ONLY)
+        self.taps = GrowBuffer(ctx, MF.READ_ONLY)
+        self.pos = GrowBuffer(ctx)
+        self.nrm = GrowBuffer(ctx)
+        self.ao_low = GrowBuffer(ctx)
+        self.lum = GrowBuffer(ctx)
+        self.scratch_out = GrowBuffer(ctx)
+        self.shadow_stage = ShadowStage(ctx)
+
+    def _in(self, a: np.ndarray) -> cl.Buffer:
+        """A read-only buffer of `a`: over `a` itself (CL_MEM_USE_HOST_PTR, no copy) where
+        the device works in host memory, else a copy. Keep `a` alive until the pass's
+        wait."""
+        a = np.ascontiguousarray(a)
+        flag = MF.USE_HOST_PTR if self.host else MF.COPY_HOST_PTR
+        return cl.Buffer(self.ctx, MF.READ_ONLY | flag, hostbuf=a)
+
+    def _result(self, out: np.ndarray) -> tuple[cl.Buffer, bool]:
+        """A write-only buffer for `out`: over `out` itself where the device works in host
+        memory (True: nothing to read back after the wait), else a scratch buffer."""
+        if self.host:
+            return cl.Buffer(self.ctx, MF.WRITE_ONLY | MF.USE_HOST_PTR, hostbuf=out), True
+        return self.scratch_out.ensure(out.nbytes, "post-pass output"), False
+
+    def _finish(self, out: np.ndarray, buf: cl.Buffer, in_place: bool) -> np.ndarray:
+        if in_place:
+            self.queue.finish()
+        else:
+            cl.enqueue_copy(self.queue, out, buf, is_blocking=True)
+        return out
+
+    def shadow(self, smap: ShadowMap, light: Light, depth: np.ndarray, normals: np.ndarray,
+               vp: np.ndarray, reversed_z: bool) -> np.ndarray:
+        return self.shadow_stage.run(self.queue, smap, light, depth, normals, vp, reversed_z)
+
+    def ssao_inputs(self, depth: cl.Buffer, normals: cl.Buffer, vp: np.ndarray,
+                    reversed_z: bool, radius: float, h: int, w: int
+                    ) -> tuple[cl.Buffer, cl.Buffer]:
+        """SSAO's first pass (kernel ``ssao_prepare``): device buffers of float4 positions
+        and normals (w: linear depth) on the half-resolution grid, reused from call to call
+        (`clraster.output.post.ssao_inputs` is the twin)."""
+        h2, w2 = (h + 1) // 2, (w + 1) // 2
+        params = np.concatenate([np.linalg.inv(vp).ravel(), ssao_origin(vp), vp[3],
+                                 [radius * float(np.linalg.norm(vp[1, :3])) * (h * 0.25)]])
+        self.params.write(self.queue, params.astype(np.float64))
+        pos = self.pos.ensure(16 * w2 * h2, "SSAO position buffer")
+        nrm = self.nrm.ensure(16 * w2 * h2, "SSAO normal buffer")
+        assert self.params.buf is not None
+        self.k_prepare(self.queue, _global(w2, h2), LOCAL, depth, normals, self.params.buf,
+                       pos, nrm, np.int32(w), np.int32(h), np.int32(reversed_z),
+                       np.linalg.inv(vp)[3].astype(np.float32), np.float32(2.0 / w),
+                       np.float32(2.0 / h))
+        return pos, nrm
+
+    def ssao(self, depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed_z: bool,
+             params: SSAO) -> np.ndarray:
+        assert params.radius is not None
+        h, w = depth.shape
+        h2, w2 = (h + 1) // 2, (w + 1) // 2
+        depth = np.ascontiguousarray(depth, dtype=np.float32)
+        normals = np.ascontiguousarray(normals, dtype=np.float32)
+        d_depth, d_nrm = self._in(depth), self._in(normals)
+        pos, nrm = self.ssao_inputs(d_depth, d_nrm, vp, reversed_z, params.radius, h, w)
+        self.taps.write(self.queue, ssao_taps(params.samples))
+        low = self.ao_low.ensure(4 * w2 * h2, "SSAO half-resolution buffer")
+        r = np.float32(params.radius)
+        r2 = r * r
+        assert self.taps.buf is not None
+        self.k_ssao(self.queue, _global(w2, h2), LOCAL, pos, nrm, self.taps.buf, low,
+                    np.int32(w2), np.int32(h2), np.int32(params.samples), r2,
+                    np.float32(1.0) / r2, np.float32(params.bias),
+                    np.float32(params.strength) / np.float32(params.samples))
+        out = np.empty((h, w), np.float32)
+        d_out, in_place = self._result(out)
+        ivp = np.linalg.inv(vp)[3].astype(np.float32)
+        self.k_upsample(self.queue, _global(w, h), LOCAL, d_depth, nrm, low, d_out, ivp,
+                        np.int32(w), np.int32(h), np.float32(2.0 / w), np.float32(2.0 / h),
+                        np.int32(reversed_z), np.float32(SSAO_UPSAMPLE_DEPTH))
+        return self._finish(out, d_out, in_place)
+
+    def fxaa(self, rgb: np.ndarray) -> np.ndarray:
+        img = np.ascontiguousarray(rgb, dtype=np.float32)
+        h, w = img.shape[:2]
+        d_rgb = self._in(img)
+        d_lum = self.lum.ensure(4 * w * h, "FXAA luma buffer")
+        out = np.empty_like(img)
+        d_out, in_place = self._result(out)
+        n = w * h
+        self.k_luma(self.queue, (-(-n // 64) * 64,), (64,), d_rgb, d_lum, np.int32(n))
+        self.k_fxaa(self.queue, _fxaa_global(w, h), FXAA_LOCAL, d_rgb, d_lum, d_out,
+                    np.int32(w), np.int32(h))
+        return self._finish(out, d_out, in_place)
+
+
+_PASSES: weakref.WeakKeyDictionary[cl.Context, DevicePasses] = weakref.WeakKeyDictionary()
+
+
+def device_passes(renderer: Any) -> Passes | None:
+    """`DevicePasses` for a renderer with an OpenCL ``context`` (one per context), else
+    None (the factory `clraster.output.post.register_passes` holds)."""
+    ctx = getattr(renderer, "context", None)
+    if not isinstance(ctx, cl.Context):
+        return None
+    made = _PASSES.get(ctx)
+    if made is None:
+        made = _PASSES[ctx] = DevicePasses(ctx)
+    return made
+
+
+register_passes(device_passes)

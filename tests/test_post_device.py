@@ -1,0 +1,98 @@
+"""The per-pixel passes on the device (kernels/post.cl, kernels/shadow.cl through
+`clraster.pipeline.stages.post`) against their NumPy twins, and render_shaded running them
+for an OpenCL renderer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+import clraster
+from clraster.output import post
+from clraster.output.lights import Light, frame_points, shadow_lookup, shadow_map
+from clraster.output.shade import pixel_normals, render_shaded
+from clraster.pipeline.stages.post import DevicePasses, device_passes
+
+W, H = 160, 120
+
+
+def scene() -> clraster.Mesh:
+    floor = trimesh.creation.box(extents=(8, 0.02, 8))
+    floor.apply_translation((0, -0.01, 0))
+    parts = [floor]
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        b = trimesh.creation.box(extents=rng.uniform(0.2, 0.8, 3))
+        b.apply_transform(trimesh.transformations.random_rotation_matrix(rng.random(3)))
+        b.apply_translation(rng.uniform(-1.5, 1.5, 3) * (1, 0.3, 1) + (0, 0.5, 0))
+        parts.append(b)
+    return clraster.Mesh.from_trimesh(trimesh.util.concatenate(parts))
+
+
+CAMERAS = [clraster.Camera.look_at((3.0, 3.5, 4.5), (0, 0.3, 0), near=0.5, far=30.0),
+           clraster.Camera.look_at((-4.0, 2.0, 1.0), (0, 0.3, 0), near=0.5, far=30.0)]
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    return clraster.Renderer(W, H)
+
+
+def test_device_passes_registered_for_opencl_renderers(renderer):
+    assert isinstance(post.passes_for(renderer), DevicePasses)
+    assert device_passes(clraster.reference.Renderer(W, H)) is None
+    assert post.passes_for(clraster.reference.Renderer(W, H)) is post.NUMPY_PASSES
+
+
+@pytest.mark.parametrize("cam", range(len(CAMERAS)))
+def test_fxaa_kernel_equals_twin(renderer, cam):
+    img = render_shaded(renderer, scene(), CAMERAS[cam]).astype(np.float32) / 255.0
+    dev = device_passes(renderer)
+    np.testing.assert_array_equal(dev.fxaa(img), post.fxaa(img))
+
+
+@pytest.mark.parametrize("reversed_z", [False, True])
+def test_ssao_kernel_matches_twin(renderer, reversed_z):
+    mesh = scene()
+    cam = CAMERAS[0]
+    frame = renderer.render(mesh, cam, reversed_z=reversed_z)
+    n = pixel_normals(frame, mesh)
+    vp = cam.view_projection(W, H)
+    params = post.SSAO(radius=0.4).checked(1.0)
+    dev = device_passes(renderer)
+    got = dev.ssao(frame.depth, n, vp, reversed_z, params)
+    want = post.ssao(frame.depth, n, vp, reversed_z, params)
+    diff = np.abs(got - want)
+    # the first pass rounds float64 → float32 per pixel in either order of matrix sums:
+    # a tap can change pixel or cross the radius on a handful of pixels
+    assert np.mean(diff > 1e-4) < 0.005 and diff.max() < 0.3
+    assert want.min() < 0.9   # there is occlusion to compare
+
+
+@pytest.mark.parametrize("light", [
+    Light.directional((0.4, -1.0, 0.3), shadow_size=512),
+    Light.spot((-1.0, 3.0, -1.0), (0.3, -1.0, 0.3), cone=45.0, shadow_size=512)])
+def test_shadow_kernel_matches_twin(renderer, light):
+    mesh = scene()
+    cam = CAMERAS[0]
+    frame = renderer.render(mesh, cam)
+    n = pixel_normals(frame, mesh)
+    vp = cam.view_projection(W, H)
+    covered = frame.triangle_id >= 0
+    smap = shadow_map(renderer, mesh, light, frame_points(frame.depth, covered, vp, False))
+    got = device_passes(renderer).shadow(smap, light, frame.depth, n, vp, False)
+    want = shadow_lookup(smap, light, frame.depth, n, vp, False)
+    diff = np.abs(got - want)
+    assert np.mean(diff > 1e-6) < 0.002 and (want[covered] < 0.5).sum() > 200
+
+
+def test_render_shaded_on_device_equals_numpy_passes(renderer, monkeypatch):
+    mesh = scene()
+    kw = dict(lights=[Light.directional((0.4, -1.0, 0.3), shadow_size=512)], shadows=True,
+              ssao=0.4, aa="fxaa", return_layers=True)
+    img_dev, lay_dev = render_shaded(renderer, mesh, CAMERAS[1], **kw)
+    monkeypatch.setattr(post, "_FACTORIES", [])
+    img_np, lay_np = render_shaded(renderer, mesh, CAMERAS[1], **kw)
+    assert np.mean(np.abs(img_dev.astype(int) - img_np) > 1) < 0.005
+    assert np.mean(np.abs(lay_dev.ao - lay_np.ao) > 1e-4) < 0.005
