@@ -49,11 +49,12 @@ if TYPE_CHECKING:
     from .pipeline.lines import LineRenderer, render_lines
     from .pipeline.renderer import Renderer
     from .pipeline.segments import LineFrame
+    from .viewer.command import view
     from .world.scene import Instance, Scene, SceneWarning
 
 __all__ = ["Camera", "ClusterFates", "Frame", "FrameStats", "Instance", "LineFrame",
            "LineRenderer", "Mesh", "Occlusion", "RasterConfig", "Renderer", "Scene",
-           "SceneWarning", "reference", "render_lines"]
+           "SceneWarning", "reference", "render_lines", "view"]
 __version__ = "0.1.0"
 
 _aliases.install()   # the public modules' short names (clraster.views, clraster.shade, ...)
@@ -70,6 +71,7 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "SceneWarning": ("clraster.world.scene", "SceneWarning"),
     "ClusterFates": ("clraster.culling.fates", "ClusterFates"),
     "Occlusion": ("clraster.pipeline.boxes", "Occlusion"),
+    "view": ("clraster.viewer.command", "view"),
 }
 # public submodules by their short names, importable as attributes
 # (``clraster.shade.shade(frame, mesh)``, ``clraster.reference.render(...)``)

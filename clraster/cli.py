@@ -7,6 +7,8 @@
   ADDRESS`` on a running Dask cluster (`clraster.distributed.render_views`, same files).
 - ``clraster demo ...``: the built-in plant demo with the culling inspector
   (`clraster.demo.main`).
+- ``clraster view TARGET``: walk through a scene in a web browser
+  (`clraster.viewer.command.main`).
 - ``clraster devices``: list the OpenCL devices, whether each compiles clraster's probe
   kernel, and which one clraster would use and why (`clraster.pipeline.device`).
 - ``clraster bench ...``: the benchmark harness (`clraster.bench.harness.main`; results and
@@ -577,6 +579,8 @@ DELEGATED = {
                               "culling inspector"),
     "bench": ("clraster.bench.harness", "benchmark harness: OpenCL vs the NumPy twin and "
                                         "Mesa llvmpipe"),
+    "view": ("clraster.viewer.command", "walk through a scene in a web browser (frames "
+                                        "streamed from a local server)"),
 }
 
 
@@ -604,6 +608,7 @@ def _devices(argv: list[str]) -> int:
 
     def body() -> int:
         from .pipeline.device import choose_context, describe_choice, list_devices
+        from .pipeline.runtimes import wheel_runtimes
 
         rows = list_devices()
         print("OpenCL devices (* the one clraster uses):" if rows else "OpenCL devices: none")
@@ -614,6 +619,9 @@ def _devices(argv: list[str]) -> int:
                 state += " (a simulator, ~1000x slower)"
             mark = "*" if r.device == ctx.devices[0] else " "
             print(f"{mark} {r.label}  [{r.kind}; {r.platform_version}]  {state}")
+        for rt in wheel_runtimes():   # installed from PyPI, yet not usable: say why
+            if rt.installed and not rt.registered:
+                print(f"  not listed: {rt.describe()}")
         print(f"clraster uses: {describe_choice(ctx, reason)}")
         return 0
 

@@ -19,7 +19,8 @@ from clraster import _aliases
 PACKAGE = Path(clraster.__file__).resolve().parent
 
 #: bottom up; a module may import its own layer and the layers before it
-LAYERS = ("base", "world", "clip", "culling", "output", "pipeline", "scale", "entrances")
+LAYERS = ("base", "world", "clip", "culling", "output", "pipeline", "scale", "viewer",
+          "entrances")
 #: modules outside the layer packages: the package face, the old names, the command lines
 ENTRANCES = {"clraster", "clraster._aliases", "clraster.cli", "clraster.cmdline",
              "clraster.demo"}

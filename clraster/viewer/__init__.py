@@ -1,0 +1,1 @@
+"""The viewer: an interactive walkthrough served as a web page (``clraster view``)."""
