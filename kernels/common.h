@@ -56,20 +56,36 @@
  * LineRec [LINE_DTYPE]: one set-up line segment (lines.cl).
  */
 
+/* Compiler builtins, each with a portable OpenCL C fallback that gives the same bits. The
+ * fast paths are Clang builtins, which PoCL's and Intel's compilers take and others may not
+ * (GPU drivers; Oclgrind's interpreter builds some it cannot run). The host probes the
+ * device's compiler once (clraster.pipeline.features: each builtin built and run on known
+ * inputs) and passes -DCLRASTER_NO_<FEATURE> for each one it lacks; -DCLRASTER_PORTABLE
+ * forces every fallback (always on Oclgrind, which also needs the workarounds of its own
+ * in vertex.cl and raster.cl; CLRASTER_FALLBACKS=all). */
+#ifdef CLRASTER_PORTABLE
+#define CLRASTER_NO_RINTF
+#define CLRASTER_NO_CTZ
+#define CLRASTER_NO_NONTEMPORAL_STORE
+#define CLRASTER_NO_PREFETCH
+#define CLRASTER_NO_CONVERTVECTOR
+#define CLRASTER_NO_SHUFFLEVECTOR
+#define CLRASTER_NO_ROUNDEVEN
+#define CLRASTER_NO_EXT_VECTOR_TYPE
+#endif
+
 /* Round to nearest, ties to even (rint). On PoCL, __builtin_rintf is LLVM's rint intrinsic,
  * one roundss on x86; PoCL's OpenCL rint() is a software routine that is not inlined and
- * was half the vertex stage's time. Other platforms (Oclgrind's interpreter has no
- * llvm.rint) are built with -DCLRASTER_PORTABLE (clraster.device.program) and use rint().
- * Both round the same, bit for bit. */
-#ifdef CLRASTER_PORTABLE
+ * was half the vertex stage's time. Fallback: rint(), which rounds the same, bit for bit. */
+#ifdef CLRASTER_NO_RINTF
 #define RINTF(x) rint(x)
 #else
 #define RINTF(x) __builtin_rintf(x)
 #endif
 
 /* Index of the lowest set bit of x != 0 (uint). PoCL's clz() is a call into its library,
- * not inlined; clang's builtin is one tzcnt. Other platforms: OpenCL 1.2's clz. */
-#ifdef CLRASTER_PORTABLE
+ * not inlined; clang's builtin is one tzcnt. Fallback: OpenCL 1.2's clz. */
+#ifdef CLRASTER_NO_CTZ
 #define CTZ(x) (31 - clz((x) & -(x)))
 #else
 #define CTZ(x) __builtin_ctz(x)
@@ -78,8 +94,8 @@
 /* A non-temporal store of value v to *p (p aligned to v's size): the line is written
  * without being read into the cache first, half the memory traffic of an ordinary store
  * for outputs written once and read much later (the frame arrays, bin entries, setup
- * records). Clang's builtin; plain stores on other platforms (-DCLRASTER_PORTABLE). */
-#ifdef CLRASTER_PORTABLE
+ * records). Fallback: a plain store. */
+#ifdef CLRASTER_NO_NONTEMPORAL_STORE
 #define NT_STORE(v, p) (*(p) = (v))
 #else
 #define NT_STORE(v, p) __builtin_nontemporal_store((v), (p))
@@ -87,12 +103,39 @@
 
 /* Ask for the cache line at p (any address space) ahead of its use: prefetcht0 on x86 from
  * clang's builtin (a hint: it never faults, so an address past the end of a buffer is
- * harmless); nothing on other platforms (-DCLRASTER_PORTABLE: Oclgrind). The raster reads
+ * harmless). Fallback: nothing (OpenCL's prefetch() takes a global pointer and an element
+ * count within the buffer, so it cannot stand in for a hint past the end). The raster reads
  * its bin entries, written non-temporally by bin_scatter, from memory in list order. */
-#ifdef CLRASTER_PORTABLE
+#ifdef CLRASTER_NO_PREFETCH
 #define PREFETCH(p) ((void)0)
 #else
 #define PREFETCH(p) __builtin_prefetch((__global const char *)(p))
+#endif
+
+/* Vector v converted element by element to the vector type T (int <-> float rounds to
+ * nearest even, as a C cast; the lane masks -1/0 keep their value). PoCL's convert_T() is
+ * a library call per vector; clang's builtin is one instruction. Fallback: convert_T(). */
+#ifdef CLRASTER_NO_CONVERTVECTOR
+#define CONVERT_VEC(v, T) convert_##T(v)
+#else
+#define CONVERT_VEC(v, T) __builtin_convertvector(v, T)
+#endif
+/* A lane mask m (a long8 variable of -1/0) as the int8 of the same -1/0. Fallback: lane by
+ * lane (the pip PoCL 3.0 built raster.cl with convert_int8(long8), a library call taking a
+ * long8, into a program without its kernel). */
+#ifdef CLRASTER_NO_CONVERTVECTOR
+#define MASK_INT8(m) ((int8)((int)(m).s0, (int)(m).s1, (int)(m).s2, (int)(m).s3,          \
+                             (int)(m).s4, (int)(m).s5, (int)(m).s6, (int)(m).s7))
+#else
+#define MASK_INT8(m) __builtin_convertvector(m, int8)
+#endif
+
+/* vertex.cl's lane stores (store_lanes) need three Clang features at once: vector shuffles,
+ * elementwise roundeven and ext_vector_type typedefs of element alignment. Fallback: the
+ * vertex kernel's per-vertex loop, the same values vertex by vertex. */
+#if !defined(CLRASTER_NO_SHUFFLEVECTOR) && !defined(CLRASTER_NO_ROUNDEVEN) &&              \
+    !defined(CLRASTER_NO_EXT_VECTOR_TYPE)
+#define CLRASTER_LANE_STORES
 #endif
 
 /* A helper PoCL must inline. Its inliner left some larger helpers called once per triangle

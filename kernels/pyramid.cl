@@ -24,9 +24,22 @@
  * takes 2 launches, 16384² 3. The private scratch is (block/2)² floats = 4 KiB. */
 #define PYR_HALF (1 << (PYR_LOG2 - 1))
 
-/* Vectors at any float's alignment (rows of odd widths): unaligned loads and stores */
+/* Vectors at any float's alignment (rows of odd widths): unaligned loads and stores, through
+ * Clang's ext_vector_type typedefs of element alignment, or OpenCL's vload/vstore where the
+ * compiler lacks them (common.h: the same values). */
+#ifdef CLRASTER_NO_EXT_VECTOR_TYPE   /* vload8 pairs: the pip PoCL 3.0 lost this file's
+                                       * kernels from programs it read back from its cache
+                                       * when they called vload16 / vstore16 */
+#define LOAD16U(p) ((float16)(vload8(0, (p)), vload8(1, (p))))
+#define STORE16U(v, p) (vstore8((v).lo, 0, (p)), vstore8((v).hi, 1, (p)))
+#define STORE8U(v, p) vstore8((v), 0, (p))
+#else
 typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));
 typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
+#define LOAD16U(p) (*(__global const float16u *)(p))
+#define STORE16U(v, p) (*(__global float16u *)(p) = (v))
+#define STORE8U(v, p) (*(__global float8u *)(p) = (v))
+#endif
 
 /* Farthest of two depths, written as a comparison so the twin's np.where matches it bit for
  * bit for every input (fmax may return either zero for ±0). */
@@ -70,17 +83,17 @@ __kernel void pyramid_reduce(__global const float *depth, __global float *pyr,
             size_t oa = (size_t)ya * ws + 2 * gx0, ob = (size_t)yb * ws + 2 * gx0;
             __global float *out = pyr + D.x + (size_t)(gy0 + j) * D.y + gx0;
             for (int c = 0; c < lw; c += 8) {
-                float16 a = *(__global const float16u *)(src + oa + 2 * c);
-                float16 b = *(__global const float16u *)(src + ob + 2 * c);
+                float16 a = LOAD16U(src + oa + 2 * c);
+                float16 b = LOAD16U(src + ob + 2 * c);
                 if (src_level == 0) {
-                    *(__global float16u *)(pyr + oa + 2 * c) = a;
-                    if (yb != ya) *(__global float16u *)(pyr + ob + 2 * c) = b;
+                    STORE16U(a, pyr + oa + 2 * c);
+                    if (yb != ya) STORE16U(b, pyr + ob + 2 * c);
                 }
                 float8 h1 = a.even > a.odd ? a.even : a.odd;   /* farther(ra[xa], ra[xb]) */
                 float8 h2 = b.even > b.odd ? b.even : b.odd;
                 float8 v = h1 > h2 ? h1 : h2;
                 *(float8 *)&t[j * PYR_HALF + c] = v;
-                *(__global float8u *)(out + c) = v;
+                STORE8U(v, out + c);
             }
         }
     } else {

@@ -107,7 +107,7 @@ ALWAYS_INLINE void resolve8(__global const Piece *pc, int x, int y,
                             __global const float *clip_bary, float *out)
 {
     int8 xs = (int8)(x - bb_x(pc->bb_min)) + (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    float8 fx = __builtin_convertvector(xs, float8);
+    float8 fx = CONVERT_VEC(xs, float8);
     float fy = (float)(y - bb_y(pc->bb_min));
     float8 l1 = ((float8)(pc->l1) + (float8)(pc->l1x) * fx) + (float8)(pc->l1y * fy);
     float8 l2 = ((float8)(pc->l2) + (float8)(pc->l2x) * fx) + (float8)(pc->l2y * fy);
@@ -156,8 +156,8 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
 #define G8I(f) ((int8)(p[0]->f, p[1]->f, p[2]->f, p[3]->f, p[4]->f, p[5]->f, p[6]->f, p[7]->f))
     int8 bbmin = G8I(bb_min), fl = G8I(flags);
     int8 live = *(const int8 *)w >= (int8)(0);
-    float8 fx = __builtin_convertvector((int8)(x) + LANE8 - (bbmin & (int8)(0xFFFF)), float8);
-    float8 fy = __builtin_convertvector((int8)(y) - (bbmin >> 16), float8);
+    float8 fx = CONVERT_VEC((int8)(x) + LANE8 - (bbmin & (int8)(0xFFFF)), float8);
+    float8 fy = CONVERT_VEC((int8)(y) - (bbmin >> 16), float8);
     float8 l1 = (G8(l1) + G8(l1x) * fx) + G8(l1y) * fy;
     float8 l2 = (G8(l2) + G8(l2x) * fx) + G8(l2y) * fy;
     float8 l0 = ((float8)(1.0f) - l1) - l2;
@@ -189,8 +189,7 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
 ALWAYS_INLINE int8 depth_block8(float *zbuf, int *wid, int *win, int i, int8 lx, int8 in,
                                 float zrow, float dzdx, int rx0, float zlo, int id, int k)
 {
-    float8 zf = (float8)(zrow) + (float8)(dzdx) * __builtin_convertvector(lx - (int8)(rx0),
-                                                                           float8);
+    float8 zf = (float8)(zrow) + (float8)(dzdx) * CONVERT_VEC(lx - (int8)(rx0), float8);
     float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
     float8 zb = *(float8 *)&zbuf[i];
     int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
@@ -209,7 +208,7 @@ ALWAYS_INLINE int8 edges_inside8(const PieceEdges *E, const long8 *sv, int b)
     long8 in = ((long8)(E->e[0] + (long)b * E->sx[0]) + sv[0] >= (long8)(0))
                & ((long8)(E->e[1] + (long)b * E->sx[1]) + sv[1] >= (long8)(0))
                & ((long8)(E->e[2] + (long)b * E->sx[2]) + sv[2] >= (long8)(0));
-    return __builtin_convertvector(in, int8);
+    return MASK_INT8(in);
 }
 
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
@@ -353,7 +352,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * culling or clustering actually submits them in. Nothing beats the clear value
          * (wid INT_MAX). */
         bool wide = x1 - x0 >= WIDE_RUN;
-        long8 lane8 = __builtin_convertvector(LANE8, long8);
+        long8 lane8 = CONVERT_VEC(LANE8, long8);
         long8 sv[3] = {lane8 * (long8)(E.sx[0]), lane8 * (long8)(E.sx[1]),
                        lane8 * (long8)(E.sx[2])};   /* lane·sx per edge (narrow rows) */
         LANE_COUNTER(npass);   /* passed fragments of the masked blocks */

@@ -38,22 +38,25 @@ typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
 typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 
 /* Unaligned vectors (a draw's first vertex has no particular alignment) for the stores of
- * a full set of lanes. */
+ * a full set of lanes (Clang's ext_vector_type: only with CLRASTER_LANE_STORES, common.h). */
+#ifdef CLRASTER_LANE_STORES
 typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
 typedef double double8u __attribute__((ext_vector_type(8), aligned(8)));
 typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
 typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
 typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
+#endif
 
 /* Outcodes, window positions and every store of a full set of VERTEX_LANES lanes without
  * user clip planes, in lanes: the same values as the per-vertex loop of vertex_transform
  * (the same compares; roundeven is rint in the default rounding mode), written as whole
  * vectors, the float4 and double4 positions interleaved from the lanes by shuffles. The
  * per-vertex loop (eight rounds of scalar compares, rounding and five stores from the
- * lanes spilled to private arrays) was most of the kernel. Not under CLRASTER_PORTABLE
- * (Oclgrind has no roundeven, and its vector masks differed before: see above), which
- * keeps the loop. */
-#ifndef CLRASTER_PORTABLE
+ * lanes spilled to private arrays) was most of the kernel. Only with CLRASTER_LANE_STORES
+ * (common.h: the compiler has the Clang builtins; never under CLRASTER_PORTABLE, as on
+ * Oclgrind, which has no roundeven and whose vector masks differed before: see above);
+ * otherwise the loop. */
+#ifdef CLRASTER_LANE_STORES
 /* Lanes 0-3 / 4-7 of a and b interleaved (a0 b0 a1 b1 ...), and pairs of them interleaved
  * (a0 a1 b0 b1 ...): with these, eight lanes of x, y, z, w become eight consecutive
  * (x, y, z, w) records, stored as four 8-vectors through d (STORE_XYZW8). */
@@ -165,14 +168,14 @@ __kernel void vertex_transform(__global const float *restrict pos,
      * (setup.cl ClipIn): z, or with `reversed` the depth row (FrameDraws.zrows, w row −
      * z row formed in float64) times the position. The twin: reference/setup.py
      * object_clip, the same sums. */
-    dvec xd = __builtin_convertvector(x, dvec), yd = __builtin_convertvector(y, dvec);
-    dvec zd = __builtin_convertvector(z, dvec);
+    dvec xd = CONVERT_VEC(x, double8), yd = CONVERT_VEC(y, double8);
+    dvec zd = CONVERT_VEC(z, double8);
     __global const double *m64 = mvps64 + 16 * dr.instance;
     dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
     dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
     dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
     uint i0 = (uint)dr.vert_base + (uint)lv0;
-#ifndef CLRASTER_PORTABLE
+#ifdef CLRASTER_LANE_STORES
     if (n == VERTEX_LANES && n_user == 0) {
         store_lanes(cx, cy, cz, cw, xs, ys, dx, dy, dz, dw, r, dr.flags, kx, ky, reversed,
                     clip + i0, outcode + i0, win + i0, ucode + i0, clip64 + i0, rnum + i0);

@@ -16,7 +16,13 @@ what pins them). Cases of the shared meshes skip where the mesh folder is absent
   matched bit for bit when the file was made; it draws no overdraw) and every hash of the
   line case;
 * Oclgrind (a subprocess with ``CLRASTER_DEVICE=oclgrind``) reproduces `OCLGRIND_CASES`, and
-  every case with ``-m slow``.
+  every case with ``-m slow``;
+* the device reproduces `FALLBACK_CASES` with every compiler builtin's portable fallback
+  forced (``CLRASTER_FALLBACKS``, clraster.pipeline.features), and every case with one
+  fallback at a time with ``-m slow``.
+
+CI runs this file on the pip PoCL and on Intel's CPU runtime (``CLRASTER_DEVICE=intel``,
+.ci/run).
 
 Regenerate (only after a change that is meant to change outputs; then re-check the other
 runtimes)::
@@ -322,6 +328,46 @@ def test_oclgrind_reproduces_golden_all(golden):
     if not MESH_DIR.is_dir():
         pytest.skip(f"shared meshes not found in {MESH_DIR}")
     assert _on_oclgrind(sorted(golden)) == golden
+
+
+#: the cases rendered with fallbacks forced: every kernel file's fallbacks run (vertex, setup
+#: with clipping, bin, raster with overdraw, the pyramid and Hi-Z test on the occlusion path,
+#: lines where the spot mesh is there), and none needs the shared meshes
+FALLBACK_CASES = ("soup_near_clip", "mirrored_instances", "plant_occlusion_path")
+
+
+def _with_fallbacks(monkeypatch, mode: str, names: list[str]) -> dict[str, Any]:
+    """`device_hashes` of ``names`` with ``CLRASTER_FALLBACKS=mode``, after checking that
+    the kernels were built with that mode's options."""
+    from clraster.pipeline.device import default_context
+    from clraster.pipeline.features import FEATURES, feature_options
+
+    monkeypatch.setenv("CLRASTER_FALLBACKS", mode)
+    want = ({"-DCLRASTER_PORTABLE"} if mode == "portable" else
+            {f"-D{FEATURES[n].macro}" for n in
+             (FEATURES if mode == "all" else mode.split(","))})
+    assert want <= set(feature_options(default_context()))
+    if (MESH_DIR / "spot.ply").is_file():
+        names = [*names, "lines_spot"]
+    return device_hashes(names)
+
+
+@pytest.mark.parametrize("mode", ["all", "portable"])
+def test_fallbacks_reproduce_golden(golden, monkeypatch, mode):
+    """Every builtin's portable fallback on (``all``: what a compiler with none of them
+    builds; ``portable``: CLRASTER_PORTABLE, Oclgrind's build) gives the same bytes."""
+    got = _with_fallbacks(monkeypatch, mode, list(FALLBACK_CASES))
+    assert got == {k: golden[k] for k in got}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("feature", ["rintf", "ctz", "nontemporal_store", "prefetch",
+                                     "convertvector", "shufflevector", "roundeven",
+                                     "ext_vector_type"])
+def test_each_fallback_reproduces_golden(golden, monkeypatch, feature):
+    """One fallback at a time (a compiler missing just that builtin), on every case."""
+    got = _with_fallbacks(monkeypatch, feature, sorted(CASES))
+    assert got == {k: golden[k] for k in got}
 
 
 def main(argv: list[str]) -> int:

@@ -255,9 +255,27 @@ def _parser() -> argparse.ArgumentParser:
                                            "at 1920x1080; quick: spot at 320x240)")
     p.add_argument("--cull", choices=("back", "front", "none"), default="back",
                    help="face culling (default back)")
+    p.add_argument("--device", help="OpenCL device to measure: pocl, intel, oclgrind or a "
+                                    "part of a platform or device name (sets CLRASTER_DEVICE "
+                                    "for this run and its subprocesses; `clraster devices` "
+                                    "lists them; default: CLRASTER_DEVICE, else clraster's "
+                                    "choice); recorded in results.json")
     p.add_argument("--list", action="store_true", help="print the configurations and exit")
     p.add_argument("--probe", help=argparse.SUPPRESS)
     return p
+
+
+def _choose_device(name: str) -> str | None:
+    """Make ``name`` the device of this run and of the subprocesses it starts (memory and
+    start-up probes) through CLRASTER_DEVICE; None when a device matches, else why not."""
+    from clraster.pipeline.device import NoDeviceError, find_device
+
+    os.environ["CLRASTER_DEVICE"] = name.strip()
+    try:
+        find_device(name, source="--device")
+    except NoDeviceError as exc:
+        return str(exc)
+    return None
 
 
 def _fill_defaults(a: argparse.Namespace) -> None:
@@ -547,6 +565,11 @@ def main(argv: list[str] | None = None) -> int:
     if a.list:
         _print_list(configs)
         return 0
+    if a.device:
+        why = _choose_device(a.device)
+        if why:
+            print(f"clraster bench: error: {why}", file=sys.stderr)
+            return 2
     try:
         out = _prepare_out(a)
     except OutputError as exc:

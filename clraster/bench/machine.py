@@ -96,13 +96,26 @@ def _opencl() -> dict[str, Any]:
         "driver_version": dev.driver_version.strip(),
         "compute_units": int(dev.max_compute_units),
         "global_mem_gib": round(dev.global_mem_size / 2**30, 1),
-        # why this device (CLRASTER_DEVICE, PYOPENCL_CTX or the default rule)
+        # why this device (clraster bench --device, CLRASTER_DEVICE, PYOPENCL_CTX or the
+        # default rule)
         "device_choice": reason,
+        # the compiler builtins whose portable fallbacks this device's kernels use
+        # (clraster.pipeline.features; same results, maybe slower)
+        "kernel_fallbacks": _fallbacks(ctx),
     }
     # PoCL names its LLVM in the platform version ("... LLVM 15.0.6, RELOC, ...").
     m = re.search(r"LLVM\s+([\d.]+)", plat.version)
     info["pocl_llvm"] = m.group(1) if m else None
     return info
+
+
+def _fallbacks(ctx: Any) -> list[str] | str:
+    try:
+        from clraster.pipeline.features import feature_options
+
+        return [o.removeprefix("-D") for o in feature_options(ctx)]
+    except Exception as exc:  # recorded, never raised (module docstring)
+        return f"{type(exc).__name__}: {exc}"
 
 
 def describe(repo: str | Path | None = None, peer_renderer: str | None = None
@@ -143,7 +156,8 @@ def summary(d: dict[str, Any]) -> str:
     cl = d.get("opencl") or {}
     git = d.get("git") or {}
     commit = (git.get("commit") or "unknown")[:12] + (" (dirty)" if git.get("dirty") else "")
-    dev = (f"{cl.get('platform_version')} / {cl.get('device')}" if "device" in cl
+    dev = (f"{cl.get('platform_version')} / {cl.get('device')} "
+           f"(chosen by {cl.get('device_choice')})" if "device" in cl
            else f"no OpenCL device ({cl.get('error')})")
     return (f"{d.get('cpu')} ({d.get('cores_usable')} usable of {d.get('cores_logical')} "
             f"logical cores), {d.get('ram_gib')} GiB RAM; {d.get('os')}, {d.get('kernel')}; "

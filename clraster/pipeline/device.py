@@ -11,6 +11,10 @@ Device choice, first match wins (`choose_context`, `list_devices`, ``clraster de
 4. default: the first CPU device that compiles a probe kernel, PoCL platforms first, never
    the Oclgrind simulator.
 
+Runtimes installed as wheels (Intel's CPU runtime: ``pip install clraster[intel]``) are made
+visible to pyopencl's ICD loader when this module is imported, before any OpenCL call
+(`clraster.pipeline.runtimes`).
+
 We never call ``create_some_context()`` blindly: with Oclgrind installed it may pick the
 *simulator* first, which is ~1000× slower (choosing it on purpose warns, `SimulatorWarning`).
 Every choice keeps its reason (e.g. ``"CLRASTER_DEVICE=pocl"``): `describe_choice`.
@@ -51,6 +55,17 @@ import numpy as np
 import pyopencl as cl
 
 from .arraypool import page_aligned  # plain NumPy, imports nothing of clraster
+from .features import feature_options
+from .runtimes import hint as _runtime_hint
+from .runtimes import register_wheel_runtimes
+
+# Before any OpenCL call: the ICD loader reads its environment once, at the first
+# (clraster.pipeline.runtimes: Intel's CPU runtime from `pip install clraster[intel]`).
+register_wheel_runtimes()
+# pyopencl (2026.1) reads this variable without a default when its binary cache fails, so
+# the failure became a KeyError that hid the cache's error and failed the build (seen once
+# on Intel's runtime under load); unset means "not fatal": pyopencl then warns and builds.
+os.environ.setdefault("PYOPENCL_CACHE_FAILURE_FATAL", "")
 
 #: named by the module's public path (users' logging settings name it)
 log = logging.getLogger("clraster.device")
@@ -230,7 +245,7 @@ def _warn_if_simulator(ctx: cl.Context, reason: str | None = None) -> cl.Context
 def _platform_list() -> str:
     try:
         rows = []
-        for i, p in enumerate(cl.get_platforms()):
+        for i, p in enumerate(platforms()):
             devs = ", ".join(f"{j}: {d.name.strip()}" for j, d in enumerate(p.get_devices()))
             rows.append(f"{i}: {p.name.strip()} [{devs}]")
         return "; ".join(rows) or "none"
@@ -316,7 +331,9 @@ def _probe_error(ctx: cl.Context) -> str | None:
     (several PoCLs may be installed side by side, and an old one may be unable to target
     this CPU)."""
     try:
-        cl.Program(ctx, _PROBE_SRC).build()
+        with warnings.catch_warnings():   # a compiler's remarks on success are not ours
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            cl.Program(ctx, _PROBE_SRC).build()
     except cl.Error as exc:
         return str(exc).strip().splitlines()[-1] if str(exc).strip() else repr(exc)
     return None
@@ -425,9 +442,11 @@ def find_device(spec: str, source: str = "device") -> cl.Device:
     if hits:
         raise NoDeviceError(f"{source}={spec!r}: no matching device compiles the probe "
                             f"kernel; devices here: {listing}")
+    why = _runtime_hint(spec)   # e.g. Intel's wheel installed without its dependencies
     raise NoDeviceError(f"{source}={spec!r} matches no OpenCL device (give 'pocl', 'intel', "
                         f"'oclgrind' or a part of a platform or device name); devices here: "
-                        f"{listing}. {_INSTALL_HINT if not rows else ''}".rstrip())
+                        f"{listing}. {why + '. ' if why else ''}"
+                        f"{_INSTALL_HINT if not rows else ''}".rstrip())
 
 
 #: contexts made for ``device=`` choices, one per device: a Renderer made with the same
@@ -533,10 +552,9 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
     mark_opencl_use()
     # argument info: `kernel` declares the scalar arguments' dtypes from it (PoCL gives
     # none for these programs without the option)
-    options = (*options, "-cl-kernel-arg-info")
-    if "portable computing language" not in ctx.devices[0].platform.name.lower():
-        # kernels/common.h: Clang builtins only where PoCL compiles them (not Oclgrind)
-        options = (*options, "-DCLRASTER_PORTABLE")
+    # kernels/common.h: the Clang builtins the device's compiler lacks (or that
+    # CLRASTER_FALLBACKS forces) take their portable fallbacks (clraster.pipeline.features)
+    options = (*options, "-cl-kernel-arg-info", *feature_options(ctx))
     key = (stage, tuple(options))
     with _lock:
         per_ctx = getattr(ctx, _CACHE_ATTR, None)

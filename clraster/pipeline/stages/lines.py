@@ -16,6 +16,7 @@ import pyopencl as cl
 from ...base.config import LINES_LOCAL, RasterConfig
 from ...base.layout import LINE_DTYPE, ZMIN_CLEAR
 from ..device import kernel, program
+from ..features import local_size
 from ._buffers import GrowBuffer
 
 _CLEAR = np.array([ZMIN_CLEAR], np.uint32)  # ZMIN_CLEAR == IDMIN_CLEAR: both resolve buffers
@@ -48,6 +49,8 @@ class LineStage:
         self.k_setup = kernel(prg, "line_setup")
         self.k_depth = kernel(prg, "line_depth")
         self.k_id = kernel(prg, "line_id")
+        self.local = min(local_size(k, ctx.devices[0], LINES_LOCAL)
+                         for k in (self.k_setup, self.k_depth, self.k_id))
         ro = cl.mem_flags.READ_ONLY
         self.buffers = LineBuffers(GrowBuffer(ctx, ro), GrowBuffer(ctx, ro), GrowBuffer(ctx),
                                    GrowBuffer(ctx), GrowBuffer(ctx, ro), GrowBuffer(ctx),
@@ -77,8 +80,8 @@ class LineStage:
             cl.enqueue_copy(queue, dbuf, depth, is_blocking=False)
         cl.enqueue_fill_buffer(queue, zmin, _CLEAR, 0, 4 * npix)
         cl.enqueue_fill_buffer(queue, idmin, _CLEAR, 0, 4 * npix)
-        gsize = ((n + LINES_LOCAL - 1) // LINES_LOCAL * LINES_LOCAL,)
-        lsize = (LINES_LOCAL,)
+        gsize = ((n + self.local - 1) // self.local * self.local,)
+        lsize = (self.local,)
         w, h, nn = np.int32(width), np.int32(height), np.uint32(n)
         has = np.int32(depth is not None)
         self.k_setup(queue, gsize, lsize, pos, nn, mbuf, w, h, rec)

@@ -20,6 +20,7 @@ from ...base.config import HIZ_TEST_LOCAL, RasterConfig
 # PYR_LOG2: levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ...base.layout import PYR_LOG2, level_shapes
 from ..device import kernel, program
+from ..features import local_size
 from ._buffers import GrowBuffer
 
 #: Boxes per test call: the kernel indexes its (6, K) box array with int32.
@@ -96,6 +97,7 @@ class PyramidStage:
         prg = program(ctx, "pyramid", (config or RasterConfig()).build_options())
         self.k_reduce = kernel(prg, "pyramid_reduce")
         self.k_test = kernel(prg, "hiz_test_boxes")
+        self.test_local = local_size(self.k_test, ctx.devices[0], HIZ_TEST_LOCAL)
         # boxes, view_proj and result go between host and device every test: host mode
         # (`GrowBuffer`), where the device works in host memory no command each
         self.buffers = PyramidBuffers(GrowBuffer(ctx), GrowBuffer(ctx),
@@ -198,8 +200,8 @@ class PyramidStage:
         b.boxes.write(queue, soa)
         b.view_proj.write(queue, vp)
         n_wi = n_pad // 8
-        gsize = -(-n_wi // HIZ_TEST_LOCAL) * HIZ_TEST_LOCAL
-        ev = self.k_test(queue, (gsize,), (HIZ_TEST_LOCAL,), bbox, np.int32(n_pad), bvp,
+        gsize = -(-n_wi // self.test_local) * self.test_local
+        ev = self.k_test(queue, (gsize,), (self.test_local,), bbox, np.int32(n_pad), bvp,
                          np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
                          np.int32(pyramid.n_levels), np.float32(zoff), bres)
         # Waited for in one C call, not interruptibly (device.wait): the build and the test

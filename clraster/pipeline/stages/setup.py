@@ -12,6 +12,7 @@ import pyopencl as cl
 from ...base.config import SCAN_CHUNKS, RasterConfig
 from ...base.layout import CLUSTER_MAX, PIECE_DTYPE
 from ..device import kernel, program, wait
+from ..features import local_size
 from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
@@ -57,6 +58,8 @@ class SetupStage:
         self.k_setup = kernel(prg, "setup_triangles")
         self.k_clipped = kernel(prg, "setup_clipped")
         self.k_count = kernel(prg, "setup_count_clipped")
+        for k in (self.k_setup, self.k_clipped, self.k_count):   # one work-group per draw
+            local_size(k, ctx.devices[0], CLUSTER_MAX, exact=True)
         self.k_partials = kernel(prg, "scan_partials")
         self.k_offsets = kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field

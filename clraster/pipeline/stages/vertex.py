@@ -11,6 +11,7 @@ import pyopencl as cl
 from ...base.config import RasterConfig
 from ...base.layout import CLUSTER_MAX, VERTEX_LANES, WINXY_DTYPE
 from ..device import kernel, program
+from ..features import local_size
 from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
@@ -42,6 +43,8 @@ class ClipBuffers:
 class VertexStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         self.kernel = kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
+        # one work-group per draw (kernels/vertex.cl): a device that cannot is refused here
+        local_size(self.kernel, ctx.devices[0], CLUSTER_MAX // VERTEX_LANES, exact=True)
         self.buffers = ClipBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
