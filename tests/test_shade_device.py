@@ -1,7 +1,8 @@
-"""Shading on the device (kernels/resolve.cl shade_pixels) against its twin, the NumPy path
-of `clraster.output.shade.shade` on the same frame: equal within 1/255 per channel in every
-mode the kernel takes; the modes it does not take (colour sources, callable tints) shade on
-the host."""
+"""Shading on the device (kernels/resolve.cl shade_pixels, shade_ssaa) against its twin, the
+NumPy path of `clraster.output.shade.shade` (and of render_shaded's supersampling) on the
+same frame: equal within 1/255 per channel in every mode (flat, smooth, one- and two-sided,
+RGBA, per-instance colours as arrays or callables, vertex and face colours, bilinear
+textures with factors, ssaa), for a Mesh and a Scene with a mirrored instance."""
 
 from __future__ import annotations
 
@@ -87,16 +88,158 @@ def test_render_shaded_uses_the_device(scene, monkeypatch):
     assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
 
 
-def test_colour_sources_shade_on_the_host(scene):
-    """Vertex colours (and textures, face colours, callable tints) are the host's: the
-    device is not asked, the image is the host path's exactly."""
-    mesh = scene.instances[0].mesh
-    colors = np.linspace(0.1, 0.9, mesh.n_vertices * 3).reshape(-1, 3)
-    frame = get_renderer(W, H).render(mesh, camera())
-    np.testing.assert_array_equal(shade(frame, mesh, colors=colors),
-                                  shade(host_twin(frame), mesh, colors=colors))
-    tint = shade(frame, scene.instances[0].mesh, per_instance_colors=lambda i, inst: (1, 0, 0))
-    assert (tint[frame.triangle_id >= 0][:, 1:] == 0).all()
+def _no_host(monkeypatch):
+    def no_host(*a, **k):
+        raise AssertionError("shaded on the host")
+
+    monkeypatch.setattr(shade_mod, "_shade_covered", no_host)
+
+
+def _sources(scene: Scene) -> dict[str, dict]:
+    """Colour-source modes for the scene (per instance) and for its sphere mesh."""
+    sphere = scene.instances[0].mesh
+    box = scene.instances[2].mesh
+    rng = np.random.default_rng(7)
+    vc_s = rng.random((sphere.n_vertices, 3))
+    vc_b = (rng.random((box.n_vertices, 3)) * 255).astype(np.uint8)
+    # a small asymmetric texture with sharp texel steps, UVs beyond [0, 1] (repeat)
+    img = rng.integers(0, 256, (5, 7, 3), np.uint8)
+    uv_s = rng.random((sphere.n_vertices, 2)) * 3.0 - 1.0
+    uv_b = rng.random((box.n_vertices, 2))
+    return {
+        "vertex_colors": {"mesh": {"colors": vc_s},
+                          "scene": {"colors": [vc_s, vc_s[::-1].copy(), vc_b]}},
+        "texture": {"mesh": {"texture": (uv_s, img)},
+                    "scene": {"texture": [(uv_s, img), (uv_s, img, (0.5, 1.0, 0.2)),
+                                          (uv_b, img[::-1].copy())]}},
+        "texture_factor_only": {"mesh": {"texture": (None, None, (200, 30, 90))},
+                                "scene": {"texture": [None, (None, None, (0.1, 0.9, 0.5)),
+                                                      None]}},
+        "colors_texture_tints": {
+            "mesh": {"colors": vc_s, "texture": (uv_s, img),
+                     "per_instance_colors": [[0.9, 0.6, 0.3]], "smooth": True},
+            "scene": {"colors": [vc_s, None, vc_b], "texture": [(uv_s, img), None, None],
+                      "per_instance_colors": [[0.9, 0.6, 0.3], [0.2, 0.5, 1.0],
+                                              [1.0, 1.0, 1.0]],
+                      "alpha": True, "two_sided": False}},
+        "callable_tints": {
+            "mesh": {"per_instance_colors": lambda i, inst: (0.3 + 0.1 * i, 0.7, 0.2)},
+            "scene": {"per_instance_colors": lambda i, inst: (
+                (1.0, 0.2, 0.1) if np.linalg.det(inst.transform[:3, :3]) < 0
+                else (0.1 + 0.3 * i, 0.8, 0.4)), "smooth": True}},
+    }
+
+
+@pytest.mark.parametrize("mode", ["vertex_colors", "texture", "texture_factor_only",
+                                  "colors_texture_tints", "callable_tints"])
+@pytest.mark.parametrize("target", ["mesh", "scene"])
+def test_colour_sources_on_the_device(scene, mode, target, monkeypatch):
+    geom = scene if target == "scene" else scene.instances[0].mesh
+    kw = _sources(scene)[mode][target]
+    frame = get_renderer(W, H).render(geom, camera(), cull="none")
+    want = shade(host_twin(frame), geom, **kw)
+    _no_host(monkeypatch)
+    got = shade(frame, geom, **kw)
+    assert got.shape == want.shape
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+    covered = frame.triangle_id >= 0
+    # the sources show: covered pixels are not one flat colour
+    assert len(np.unique(got[covered][:, :3], axis=0)) > 20
+
+
+def test_face_colours_of_a_trimesh_on_the_device(monkeypatch):
+    tm = trimesh.creation.icosphere(subdivisions=2, radius=0.9)
+    rng = np.random.default_rng(3)
+    tm.visual.face_colors = rng.integers(0, 256, (len(tm.faces), 4), np.uint8)
+    r = get_renderer(W, H)
+    frame = r.render(tm, camera())
+    want = shade(host_twin(frame), tm)
+    _no_host(monkeypatch)
+    got = shade(frame, tm)
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+    ids = frame.triangle_id
+    px = np.argwhere(ids >= 0)[len(np.argwhere(ids >= 0)) // 2]
+    # a hand check at one pixel: face colour · (ambient + (1 − ambient)·|n·l|)
+    f = ids[tuple(px)]
+    n = Mesh.from_trimesh(tm).face_normals()[f].astype(np.float64)
+    light = np.asarray(shade_mod.DEFAULT_LIGHT_DIR) / np.linalg.norm(shade_mod.DEFAULT_LIGHT_DIR)
+    lam = abs(n @ light)
+    expect = tm.visual.face_colors[f, :3] / 255.0 * (0.22 + 0.78 * lam) * 255.0
+    assert np.abs(got[tuple(px)].astype(float) - expect).max() <= 1.0
+
+
+def test_callable_tints_are_called_for_seen_instances_only(scene, monkeypatch):
+    """The callable is evaluated on the host once per instance seen in the frame (the
+    device finds which), never for an instance outside the view."""
+    far = np.eye(4)
+    far[:3, 3] = (0.0, 0.0, 50.0)   # behind the camera
+    sphere = scene.instances[0].mesh
+    sc = Scene([*((inst.mesh, inst.transform) for inst in scene.instances), (sphere, far)])
+    calls: list[int] = []
+
+    def tint(i, inst):
+        calls.append(i)
+        return (0.2 * i, 0.5, 0.9)
+
+    frame = get_renderer(W, H).render(sc, camera())
+    want = shade(host_twin(frame), sc, per_instance_colors=tint)
+    host_calls = sorted(calls)
+    calls.clear()
+    _no_host(monkeypatch)
+    got = shade(frame, sc, per_instance_colors=tint)
+    assert sorted(calls) == host_calls == [0, 1, 2]
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+
+
+SSAA_MODES = [{}, {"alpha": True, "background": (0, 40, 200), "smooth": True},
+              {"per_instance_colors": np.array([[250, 10, 10], [10, 250, 10], [10, 10, 250]],
+                                               np.uint8), "two_sided": False}]
+
+
+@pytest.mark.parametrize("k", [2, 3])
+@pytest.mark.parametrize("kw", SSAA_MODES, ids=lambda kw: ",".join(kw) or "flat")
+@pytest.mark.parametrize("target", ["mesh", "scene"])
+def test_ssaa_on_the_device(scene, kw, k, target, monkeypatch):
+    geom = scene if target == "scene" else scene.instances[2].mesh
+    if target == "mesh" and "per_instance_colors" in kw:
+        kw = {**kw, "per_instance_colors": kw["per_instance_colors"][:1]}
+    r = get_renderer(W, H)
+    with monkeypatch.context() as m:   # the host path: the twin of the device's
+        m.setattr(shade_mod, "_shade_on_device", lambda *a, **k: None)
+        want = render_shaded(r, geom, camera(), ssaa=k, **kw)
+    _no_host(monkeypatch)
+    got = render_shaded(r, geom, camera(), ssaa=k, **kw)
+    assert got.shape == want.shape == (H, W, 4 if kw.get("alpha") else 3)
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+    if kw.get("alpha"):   # partial coverage on the edges
+        a = got[..., 3]
+        assert ((a > 0) & (a < 255)).any() and (a == 255).any() and (a == 0).any()
+
+
+def test_ssaa_with_colour_sources_on_the_device(scene, monkeypatch):
+    kw = _sources(scene)["colors_texture_tints"]["scene"]
+    r = get_renderer(W, H)
+    with monkeypatch.context() as m:
+        m.setattr(shade_mod, "_shade_on_device", lambda *a, **k: None)
+        want = render_shaded(r, scene, camera(), ssaa=2, **kw)
+    _no_host(monkeypatch)
+    got = render_shaded(r, scene, camera(), ssaa=2, **kw)
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+
+
+def test_device_background_is_exact_on_odd_sizes(scene, monkeypatch):
+    """Runs of 16 background pixels are vector stores, the rest pixel by pixel: every
+    background pixel is the colour given, whatever the width (not a multiple of 16)."""
+    for w, h in ((17, 5), (33, 31), (W, H)):
+        frame = get_renderer(w, h).render(scene, camera())
+        _no_host(monkeypatch)
+        for alpha in (False, True):
+            got = shade(frame, scene, background=(1, 2, 3), alpha=alpha)
+            bg = frame.triangle_id < 0
+            assert bg.any()
+            assert (got[bg, :3] == (1, 2, 3)).all()
+            if alpha:
+                assert (got[bg, 3] == 0).all() and (got[~bg, 3] == 255).all()
 
 
 def test_bad_ids_are_refused_as_on_the_host(scene):
@@ -104,3 +247,8 @@ def test_bad_ids_are_refused_as_on_the_host(scene):
     small = Mesh(np.eye(3), [[0, 1, 2]])
     with pytest.raises(ValueError, match="ids outside"):
         shade(frame, small)
+    frame = get_renderer(W, H).render(scene.instances[0].mesh, camera())
+    with pytest.raises(ValueError, match="ids outside"):
+        shade(frame, small, per_instance_colors=lambda i, inst: (1, 0, 0))
+    with pytest.raises(ValueError, match="ids outside"):
+        shade(frame, small, smooth=True)

@@ -132,6 +132,15 @@ class _Resolved:
     parts: list[_Part]  # one per instance
     n_faces: int
 
+    @property
+    def plain(self) -> bool:
+        """No instance has a colour source."""
+        got = self.__dict__.get("_plain")
+        if got is None:
+            got = not any(p.colored for p in self.parts)
+            object.__setattr__(self, "_plain", got)
+        return got
+
 
 def _trimesh_type(obj: Any, name: str) -> bool:
     """`obj` is a ``trimesh.<name>`` (without importing trimesh for other objects)."""
@@ -181,7 +190,25 @@ def _per_instance(value: Any, n: int, shared: bool, name: str, single: Callable[
     return [value] * n
 
 
+#: The plain parts of clraster Scenes (no colour option given): (version, parts), per scene.
+_PLAIN_PARTS: weakref.WeakKeyDictionary[Scene, tuple[int, list[_Part]]] = (
+    weakref.WeakKeyDictionary())
+
+
 def _resolve(target: Any, colors: Any, texture: Any) -> _Resolved:
+    if (isinstance(target, Scene) and (colors is None or colors is False)
+            and (texture is None or isinstance(texture, bool))):
+        # nothing to validate per instance (a clraster Scene has no colours of its own):
+        # the parts depend on the scene alone, kept per version (a frame of the 10M plant's
+        # 5,349 instances spent ~20 ms here, more than its shading)
+        kept = _PLAIN_PARTS.get(target)
+        if kept is None or kept[0] != target.version:
+            kept = (target.version, [_Part(inst.mesh, None, None, None)
+                                     for inst in target.instances])
+            _PLAIN_PARTS[target] = kept
+        res = _Resolved(target, target, kept[1], target.n_faces)
+        object.__setattr__(res, "_plain", True)
+        return res
     # trimesh geometry per instance, whose own colours and texture apply unless the
     # options say otherwise (None for clraster targets)
     sources: list[Any] = []
@@ -412,26 +439,86 @@ def _shade_covered(frame: _FrameLike, res: _Resolved, *, smooth: bool,
     return px.covered, base * (_AMBIENT + (1.0 - _AMBIENT) * lam[:, None])
 
 
-def _shade_on_device(frame: _FrameLike, res: _Resolved, *, smooth: bool,
+class _Same:
+    """A key equal to another holding the very same objects (kept alive by it, so their
+    identities cannot pass to new objects while it is compared)."""
+
+    __slots__ = ("objs",)
+
+    def __init__(self, objs: tuple[Any, ...]) -> None:
+        self.objs = objs
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, _Same) and len(other.objs) == len(self.objs)
+                and all(a is b for a, b in zip(self.objs, other.objs, strict=True)))
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _shade_on_device(frame: _FrameLike, res: _Resolved, k: int, *, smooth: bool,
                      per_instance_colors: Any, light: np.ndarray, two_sided: bool,
                      background: np.ndarray, alpha: bool) -> np.ndarray | None:
-    """`_compose`'s image (k = 1) made on the device of the OpenCL renderer that rendered
-    ``frame`` (``frame.source``; kernels/resolve.cl shade_pixels, this module's NumPy path
-    being its twin, equal within 1/255), or None where the host path shades: a frame from
-    the twin, colour sources (vertex or face colours, textures), a callable
-    ``per_instance_colors``, smooth shading of a frame without barycentrics."""
+    """`_compose`'s image made on the device of the OpenCL renderer that rendered ``frame``
+    (``frame.source``; kernels/resolve.cl shade_pixels, shade_ssaa; this module's NumPy
+    path is its twin, equal within 1/255), or None where the host path shades: a frame from
+    the twin or without a renderer, or one without the barycentrics its shading needs (the
+    host path then says so). Ids out of range raise as on the host."""
     src = getattr(frame, "source", None)
     renderer = src() if src is not None else None
-    if (renderer is None or callable(per_instance_colors) or any(p.colored for p in res.parts)
-            or (smooth and getattr(frame, "barycentrics", None) is None)):
+    if renderer is None or not hasattr(renderer, "shade_frame"):
         return None
-    _ids(frame, res.n_faces)   # ids out of range: the host's error
-    tints = (None if per_instance_colors is None
-             else as_colors(per_instance_colors, len(res.parts), "per_instance_colors"))
-    return renderer.shade_frame(frame, res.geometry, smooth=smooth, light=light,
-                                ambient=_AMBIENT, albedo=_ALBEDO, two_sided=two_sided,
-                                tints=tints, flat_raw=not smooth and res.scene is None,
-                                background=background, alpha=alpha)
+    ids = np.asarray(frame.triangle_id)
+    if ids.ndim != 2 or ids.dtype.kind not in "iu":
+        return None   # the host path's error
+    parts = res.parts
+    textured = not res.plain and any(
+        p.vertex_colors is not None or (p.texture is not None and p.texture.image is not None)
+        for p in parts)
+    if (smooth or textured) and getattr(frame, "barycentrics", None) is None:
+        return None
+    n = len(parts)
+    max_id = res.n_faces - 1
+    tints = None
+    if callable(per_instance_colors):
+        seen = renderer.seen_instances(frame, res.geometry, max_id)
+        if seen is None:
+            _ids(frame, res.n_faces)   # raises: ids out of range
+            return None
+        tints = np.ones((n, 3))
+        for i in np.flatnonzero(seen):
+            inst = (res.scene.instances[i] if res.scene is not None
+                    else Instance(parts[0].mesh, np.eye(4)))
+            tints[i] = as_colors(np.asarray(per_instance_colors(int(i), inst)).reshape(1, -1),
+                                 1, f"per_instance_colors({i}, ...)")[0]
+    elif per_instance_colors is not None:
+        tints = as_colors(per_instance_colors, n, "per_instance_colors")
+    inst_col = np.zeros((n, 4), np.float32)
+    sources: list[tuple[Any, Any, Any]] | None = None
+    key = None
+    if res.plain:
+        inst_col[:, :3] = _ALBEDO if tints is None else tints
+    else:
+        colored = np.fromiter((p.colored for p in parts), bool, n)
+        factor = np.ones((n, 3))
+        for j, p in enumerate(parts):
+            if p.texture is not None:
+                factor[j] = p.texture.factor
+        base = factor * (tints if tints is not None else 1.0)
+        if tints is None:
+            base[~colored] = _ALBEDO
+        inst_col[:, :3] = base
+        key = _Same(tuple(x for p in parts
+                          for x in (p.mesh, p.vertex_colors, p.face_colors, p.texture)))
+        sources = [(p.vertex_colors, p.face_colors, p.texture) for p in parts]
+
+    img = renderer.shade_frame(frame, res.geometry, smooth=smooth, light=light,
+                               ambient=_AMBIENT, two_sided=two_sided, inst_col=inst_col,
+                               sources=sources, sources_key=key,
+                               identity=res.scene is None, max_id=max_id,
+                               background=background, alpha=alpha, k=k)
+    if img is None:
+        _ids(frame, res.n_faces)   # raises: ids out of range
+    return img
 
 
 def _to_u8(rgb: np.ndarray) -> np.ndarray:
@@ -506,12 +593,10 @@ def _compose(frame: _FrameLike, res: _Resolved, k: int, *, smooth: bool,
              two_sided: bool) -> np.ndarray:
     """The output image of a frame k× the output size in each axis (k = 1: `shade`)."""
     bg = _background(background)
-    if k == 1:
-        img = _shade_on_device(frame, res, smooth=smooth,
-                               per_instance_colors=per_instance_colors, light=light,
-                               two_sided=two_sided, background=bg, alpha=alpha)
-        if img is not None:
-            return img
+    img = _shade_on_device(frame, res, k, smooth=smooth, per_instance_colors=per_instance_colors,
+                           light=light, two_sided=two_sided, background=bg, alpha=alpha)
+    if img is not None:
+        return img
     covered, rgb = _shade_covered(frame, res, smooth=smooth,
                                   per_instance_colors=per_instance_colors, light=light,
                                   two_sided=two_sided)

@@ -25,7 +25,7 @@ from .drawlist import GeometryPool, PlanCache
 from .draws import FrameDraws
 from .driver import FrameBuffers, FrameOptions, HiZ, check_options, render_frame
 from .params import FrameParams, FrameTotals
-from .resolving import ResolveTables, ResolveView, resolve_tables
+from .resolving import ResolveTables, ResolveView, resolve_tables, shade_sources
 
 # imported for its effect: it registers the device SSAO, FXAA and shadow passes with
 # clraster.output.post, which render_shaded then uses
@@ -265,13 +265,16 @@ class Renderer:
         return arrays, event_ms([ev])
 
     def shade_frame(self, frame: Frame, target: Any, *, smooth: bool, light: np.ndarray,
-                    ambient: float, albedo: np.ndarray, two_sided: bool,
-                    tints: np.ndarray | None, flat_raw: bool, background: np.ndarray,
-                    alpha: bool) -> np.ndarray:
-        """The Lambert image `clraster.output.shade.shade` makes of ``frame`` (rendered from
-        ``target``, a Mesh or Scene) for surfaces without colour sources, made on this
-        renderer's device (kernels/resolve.cl shade_pixels; arguments as
-        `ResolveStage.shade`). The scene's tables are the resolve stage's, kept per
+                    ambient: float, two_sided: bool, inst_col: np.ndarray,
+                    sources: Any, sources_key: object, identity: bool, max_id: int,
+                    background: np.ndarray, alpha: bool, k: int = 1) -> np.ndarray | None:
+        """The image `clraster.output.shade` makes of ``frame`` (rendered from ``target``, a
+        Mesh or Scene; k× the output size for render_shaded's ssaa), made on this
+        renderer's device (kernels/resolve.cl shade_pixels, shade_ssaa; arguments as
+        `ResolveStage.shade`; ``sources``: per instance (vertex colours, face colours,
+        texture) as `clraster.pipeline.resolving.shade_sources` takes them, or None, made
+        into tables when ``sources_key`` differs from the last call's). None when the frame holds
+        ids outside [−1, max_id]. The scene's tables are the resolve stage's, kept per
         geometry pool (this renderer's last target's, or made for ``target``)."""
         check_process(self._pid)
         with self._lock:
@@ -279,12 +282,29 @@ class Renderer:
                 self._resolver = ResolveStage(self.context, self.config)
             scene, pool = self._plans.scene_and_pool(target)
             tables = resolve_tables(pool, scene)
-            img, _ = self._resolver.shade(
-                self.queue, pool, tables, frame.triangle_id,
-                frame.barycentrics, light=light, ambient=ambient, albedo=albedo,
-                two_sided=two_sided, tints=tints, smooth=smooth, flat_raw=flat_raw,
-                background=background, alpha=alpha)
+            res = self._resolver
+            src = None
+            if sources is not None:
+                src = (res._sources if sources_key == res._sources_key
+                       and res._shade_tables is tables else shade_sources(tables, sources))
+            img, _ = res.shade(
+                self.queue, pool, tables, frame.triangle_id, frame.barycentrics, light=light,
+                ambient=ambient, two_sided=two_sided, inst_col=inst_col, sources=src,
+                sources_key=sources_key, smooth=smooth, identity=identity, max_id=max_id,
+                background=background, alpha=alpha, k=k,
+                arrays=cast(RasterStage, self.chain.raster).pool)
             return img
+
+    def seen_instances(self, frame: Frame, target: Any, max_id: int) -> np.ndarray | None:
+        """bool (I,): the instances of ``target`` with a pixel in ``frame`` (on the device);
+        None when the frame holds ids outside [−1, max_id]."""
+        check_process(self._pid)
+        with self._lock:
+            if self._resolver is None:
+                self._resolver = ResolveStage(self.context, self.config)
+            scene, pool = self._plans.scene_and_pool(target)
+            return self._resolver.seen(self.queue, pool, resolve_tables(pool, scene),
+                                       frame.triangle_id, max_id)
 
     def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
              same_depth: bool = False) -> tuple[np.ndarray, float]:

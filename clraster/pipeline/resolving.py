@@ -46,8 +46,8 @@ from ..output.shade import vertex_normals
 from ..world.scene import Scene
 from .drawlist import GeometryPool
 
-__all__ = ["OUTPUT_BITS", "RESOLVE_SPAN", "ResolveTables", "ResolveView", "resolve_bits",
-           "resolve_tables", "resolve_view"]
+__all__ = ["OUTPUT_BITS", "RESOLVE_SPAN", "SHADE_SPAN", "ResolveTables", "ResolveView",
+           "ShadeSources", "resolve_bits", "resolve_tables", "resolve_view", "shade_sources"]
 
 #: resolve output → its bit in the kernel's ``want`` mask (generated as -D options).
 OUTPUT_BITS = {"mask": 1, "linear_depth": 2, "distance": 4, "points": 8, "normals": 16,
@@ -56,6 +56,14 @@ OUTPUT_BITS = {"mask": 1, "linear_depth": 2, "distance": 4, "points": 8, "normal
 #: a frame is a few hundred work-items (each launch of one costs PoCL a loop iteration, not
 #: a thread), small enough that 1080p still spreads over every core. Speed only.
 RESOLVE_SPAN = 512
+#: Pixels per work-item of the shading kernels (a multiple of their 16-pixel background
+#: runs): as RESOLVE_SPAN, speed only.
+SHADE_SPAN = 1024
+#: Instances per bucket of the id → instance table, about (`ResolveTables.buckets`): the
+#: forward scan from a bucket's first instance visits about this many. Speed and size only.
+_BUCKET_INSTANCES = 2
+#: Most entries of that table (4 bytes each).
+_MAX_BUCKETS = 1 << 22
 #: outputs made from the barycentrics (the surface point, or interpolated vertex normals)
 NEED_BARY = frozenset({"linear_depth", "distance", "points", "smooth_normals",
                        "smooth_camera_normals"})
@@ -98,6 +106,60 @@ class ResolveTables:
     face_normals: np.ndarray
     normal_mats: np.ndarray
     meshes: tuple[Any, ...]
+
+    def buckets(self) -> tuple[np.ndarray, int]:
+        """(bucket int32 (B,), shift): ``bucket[id >> shift]`` is the last instance whose
+        first id is ≤ ``id >> shift << shift``, so the instance of ``id`` is found by a
+        forward scan from it (kernels/resolve.cl shade_one); ~`_BUCKET_INSTANCES` instances
+        per bucket (cached)."""
+        got = self.__dict__.get("_buckets")
+        if got is None:
+            n_inst = int(self.inst_base.size)
+            total = int(self.inst_base[-1]) + int(self.meshes[int(self.inst_mesh[-1])].n_faces) \
+                if n_inst else 0
+            want = max(1, min(n_inst // _BUCKET_INSTANCES, _MAX_BUCKETS))
+            shift = 0
+            while (total >> shift) > want:
+                shift += 1
+            starts = np.arange((total >> shift) + 1, dtype=np.int64) << shift
+            bucket = (np.searchsorted(self.inst_base, starts, side="right") - 1
+                      if n_inst else np.zeros(starts.size, np.int64))
+            got = (np.ascontiguousarray(np.maximum(bucket, 0), np.int32), shift)
+            object.__setattr__(self, "_buckets", got)
+        return got
+
+    def inst_rows(self) -> np.ndarray:
+        """int32 (I,): the row of an id's face in ``face_verts`` is ``id + inst_rows[i]``
+        (``mesh_fbase[inst_mesh[i]] − inst_base[i]``; cached)."""
+        got = self.__dict__.get("_inst_rows")
+        if got is None:
+            got = np.ascontiguousarray(
+                self.mesh_fbase[self.inst_mesh].astype(np.int64) - self.inst_base, np.int32)
+            object.__setattr__(self, "_inst_rows", got)
+        return got
+
+    def shade_normal_mats(self) -> np.ndarray:
+        """float32 (I, 12): ``normal_mats`` as three rows of 4 (float4 loads; cached)."""
+        got = self.__dict__.get("_shade_nrm")
+        if got is None:
+            got = np.zeros((self.inst_base.size, 3, 4), np.float32)
+            got[:, :, :3] = self.normal_mats.reshape(-1, 3, 3)
+            got = got.reshape(-1, 12)
+            object.__setattr__(self, "_shade_nrm", got)
+        return got
+
+    def vertex_bases(self) -> np.ndarray:
+        """int64 (U,): pool row of each unique mesh's first vertex (cached)."""
+        got = self.__dict__.get("_vbase")
+        if got is None:
+            from ..culling.clusters import clusters_of
+
+            sizes = [clusters_of(m).vert_ids.shape[0] for m in self.meshes]
+            got = np.zeros(len(sizes), np.int64)
+            if sizes:
+                np.cumsum(sizes[:-1], out=got[1:])
+            object.__setattr__(self, "_vbase", got)
+        return got
 
     def smooth_normals(self, pool: GeometryPool) -> np.ndarray:
         """float32 (V, 3) vertex normals parallel to ``pool.positions`` (cached)."""
@@ -208,3 +270,94 @@ def resolve_view(pool: GeometryPool, scene: Scene, camera: Any, width: int, heig
         cam[15] = 1.0 if ortho else 0.0
     return ResolveView(names, resolve_bits(names),
                        np.ascontiguousarray(model[:, :3, :].reshape(-1, 12)), cam, view, proj)
+
+
+#: inst_src bits (kernels/resolve.cl SRC_*)
+SRC_VCOL, SRC_FCOL, SRC_TEX = 1, 2, 4
+
+
+@dataclass(frozen=True)
+class ShadeSources:
+    """The colour sources of a scene's instances for the shading kernels (kernels/resolve.cl
+    shade_one), made by `shade_sources`.
+
+    inst_src: int32 (I, 8) per instance: SRC_* bits, vertex colour offset, face colour
+        offset, uv offset, texel offset, texture width, texture height, 0. A pool vertex v
+        of the instance's mesh has its colour at ``colours[v + offset]`` and its uv at
+        ``uvs[v + offset]``; face f its colour at ``colours[f + offset]``; texel (r, c) is
+        ``texels[offset + r·width + c]``.
+    colours: float32 (N, 4) RGB0 in [0, 1]; uvs: float32 (M, 2); texels: float32 (T, 4).
+    factor: float64 (I, 3): the texture's factor, ones where none.
+    colored: bool (I,): the instance has a colour source (its albedo is not the default).
+    """
+
+    inst_src: np.ndarray
+    colours: np.ndarray
+    uvs: np.ndarray
+    texels: np.ndarray
+    factor: np.ndarray
+    colored: np.ndarray
+
+
+def shade_sources(tables: ResolveTables, sources: list[tuple[Any, Any, Any]]) -> ShadeSources:
+    """`ShadeSources` of ``sources``: per instance (vertex colours float (N, 3) or None, face
+    colours float (F, 3) or None, a `clraster.output.textures.Texture` or None), the mesh's
+    own vertex and face order. An array shared by instances of one mesh is stored once."""
+    from ..culling.clusters import clusters_of
+
+    n = len(sources)
+    inst_src = np.zeros((n, 8), np.int32)
+    factor = np.ones((n, 3))
+    colored = np.zeros(n, bool)
+    vbase = tables.vertex_bases()
+    cols: list[np.ndarray] = []
+    uvs: list[np.ndarray] = []
+    texels: list[np.ndarray] = []
+    sizes = {"c": 0, "u": 0, "t": 0}
+    blocks: dict[tuple[str, int, int], int] = {}
+
+    def block(kind: str, u: int, arr: np.ndarray, make: Any, into: list[np.ndarray]) -> int:
+        key = (kind, u, id(arr))
+        got = blocks.get(key)
+        if got is None:
+            rows = make(arr)
+            got = blocks[key] = sizes[kind[0]]
+            into.append(rows)
+            sizes[kind[0]] += rows.shape[0]
+        return got
+
+    def per_vertex(u: int) -> Any:
+        vid = clusters_of(tables.meshes[u]).vert_ids
+        return lambda a: np.asarray(a)[vid]
+
+    def rgb0(a: np.ndarray) -> np.ndarray:
+        out = np.zeros((a.shape[0], 4), np.float32)
+        out[:, :3] = a
+        return out
+
+    for i, (vc, fc, tex) in enumerate(sources):
+        u = int(tables.inst_mesh[i])
+        bits = 0
+        if vc is not None:
+            bits |= SRC_VCOL
+            inst_src[i, 1] = block("cv", u, vc, lambda a, u=u: rgb0(per_vertex(u)(a)), cols) \
+                - vbase[u]
+        if fc is not None:
+            bits |= SRC_FCOL
+            inst_src[i, 2] = block("cf", u, fc, rgb0, cols)
+        if tex is not None:
+            factor[i] = tex.factor
+            if tex.image is not None:
+                bits |= SRC_TEX
+                inst_src[i, 3] = block("uv", u, tex.uv, per_vertex(u), uvs) - vbase[u]
+                img = tex.image
+                inst_src[i, 4] = block("tex", -1, img, lambda a: rgb0(a.reshape(-1, 3)), texels)
+                inst_src[i, 5], inst_src[i, 6] = img.shape[1], img.shape[0]
+        inst_src[i, 0] = bits
+        colored[i] = vc is not None or fc is not None or tex is not None
+
+    def cat(parts: list[np.ndarray], width: int) -> np.ndarray:
+        return (np.ascontiguousarray(np.concatenate(parts), np.float32) if parts
+                else np.zeros((1, width), np.float32))
+
+    return ShadeSources(inst_src, cat(cols, 4), cat(uvs, 2), cat(texels, 4), factor, colored)
