@@ -5,10 +5,10 @@
     python bench/post_passes.py --rounds 15 --numpy
 
 The frame: a floor with boxes on it (tests/test_post_device.py's scene) seen from above so
-that nearly every pixel is covered; SSAO with 12 taps and a 0.4 radius (≈ 30 px); FXAA over
-the smooth-shaded image (edge-rich). Times are wall-clock per call, as render_shaded pays
-them (uploads, launches and read-back included). The machine is shared: compare rows of one
-run, not across runs.
+that nearly every pixel is covered; SSAO with the default taps (`SSAO.samples`, or
+``--taps``) and a 0.4 radius (≈ 30 px); FXAA over the smooth-shaded image (edge-rich).
+Times are wall-clock per call, as render_shaded pays them (uploads, launches and read-back
+included). The machine is shared: compare rows of one run, not across runs.
 """
 
 from __future__ import annotations
@@ -56,6 +56,7 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--rounds", type=int, default=9)
     ap.add_argument("--numpy", action="store_true", help="also time the NumPy twins")
+    ap.add_argument("--taps", type=int, default=post.SSAO.samples, help="SSAO taps per pixel")
     a = ap.parse_args()
     w, h = a.width, a.height
     r = clraster.Renderer(w, h)
@@ -64,7 +65,7 @@ def main() -> None:
     frame = r.render(mesh, cam)
     n = pixel_normals(frame, mesh).astype(np.float32)
     vp = cam.view_projection(w, h)
-    params = post.SSAO(radius=0.4).checked(1.0)
+    params = post.SSAO(radius=0.4, samples=a.taps).checked(1.0)
     img = render_shaded(r, mesh, cam, smooth=True).astype(np.float32) / 255.0
     dev = device_passes(r)
     assert dev is not None

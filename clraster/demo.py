@@ -5,7 +5,11 @@ Builds :func:`clraster.scenes.plant`, renders it from the first-person corridor 
 occlusion culling for a few frames (the first one builds the kernels and has no visibility
 history; the later ones reuse it), and writes into ``--out``:
 
-* ``shaded.png``: flat Lambert shading (`clraster.shade.shade`);
+* ``shaded.png``: flat Lambert shading (`clraster.shade.render_shaded`, its frame rendered
+  with the same culling) lit by a sun (a directional `clraster.shade.Light`) and a lamp over
+  the corridor (a spot light), both with shadow maps, and screen-space ambient occlusion
+  (`AO_RADIUS`). The corridor has storeys above it, so the sun's shadow map leaves it in
+  shadow (lit by the ambient term only); the lamp lights it;
 * ``depth.png``: eye distance on a log scale over the covered pixels, with a colour bar
   in metres;
 * ``overdraw.png``: fragments tested per pixel (the depth-test work, after the tile Hi-Z)
@@ -79,6 +83,16 @@ INSPECTOR_BACKGROUND = (28, 30, 36)
 #: and storeys above go, walls and machines that reach through the plane are cut open, so
 #: the corridor and the rooms around it can be seen from above.
 INSPECTOR_CUT = 2.6
+#: The sun of ``shaded.png``: the direction its light travels (world, y up).
+SUN_DIRECTION = (0.45, -1.0, 0.3)
+#: The lamp of ``shaded.png``: a spot light this far ahead of and above the eye (metres, x
+#: along the corridor), shining forward and down within LAMP_CONE degrees.
+LAMP_OFFSET = (4.0, 1.3, 0.0)
+LAMP_DIRECTION = (1.0, -0.9, 0.15)
+LAMP_CONE = 60.0
+#: ``shaded.png``'s ambient occlusion radius in metres (the plant's scale: pipes, corners,
+#: machine feet), instead of render_shaded's default share of the whole plant's diagonal.
+AO_RADIUS = 0.5
 #: Largest ``--triangles``: the demo holds the plant flattened into one world mesh
 #: (`world_mesh`, for shading) plus the renderer's per-triangle buffers, about 300 bytes of
 #: host memory per triangle over a base of about 0.2 GiB (peak RSS measured: 0.5 GiB at 1M,
@@ -314,7 +328,9 @@ def _run(args: argparse.Namespace) -> int:
     import imageio.v3 as iio
 
     from .cmdline import check_output_folder
-    from .output.shade import shade
+    from .output.lights import Light
+    from .output.post import SSAO
+    from .output.shade import render_shaded
     from .pipeline.renderer import Renderer
     from .world.generators import EYE_HEIGHT, plant, plant_inside_camera
 
@@ -363,7 +379,13 @@ def _run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     world = world_mesh(scene)
-    shaded = shade(frame, world)
+    t1 = time.perf_counter()
+    lights = [Light.directional(SUN_DIRECTION),
+              Light.spot(np.asarray(cam.eye, float) + LAMP_OFFSET, LAMP_DIRECTION,
+                         cone=LAMP_CONE, shadow_size=1024)]
+    shaded = render_shaded(renderer, scene, cam, lights=lights, shadows=True,
+                           ssao=SSAO(radius=AO_RADIUS), render_kwargs={"occlusion": occlusion})
+    t_shaded = (time.perf_counter() - t1) * 1e3
     depth = depth_picture(frame, cam.projection(w, h))
     over, top = overdraw_picture(cast(np.ndarray, frame.overdraw))   # overdraw=True
     floor_y = float(cam.eye[1]) - EYE_HEIGHT
@@ -391,7 +413,8 @@ def _run(args: argparse.Namespace) -> int:
           f"floor): {above:,} of {scene.n_instances:,} instances wholly above it, "
           f"{crossing:,} cut open; pixels " + ", ".join(
               f"{FATE_LABELS[f].split(' (')[0]} {per_fate[f]:,}" for f in Fate))
-    print(f"images: {t_img:.0f} ms")
+    print(f"images: {t_img:.0f} ms (shaded.png with its lights' shadow maps and ambient "
+          f"occlusion: {t_shaded:.0f} ms)")
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
 

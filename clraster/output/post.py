@@ -6,13 +6,13 @@ quantization and outlines — the NumPy twins of kernels/post.cl, and the seam t
 resolution (one sample per 2×2 block: its top-left pixel) and brought back to full
 resolution by a depth-aware upsample (`ssao_upsample`). Per covered low-res pixel
 p with world point P (the depth at the pixel centre through the inverse view-projection,
-float64) and world normal n (turned towards the camera: lighting is two-sided), N taps
-lie on a fixed spiral in the screen disc of the projected radius ``r_px = R · P₁₁ · H / (2w)``
-in full-res pixels, halved on the low-res grid (w: the clip w of P; the same for every
-pixel, no per-pixel rotation, so there is no noise to blur and nothing flickers when the
-camera moves by a fraction of a pixel); tap i at radius ``α_i · r_px`` and angle
-``2π · TURNS · α_i`` with ``α_i = (i + ½)/N``, read at the low-res pixel whose square
-holds it. Each tap's point Q with ``v = Q − P`` adds
+float32, relative to a point by the camera) and world normal n (turned towards the camera:
+lighting is two-sided), N taps lie on a fixed spiral in the screen disc of the projected
+radius ``r_px = R · P₁₁ · H / (2w)`` in full-res pixels, halved on the low-res grid (w: the
+clip w of P; the same for every pixel, no per-pixel rotation, so there is no noise to
+blur and nothing flickers when the camera moves by a fraction of a pixel); tap i at radius
+``α_i · r_px`` and angle ``2π · TURNS · α_i`` with ``α_i = (i + ½)/N``, read at the low-res
+pixel whose square holds it. Each tap's point Q with ``v = Q − P`` adds
 ``(1 − |v|²/R²) · max(0, v·n/|v| − β)`` when ``|v| < R`` (nothing beyond the radius, behind
 the surface, or on the background), and ``AO = clamp(1 − (strength / N) · Σ, 0, 1)``. R is in
 world units: the point's neighbourhood that can occlude it. A plane with nothing within R
@@ -47,8 +47,8 @@ from .lights import Light, ShadowMap, ndc_grid, shadow_lookup
 
 __all__ = ["FXAA_STEPS", "NUMPY_PASSES", "SSAO", "Outlines", "Passes", "PostError",
            "cel_quantize", "fxaa", "luma", "outline_mask", "passes_for", "register_passes",
-           "ssao", "ssao_inputs", "ssao_linear_depth", "ssao_origin", "ssao_taps",
-           "ssao_taps_pass", "ssao_upsample", "world_positions"]
+           "ssao", "ssao_inputs", "ssao_linear_depth", "ssao_origin", "ssao_prepare_matrix",
+           "ssao_radius_scale", "ssao_taps", "ssao_taps_pass", "ssao_upsample", "world_positions"]
 
 #: FXAA 3.11 preset 12: search step lengths in pixels (FXAA_QUALITY__P0..P4).
 FXAA_STEPS = (1.0, 1.5, 2.0, 4.0, 12.0)
@@ -78,7 +78,7 @@ class SSAO:
     """
 
     radius: float | None = None
-    samples: int = 12
+    samples: int = 8
     strength: float = 2.5
     bias: float = 0.1
 
@@ -135,6 +135,23 @@ def ssao_origin(vp: np.ndarray) -> np.ndarray:
     return hom[:3] / hom[3]
 
 
+def ssao_prepare_matrix(vp: np.ndarray) -> np.ndarray:
+    """float32 (4, 4): ``vp⁻¹`` (float64) moved to `ssao_origin` (rows 0..2 less the origin
+    times row 3) and rounded once; row 3 is ``vp⁻¹``'s own, so ``M · ndc`` has w = 1 / clip w,
+    the reciprocal of `ssao_linear_depth`. What `ssao_inputs` and kernel ``ssao_prepare``
+    unproject with."""
+    ivp = np.linalg.inv(vp)
+    m = ivp.copy()
+    m[:3] -= ssao_origin(vp)[:, None] * ivp[3][None, :]
+    return m.astype(np.float32)
+
+
+def ssao_radius_scale(vp: np.ndarray, radius: float, height: int) -> np.float32:
+    """float32 ``radius · ‖vp[1, :3]‖ · H/4``: a point's projected radius in *low-res* pixels
+    is this times its ``1 / clip w``."""
+    return np.float32(radius * float(np.linalg.norm(vp[1, :3])) * (height * 0.25))
+
+
 def ssao_inputs(depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed_z: bool,
                 radius: float) -> tuple[np.ndarray, np.ndarray]:
     """SSAO's first pass (kernel ``ssao_prepare``), at half resolution: for each low-res
@@ -142,25 +159,38 @@ def ssao_inputs(depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed
     float32 (h2, w2, 4) positions relative to `ssao_origin` with the projected radius in
     *low-res* pixels as w (0 on the background), and float32 (h2, w2, 4) normals turned
     towards the camera with the pixel's `ssao_linear_depth` as w (inf on the background).
-    Computed in float64 (the linear depth in float32)."""
+
+    All in float32, in the kernel's order: the pixel centre's NDC ``(nx, ny, nz, 1)``,
+    ``hom = M · ndc`` (M = `ssao_prepare_matrix`, rows summed left to right), the linear
+    depth ``z = 1 / hom.w``, the point ``hom.xyz · z``, the radius ``k · hom.w``
+    (`ssao_radius_scale`); the normal is negated where it points along the view ray
+    ``p − pn`` (pn: the pixel's point on the near plane, ``homn = M · (nx, ny, −1, 1)``),
+    tested without a division as ``n · (hom.xyz · homn.w − homn.xyz · hom.w) > 0``
+    (both w > 0)."""
+    f32 = np.float32
     h, w = depth.shape
-    covered = ((depth > 0.0) if reversed_z else (depth < 1.0))[::2, ::2]
-    full = world_positions(depth, vp, reversed_z)
-    pos = full[::2, ::2]
-    ray = pos - world_positions(depth, vp, reversed_z, -1.0)[::2, ::2]
-    n = normals[::2, ::2].astype(np.float64)
-    flip = np.einsum("hwc,hwc->hw", n, ray) > 0.0
-    n = np.where(flip[..., None], -n, n)
-    cw = pos @ vp[3, :3] + vp[3, 3]
-    p4 = np.zeros(covered.shape + (4,), np.float32)
-    n4 = np.zeros(covered.shape + (4,), np.float32)
-    k = radius * float(np.linalg.norm(vp[1, :3])) * (h * 0.25)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p4[covered, :3] = pos[covered] - ssao_origin(vp)
-        p4[covered, 3] = k / cw[covered]
-    n4[covered, :3] = n[covered]
-    z = ssao_linear_depth(depth, np.linalg.inv(vp)[3].astype(np.float32), reversed_z)
-    n4[..., 3] = np.where(covered, z[::2, ::2], np.float32(np.inf))
+    d = np.ascontiguousarray(depth[::2, ::2], dtype=f32)
+    covered = (d > 0.0) if reversed_z else (d < 1.0)
+    m = ssao_prepare_matrix(vp)
+    sx, sy = f32(2.0 / w), f32(2.0 / h)
+    nx = ((np.arange(0, w, 2, dtype=f32) + f32(0.5)) * sx - f32(1.0))[None, :]
+    ny = (f32(1.0) - (np.arange(0, h, 2, dtype=f32) + f32(0.5)) * sy)[:, None]
+    nz = (f32(1.0) - f32(2.0) * d) if reversed_z else (f32(2.0) * d - f32(1.0))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        hom = [((m[r, 0] * nx + m[r, 1] * ny) + m[r, 2] * nz) + m[r, 3] for r in range(4)]
+        homn = [((m[r, 0] * nx + m[r, 1] * ny) - m[r, 2]) + m[r, 3] for r in range(4)]
+        z = f32(1.0) / hom[3]
+        ray = [hom[c] * homn[3] - homn[c] * hom[3] for c in range(3)]
+        n = normals[::2, ::2].astype(f32)
+        flip = ((n[..., 0] * ray[0] + n[..., 1] * ray[1]) + n[..., 2] * ray[2]) > f32(0.0)
+        n = np.where(flip[..., None], -n, n)
+        p4 = np.zeros(covered.shape + (4,), f32)
+        n4 = np.zeros(covered.shape + (4,), f32)
+        for c in range(3):
+            p4[..., c] = np.where(covered, hom[c] * z, f32(0.0))
+        p4[..., 3] = np.where(covered, ssao_radius_scale(vp, radius, h) * hom[3], f32(0.0))
+    n4[..., :3] = np.where(covered[..., None], n, f32(0.0))
+    n4[..., 3] = np.where(covered, z, f32(np.inf))
     return p4, n4
 
 
@@ -168,8 +198,8 @@ def ssao(depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed_z: boo
          params: SSAO) -> np.ndarray:
     """float32 (H, W) ambient occlusion factor in [0, 1] (1: open), 1 on the background.
 
-    Three passes (module docstring): `ssao_inputs` (world points in float64, then float32
-    relative to `ssao_origin`, at half resolution), `ssao_taps_pass` (the taps, float32, at
+    Three passes (module docstring): `ssao_inputs` (world points relative to `ssao_origin`
+    in float32, at half resolution), `ssao_taps_pass` (the taps, float32, at
     half resolution) and `ssao_upsample` (depth-aware, back to full resolution).
 
     Args:

@@ -27,7 +27,8 @@ from ...output.post import (
     SSAO_UPSAMPLE_DEPTH,
     Passes,
     register_passes,
-    ssao_origin,
+    ssao_prepare_matrix,
+    ssao_radius_scale,
     ssao_taps,
 )
 from ..device import kernel, program, shares_host_memory
@@ -36,18 +37,27 @@ from .shadow import ShadowStage
 
 __all__ = ["DevicePasses", "device_passes"]
 
-#: Work-group shape of the per-pixel kernels (x, y): a row of 16 pixels, 4 rows.
+#: Work-group shape of the SSAO kernels (x, y): 16 work-items of a row (LANES pixels each),
+#: 4 rows.
 LOCAL = (16, 4)
 MF = cl.mem_flags
 
 
-#: FXAA: one work-item per FXAA_SPAN pixels of a row (kernels/post.cl), 64 per group.
-FXAA_SPAN = 8
+#: Pixels of a row per work-item of the SSAO kernels (post.cl's LANES).
+LANES = 8
+#: FXAA: one work-item per FXAA_SPAN pixels of a row (kernels/post.cl's FXAA_SPAN), 64 per
+#: group.
+FXAA_SPAN = 16
 FXAA_LOCAL = (64, 1)
 
 
 def _global(w: int, h: int) -> tuple[int, int]:
     return (-(-w // LOCAL[0]) * LOCAL[0], -(-h // LOCAL[1]) * LOCAL[1])
+
+
+def _lanes_global(w: int, h: int) -> tuple[int, int]:
+    """Global size of a kernel doing LANES (8) pixels of a row per work-item (post.cl)."""
+    return _global(-(-w // LANES), h)
 
 
 def _fxaa_global(w: int, h: int) -> tuple[int, int]:
@@ -62,7 +72,7 @@ class DevicePasses:
         self.ctx = ctx
         self.queue = cl.CommandQueue(ctx)
         opts = RasterConfig().build_options()
-        post = program(ctx, "post", opts)
+        post = program(ctx, "post", (*opts, f"-DFXAA_SPAN={FXAA_SPAN}"))
         self.k_prepare = kernel(post, "ssao_prepare")
         self.k_ssao = kernel(post, "ssao")
         self.k_luma = kernel(post, "luma")
@@ -112,16 +122,13 @@ class DevicePasses:
         and normals (w: linear depth) on the half-resolution grid, reused from call to call
         (`clraster.output.post.ssao_inputs` is the twin)."""
         h2, w2 = (h + 1) // 2, (w + 1) // 2
-        params = np.concatenate([np.linalg.inv(vp).ravel(), ssao_origin(vp), vp[3],
-                                 [radius * float(np.linalg.norm(vp[1, :3])) * (h * 0.25)]])
-        self.params.write(self.queue, params.astype(np.float64))
+        m = ssao_prepare_matrix(vp)
         pos = self.pos.ensure(16 * w2 * h2, "SSAO position buffer")
         nrm = self.nrm.ensure(16 * w2 * h2, "SSAO normal buffer")
-        assert self.params.buf is not None
-        self.k_prepare(self.queue, _global(w2, h2), LOCAL, depth, normals, self.params.buf,
-                       pos, nrm, np.int32(w), np.int32(h), np.int32(reversed_z),
-                       np.linalg.inv(vp)[3].astype(np.float32), np.float32(2.0 / w),
-                       np.float32(2.0 / h))
+        self.k_prepare(self.queue, _lanes_global(w2, h2), LOCAL, depth, normals, pos, nrm,
+                       np.int32(w), np.int32(h), np.int32(reversed_z), m[0], m[1], m[2], m[3],
+                       np.float32(2.0 / w), np.float32(2.0 / h),
+                       ssao_radius_scale(vp, radius, h))
         return pos, nrm
 
     def ssao(self, depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed_z: bool,
@@ -131,21 +138,22 @@ class DevicePasses:
         h2, w2 = (h + 1) // 2, (w + 1) // 2
         depth = np.ascontiguousarray(depth, dtype=np.float32)
         normals = np.ascontiguousarray(normals, dtype=np.float32)
+        # the taps first: a write waits for the queue, and here it is empty
+        self.taps.write(self.queue, ssao_taps(params.samples))
         d_depth, d_nrm = self._in(depth), self._in(normals)
         pos, nrm = self.ssao_inputs(d_depth, d_nrm, vp, reversed_z, params.radius, h, w)
-        self.taps.write(self.queue, ssao_taps(params.samples))
         low = self.ao_low.ensure(4 * w2 * h2, "SSAO half-resolution buffer")
         r = np.float32(params.radius)
         r2 = r * r
         assert self.taps.buf is not None
-        self.k_ssao(self.queue, _global(w2, h2), LOCAL, pos, nrm, self.taps.buf, low,
+        self.k_ssao(self.queue, _lanes_global(w2, h2), LOCAL, pos, nrm, self.taps.buf, low,
                     np.int32(w2), np.int32(h2), np.int32(params.samples), r2,
                     np.float32(1.0) / r2, np.float32(params.bias),
                     np.float32(params.strength) / np.float32(params.samples))
         out = np.empty((h, w), np.float32)
         d_out, in_place = self._result(out)
         ivp = np.linalg.inv(vp)[3].astype(np.float32)
-        self.k_upsample(self.queue, _global(w, h), LOCAL, d_depth, nrm, low, d_out, ivp,
+        self.k_upsample(self.queue, _lanes_global(w, h), LOCAL, d_depth, nrm, low, d_out, ivp,
                         np.int32(w), np.int32(h), np.float32(2.0 / w), np.float32(2.0 / h),
                         np.int32(reversed_z), np.float32(SSAO_UPSAMPLE_DEPTH))
         return self._finish(out, d_out, in_place)
@@ -158,7 +166,8 @@ class DevicePasses:
         out = np.empty_like(img)
         d_out, in_place = self._result(out)
         n = w * h
-        self.k_luma(self.queue, (-(-n // 64) * 64,), (64,), d_rgb, d_lum, np.int32(n))
+        groups = -(-n // (LANES * 64))
+        self.k_luma(self.queue, (groups * 64,), (64,), d_rgb, d_lum, np.int32(n))
         self.k_fxaa(self.queue, _fxaa_global(w, h), FXAA_LOCAL, d_rgb, d_lum, d_out,
                     np.int32(w), np.int32(h))
         return self._finish(out, d_out, in_place)
