@@ -3,7 +3,8 @@
 It checks that the harness works and writes what it promises (JSON schema, markdown, plots,
 peer present or skipped with a reason), never a speed. A second run does the scale sweep
 alone (`--quick --sweeps scale`: instance grids of ~1M and ~2M triangles) and checks its
-rows, peak RSS and fit.
+rows, peak RSS and fit; a third the datasets sweep alone (`--quick --sweeps datasets`: a few
+views of spot, clraster and, where it imports, Open3D).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import statistics
 from pathlib import Path
 
 import pytest
@@ -108,7 +110,9 @@ def test_json_schema(quick):
                             "plant10m_occlusion_vs_llvmpipe_20", "plant10m_occlusion_vs_off",
                             "dragon_vs_llvmpipe_0.15", "plant10m_occlusion_vs_llvmpipe_30",
                             "fill_vs_llvmpipe", "empty_frame_ms",
-                            "scale_200m_renders", "scale_200m_peak_rss", "scale_linear", *every}
+                            "scale_200m_renders", "scale_200m_peak_rss", "scale_linear",
+                            "datasets_dragon_back_vs_open3d", "datasets_dragon_none_vs_open3d",
+                            "datasets_small_vs_open3d", *every}
     fills = [c for c in configs if "fill" in c["sweeps"] and c["peer"].get("median_ms")
              and c["opencl"]["covered_fraction"] >= 0.25]
     for name, t in targets.items():
@@ -123,8 +127,8 @@ def test_json_schema(quick):
             worst = max(fills, key=lambda c: c["peer"]["ratio_clraster_over_llvmpipe"])
             assert t["config"] == worst["id"] and t["met"] is (t["value"] <= 0.8)
         else:   # quick mode has neither the dragon at 1080p nor a 10M plant, and the
-            assert t["met"] is None and t["note"]   # scale sweep runs only when named
-    assert res["scale"] is None
+            assert t["met"] is None and t["note"]   # scale and datasets sweeps run only
+    assert res["scale"] is None and res["datasets"] is None   # when named
     assert all("scale" not in c["sweeps"] for c in configs)
 
     for k in ("cold", "warm"):
@@ -275,3 +279,169 @@ def test_meshes_found_from_the_current_folder(tmp_path, monkeypatch):
     assert _default_meshes() == meshes.resolve()
     monkeypatch.setenv("CLRASTER_MESHES", str(tmp_path))
     assert _default_meshes() == tmp_path
+
+
+# =======================================================================================
+# The datasets sweep (clraster.bench.datasets)
+# =======================================================================================
+
+def _open3d_importable() -> bool:
+    from clraster.bench.datasets import open3d_status
+
+    return open3d_status()[0]
+
+
+@pytest.fixture(scope="module")
+def quick_datasets(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench_datasets")
+    rc = main(["bench", "--quick", "--sweeps", "datasets", "--no-startup", "--out", str(out)])
+    return rc, out
+
+
+def test_datasets_sweep_alone(quick_datasets):
+    """`--sweeps datasets` alone: one row (a tiny mesh, a few views at 640x480), views/s of
+    each round and their median for cull back and none, the first view's coverage; no
+    frame-time configuration, no llvmpipe; its section, plot and targets."""
+    from clraster.bench.datasets import DATASETS_SIZE, QUICK_VIEWS
+
+    rc, out = quick_datasets
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["errors"] == [] and res["configs"] == [] and res["memory"] == []
+    assert res["peer"]["available"] is False   # llvmpipe has nothing to draw here
+    ds = res["datasets"]
+    assert ds["failed"] == [] and ds["skipped"] == [] and len(ds["rows"]) == 1
+    assert ds["settings"]["views"] == res["settings"]["views"] == QUICK_VIEWS
+    row = ds["rows"][0]
+    assert row["mesh"] in ("spot", "example") and row["triangles"] > 0
+    assert row["size"] == list(DATASETS_SIZE) and row["views"] == QUICK_VIEWS
+    assert set(row["clraster"]) == {"back", "none"}
+    for c in row["clraster"].values():
+        assert len(c["runs_views_per_s"]) == res["settings"]["repeat"] == row["repeat"]
+        assert all(_positive(v) for v in c["runs_views_per_s"])
+        assert c["median_views_per_s"] == statistics.median(c["runs_views_per_s"])
+        assert 0.0 < c["covered_fraction"] < 1.0   # the mesh is framed, with margin
+    # both culling modes see the same closed-ish mesh: nearly the same pixels covered
+    back, none = (row["clraster"][k]["covered_fraction"] for k in ("back", "none"))
+    assert abs(back - none) < 0.01
+    o3d = row["open3d"]
+    t = {t["name"]: t for t in res["targets"]}
+    if ds["open3d"]["available"]:
+        assert _positive(o3d["median_views_per_s"])
+        for cull, ratio in row["ratio_vs_open3d"].items():
+            assert ratio == (row["clraster"][cull]["median_views_per_s"]
+                             / o3d["median_views_per_s"])
+        small = t["datasets_small_vs_open3d"]
+        assert small["value"] == min(row["ratio_vs_open3d"].values())
+        assert small["met"] is (small["value"] >= 2.0)
+    else:
+        assert o3d["skipped"].startswith("Open3D skipped") and row["ratio_vs_open3d"] == {}
+        assert all(c["ids_agree_open3d"] is None for c in row["clraster"].values())
+        assert t["datasets_small_vs_open3d"]["met"] is None
+        assert "Open3D" in t["datasets_small_vs_open3d"]["note"]
+    for name in ("datasets_dragon_back_vs_open3d", "datasets_dragon_none_vs_open3d"):
+        assert t[name]["met"] is None and t[name]["note"]   # no dragon in quick mode
+    md = (out / "results.md").read_text()
+    assert "## Datasets sweep" in md and f"| {row['mesh']} |" in md
+    assert "## Configurations" not in md   # no frame-time configuration was run
+    if importlib.util.find_spec("matplotlib") is not None:
+        assert res["plots"] == ["datasets.png"]
+        assert (out / "datasets.png").stat().st_size > 1000
+
+
+def test_datasets_open3d_agrees(quick_datasets):
+    """Where Open3D imports: its views/s and the first view's ids, which agree with
+    clraster's on almost every pixel once the pixel centres are matched."""
+    if not _open3d_importable():
+        pytest.skip("open3d is not importable here (pip install 'clraster[open3d]', which "
+                    "needs the system's libusb-1.0)")
+    _, out = quick_datasets
+    row = json.loads((out / "results.json").read_text())["datasets"]["rows"][0]
+    o3d = row["open3d"]
+    assert len(o3d["runs_views_per_s"]) == row["repeat"]
+    assert all(_positive(v) for v in o3d["runs_views_per_s"])
+    assert abs(o3d["covered_fraction"] - row["clraster"]["none"]["covered_fraction"]) < 0.01
+    for c in row["clraster"].values():
+        assert c["ids_agree_open3d"] > 0.99
+
+
+def test_datasets_sphere_poses():
+    """The cameras: rotations (orthonormal, det +1, OpenCV axes) on a sphere around the
+    mesh's box centre, each looking at it, spread evenly (directions average to ~0); K with
+    the principal point at the image centre (OpenCV pixel centres)."""
+    import numpy as np
+
+    from clraster import Mesh
+    from clraster.bench.datasets import near_far, sphere_poses
+
+    v = np.array([[0, 0, 0], [2, 0, 0], [0, 1, 0], [0, 0, 4]], np.float32)
+    mesh = Mesh(v, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]], np.int32))
+    k, poses = sphere_poses(mesh, 50, 64, 48)
+    assert k[0, 2] == 31.5 and k[1, 2] == 23.5 and k[0, 0] == k[1, 1] > 0
+    centre = np.array([1.0, 0.5, 2.0])
+    dists = []
+    dirs = []
+    for p in poses:
+        r, eye = p[:3, :3], p[:3, 3]
+        assert np.allclose(r.T @ r, np.eye(3), atol=1e-12)
+        assert np.linalg.det(r) == pytest.approx(1.0)
+        d = centre - eye
+        dists.append(np.linalg.norm(d))
+        assert np.allclose(r[:, 2], d / np.linalg.norm(d))   # +z looks at the centre
+        dirs.append(-d / np.linalg.norm(d))
+    assert np.ptp(dists) < 1e-9
+    assert np.linalg.norm(np.mean(dirs, axis=0)) < 0.05
+    near, far = near_far(mesh, poses)
+    radius = np.linalg.norm([2.0, 1.0, 4.0]) / 2
+    assert 0 < near < dists[0] - radius and far > dists[0] + radius
+
+
+def test_datasets_rounds_abba():
+    """The jobs alternate order each round (A B C, C B A, A B C), each timed once a round."""
+    from clraster.bench.datasets import time_rounds
+
+    calls: list[str] = []
+    jobs = {n: (lambda n=n: calls.append(n)) for n in "ABC"}
+    rates = time_rounds(jobs, 10, 3)
+    assert calls == list("ABCCBAABC")
+    assert all(len(v) == 3 and all(_positive(x) for x in v) for v in rates.values())
+
+
+def test_datasets_targets():
+    """Issue 32's targets from a hand-made summary: the dragon's ratios per culling mode,
+    the smallest ratio over meshes under 100K triangles; nothing timed → not measured."""
+    from clraster.bench.datasets import datasets_targets
+
+    def row(mesh, tri, back, none):
+        return {"mesh": mesh, "source": f"/m/{mesh}.ply", "triangles": tri,
+                "ratio_vs_open3d": {"back": back, "none": none}}
+
+    summary = {"open3d": {"available": True, "reason": "Open3D 0.20"},
+               "rows": [row("dragon", 871_414, 1.6, 0.9), row("armadillo", 86_482, 2.4, 2.1),
+                        row("spot", 5_856, 3.0, 1.9), row("lucy", 100_000, 0.5, 0.5)]}
+    t = {x["name"]: x for x in datasets_targets(summary)}
+    assert t["datasets_dragon_back_vs_open3d"]["value"] == 1.6
+    assert t["datasets_dragon_back_vs_open3d"]["met"] is True
+    assert t["datasets_dragon_none_vs_open3d"]["met"] is False
+    small = t["datasets_small_vs_open3d"]   # lucy has 100K: not "under 100K"
+    assert small["value"] == 1.9 and small["met"] is False
+    assert small["config"] == "datasets spot cull=none"
+    for summ, needle in ((None, "--sweeps datasets"),
+                         ({"open3d": {"available": False, "reason": "Open3D skipped: x"},
+                           "rows": [{**row("spot", 5_856, 0, 0), "ratio_vs_open3d": {}}]},
+                          "Open3D skipped")):
+        for x in datasets_targets(summ):
+            assert x["met"] is None and needle in x["note"], x
+
+
+@pytest.mark.parametrize("name", ["grid:spot:2x1x1", "spot@close", "plant:many"])
+def test_datasets_bad_mesh_is_a_usage_error(tmp_path, capsys, name):
+    """The datasets sweep times meshes seen from its sphere of cameras: a grid, a view
+    suffix or a name that does not parse is refused before anything runs (exit 2, the
+    name and the reason on stderr)."""
+    rc = main(["bench", "--quick", "--sweeps", "datasets", "--datasets-meshes", name,
+               "--out", str(tmp_path / "out")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "datasets mesh" in err and name in err
+    assert not (tmp_path / "out").exists()

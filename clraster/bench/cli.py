@@ -21,6 +21,14 @@ from typing import Any
 
 from clraster.base.checks import parse_size
 from clraster.bench import report
+from clraster.bench.datasets import (
+    DATASETS_MESHES,
+    DATASETS_SIZE,
+    DATASETS_VIEWS,
+    QUICK_VIEWS,
+    open3d_status,
+    run_sweep,
+)
 from clraster.bench.measure import (
     MEMORY_METHOD,
     PROBE_PREFIX,
@@ -209,9 +217,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the first of ../shared/meshes and ./shared/meshes from the current "
                         "folder and ../shared/meshes next to a checkout that exists)")
     p.add_argument("--sweeps", type=_sweeps, default=list(DEFAULT_SWEEPS),
-                   help="comma-separated subset of triangles,pixels,culling,fill,scale, or all "
-                        f"(default {','.join(DEFAULT_SWEEPS)}: the scale sweep, 10M-200M "
-                        "triangles, runs only when named)")
+                   help="comma-separated subset of triangles,pixels,culling,fill,scale,"
+                        f"datasets, or all (default {','.join(DEFAULT_SWEEPS)}: the scale "
+                        "sweep, 10M-200M triangles, and the datasets sweep, views/s against "
+                        "Open3D, run only when named)")
     p.add_argument("--scenes", type=_list, help="scenes of the triangles sweep (comma-"
                    f"separated; default {','.join(FULL_TRIANGLE_SCENES)})")
     p.add_argument("--size", type=parse_size, help="image size of the triangles and culling "
@@ -234,8 +243,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scale-repeat", type=int,
                    help=f"timed frames per scale configuration (default {FULL_SCALE_REPEAT}: "
                         "a 200M frame takes 10-20 s; quick: --repeat)")
-    p.add_argument("--repeat", type=int, help="timed frames per configuration (default 5; "
-                                              "quick 2)")
+    p.add_argument("--datasets-meshes", type=_list,
+                   help="meshes of the datasets sweep (comma-separated; default "
+                        f"{','.join(DATASETS_MESHES)}; quick: spot or example)")
+    p.add_argument("--views", type=int,
+                   help=f"views per round of the datasets sweep (default {DATASETS_VIEWS}; "
+                        f"quick {QUICK_VIEWS})")
+    p.add_argument("--datasets-size", type=parse_size,
+                   help="image size of the datasets sweep (default "
+                        f"{DATASETS_SIZE[0]}x{DATASETS_SIZE[1]})")
+    p.add_argument("--repeat", type=int, help="timed frames per configuration, and rounds "
+                                              "of the datasets sweep (default 5; quick 2)")
     p.add_argument("--warmup", type=int, default=1, help="warm-up frames (default 1)")
     p.add_argument("--occlusion-warmup", type=int, default=2,
                    help="extra warm-up frames in occlusion mode (default 2)")
@@ -247,7 +265,8 @@ def _parser() -> argparse.ArgumentParser:
                         "skipped' (default 6M: one twin frame of the 10M plant takes "
                         "minutes; 'none' for no limit; quick: none)")
     p.add_argument("--no-twin", action="store_true", help="time the OpenCL path only")
-    p.add_argument("--no-peer", action="store_true", help="do not run the llvmpipe peer")
+    p.add_argument("--no-peer", action="store_true", help="do not run the peers (llvmpipe; "
+                                                          "Open3D in the datasets sweep)")
     p.add_argument("--no-startup", action="store_true", help="skip cold/warm start")
     p.add_argument("--no-memory", action="store_true", help="skip peak memory")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
@@ -296,6 +315,8 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.scale_repeat = a.scale_repeat or a.repeat
         a.startup_scene = a.startup_scene or small
         a.startup_size = (320, 240)
+        a.datasets_meshes = a.datasets_meshes or [small]
+        a.views = a.views or QUICK_VIEWS
     else:
         a.scenes = a.scenes or list(FULL_TRIANGLE_SCENES)
         a.size = a.size or (1920, 1080)
@@ -311,9 +332,21 @@ def _fill_defaults(a: argparse.Namespace) -> None:
         a.startup_size = (1920, 1080)
         if a.twin_max_triangles is None:
             a.twin_max_triangles = FULL_TWIN_MAX_TRIANGLES
+        a.datasets_meshes = a.datasets_meshes or list(DATASETS_MESHES)
+        a.views = a.views or DATASETS_VIEWS
+    a.datasets_size = a.datasets_size or DATASETS_SIZE
     if a.twin_max_triangles is not None and a.twin_max_triangles < 0:
         a.twin_max_triangles = None
     a.modes = a.modes or list(MODES)
+
+
+def _a_mesh(name: str) -> bool:
+    """Whether a scene name names a plain mesh (what the datasets sweep times)."""
+    try:
+        spec = SceneSpec.parse(name)
+    except ValueError:
+        return False
+    return spec.kind in ("mesh", "example") and spec.view == "framing"
 
 
 def _bad_settings(a: argparse.Namespace) -> str | None:
@@ -322,10 +355,13 @@ def _bad_settings(a: argparse.Namespace) -> str | None:
     bad += [m for m in a.modes if m not in MODES]
     bad += [s for s in a.scale_scenes
             if "scale" in a.sweeps and (not s.startswith("grid:") or "@" in s)]
-    if bad or a.repeat < 1 or a.scale_repeat < 1 or a.warmup < 0 or a.occlusion_warmup < 0:
-        return (f"bad sweep/mode/scale scene {bad} (scale scenes are grid:MESH:NXxNYxNZ, "
-                f"without @VIEW: both views run), or --repeat / --scale-repeat < 1, or a "
-                f"negative warm-up")
+    bad += [s for s in a.datasets_meshes if "datasets" in a.sweeps and not _a_mesh(s)]
+    if bad or a.repeat < 1 or a.scale_repeat < 1 or a.warmup < 0 or a.occlusion_warmup < 0 \
+            or a.views < 1:
+        return (f"bad sweep/mode/scale scene/datasets mesh {bad} (scale scenes are "
+                f"grid:MESH:NXxNYxNZ, without @VIEW: both views run; datasets meshes are "
+                f"meshes, not grids or plants), or --repeat / --scale-repeat / --views < 1, "
+                f"or a negative warm-up")
     return None
 
 
@@ -349,9 +385,14 @@ def _print_probe(task_json: str) -> int:
     return 0
 
 
-def _print_list(configs: list[Config]) -> None:
+def _print_list(configs: list[Config], a: argparse.Namespace) -> None:
     for c in configs:
         print(f"{c.id:<45} sweeps={','.join(c.sweeps)}")
+    if "datasets" in a.sweeps:
+        w, h = a.datasets_size
+        for m in a.datasets_meshes:
+            print(f"{f'datasets {m}/{w}x{h}/cull back,none + Open3D':<45} sweeps=datasets "
+                  f"({a.views} views x {a.repeat} rounds)")
 
 
 def _prepare_out(a: argparse.Namespace) -> Path:
@@ -401,12 +442,23 @@ def _weight(c: Config, a: argparse.Namespace) -> float:
         + c.width * c.height * 20 + 2e6
 
 
+def _datasets_weights(a: argparse.Namespace) -> list[float]:
+    """Rough cost of each mesh of the datasets sweep (three jobs, `repeat` rounds of
+    `views` frames at about 30 ms per million triangles), in `_weight`'s units (roughly
+    5e6 per second), for the ETA only."""
+    if "datasets" not in a.sweeps:
+        return []
+    n = [estimated_triangles(SceneSpec.parse(m), a.meshes) for m in a.datasets_meshes]
+    return [3 * (a.repeat + 1) * a.views * (5e-3 + 30e-3 * t / 1e6) * 5e6 for t in n]
+
+
 def _progress(runnable: list[Config], mem_jobs: list[Config],
               a: argparse.Namespace) -> Progress:
-    """The progress bar: the configurations, then the memory probes and the start-up probe
-    (weighed against an average configuration)."""
+    """The progress bar: the configurations, the datasets sweep's meshes, then the memory
+    probes and the start-up probe (weighed against an average configuration)."""
     weights = [_weight(c, a) for c in runnable]
     avg = sum(weights) / len(weights) if weights else 1.0
+    weights += _datasets_weights(a)
     steps = weights + [avg * 0.5] * len(mem_jobs) + ([] if a.no_startup else [avg])
     return Progress(steps)
 
@@ -468,6 +520,15 @@ def _measure_memory(mem_jobs: list[Config], records: list[dict], a: argparse.Nam
     return memory
 
 
+def _measure_datasets(a: argparse.Namespace, prog: Progress) -> dict:
+    """The datasets sweep (`clraster.bench.datasets.run_sweep`): one progress step per
+    mesh, each round's views/s shown on a terminal."""
+    prog.log("Open3D skipped: --no-peer" if a.no_peer else open3d_status()[1])
+    return run_sweep(a.datasets_meshes, a.meshes, views=a.views, size=a.datasets_size,
+                     repeat=a.repeat, use_open3d=not a.no_peer, log=prog.detail,
+                     start=prog.start, done=prog.finish_step)
+
+
 def _measure_startup(a: argparse.Namespace, prog: Progress) -> dict | None:
     if a.no_startup:
         return None
@@ -494,19 +555,25 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
 
     t_start = time.perf_counter()
     runnable, skipped = _drop_missing(configs, a.meshes)
-    if not runnable:
+    datasets_on = "datasets" in a.sweeps
+    if not runnable and not datasets_on:
         # a run that skips everything must not look like a successful one (exit 0)
         why = (f"the {len(configs)} configuration(s) need mesh files that are not there; "
                f"looked in {_where_looked(a)}. Give the folder with --meshes DIR or "
                f"${MESHES_ENV}" if configs else "no configuration (see --sweeps, --list)")
         print(f"clraster bench: error: nothing to measure: {why}", file=sys.stderr)
         return 1
-    peer = PeerRunner(not a.no_peer)
+    peer = PeerRunner(not a.no_peer and bool(runnable),
+                      "--no-peer" if a.no_peer else "no configuration for it in this run")
     print(f"llvmpipe: {peer.reason}", flush=True)
     mem_jobs = [] if a.no_memory else memory_jobs(runnable)
     prog = _progress(runnable, mem_jobs, a)
     records, errors = _measure_configs(runnable, a, argv, peer, prog, out, skipped)
     peer.close()
+    datasets = _measure_datasets(a, prog) if datasets_on else None
+    if datasets:
+        errors += datasets["failed"]
+        skipped += datasets["skipped"]
     memory = _measure_memory(mem_jobs, records, a, prog)
     startup = _measure_startup(a, prog)
     prog.close()
@@ -517,9 +584,9 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
     scale = scale_summary(planned, records, memory, errors, a.scale_repeat)
     res = report.results_record(
         argv=argv, a=a, machine=describe(peer_renderer=peer.reason if peer.ok else None),
-        peer=peer.status(), configs=records, targets=evaluate_targets(records, scale),
+        peer=peer.status(), configs=records, targets=evaluate_targets(records, scale, datasets),
         startup=startup, memory=memory, memory_method=MEMORY_METHOD, skipped=skipped,
-        errors=errors, scale=scale)
+        errors=errors, scale=scale, datasets=datasets)
     res["elapsed_s"] = time.perf_counter() - t_start
     plots = _plots(res, a, out)
     res["plots"] = plots
@@ -532,7 +599,7 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
         print(f"clraster bench: {len(errors)} configuration(s) failed:\n  "
               + "\n  ".join(errors), file=sys.stderr)
         return 1
-    if not records:
+    if not records and not (datasets and datasets["rows"]):
         print(f"clraster bench: error: nothing was measured: every configuration was "
               f"skipped (meshes looked for in {_where_looked(a)}; see 'skipped' above)",
               file=sys.stderr)
@@ -563,7 +630,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"clraster bench: error: {exc}", file=sys.stderr)
         return 2
     if a.list:
-        _print_list(configs)
+        _print_list(configs, a)
         return 0
     if a.device:
         why = _choose_device(a.device)
@@ -575,7 +642,9 @@ def main(argv: list[str] | None = None) -> int:
     except OutputError as exc:
         print(f"clraster bench: error: {exc}", file=sys.stderr)
         return 1
-    print(f"clraster bench: {len(configs)} configurations; results in {out}", flush=True)
+    ds = (f" and the datasets sweep ({len(a.datasets_meshes)} meshes)"
+          if "datasets" in a.sweeps else "")
+    print(f"clraster bench: {len(configs)} configurations{ds}; results in {out}", flush=True)
     return _run(a, argv, configs, out)
 
 

@@ -1,8 +1,9 @@
 """PNG plots of a harness run (results.json as a dict): matplotlib, imported lazily.
 
 `make_all(results, out)` writes time_vs_triangles.png, time_vs_pixels.png, stages.png,
-funnel.png and scale.png (frame time vs triangles sent to setup, with the scale sweep's
-fit; each only when the run has the data) and returns (file names, message); without
+funnel.png, scale.png (frame time vs triangles sent to setup, with the scale sweep's fit)
+and datasets.png (the datasets sweep's views/s, clraster beside Open3D; each only when the
+run has the data) and returns (file names, message); without
 matplotlib it writes nothing and says how to install it.
 """
 
@@ -34,7 +35,7 @@ def make_all(res: dict[str, Any], out: Path) -> tuple[list[str], str | None]:
                                                                _vs_pixels),
                      ("stages.png", _stages), ("funnel.png", _funnel),
                      ("fill_rate.png", _fill_rate),
-                     ("scale.png", _scale)):
+                     ("scale.png", _scale), ("datasets.png", _datasets)):
         fig = fn(res, plt)
         if fig is None:
             continue
@@ -266,5 +267,43 @@ def _scale(res, plt):
     ax.set_xlim(left=0)
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=9, loc="upper left")
+    fig.tight_layout()
+    return fig
+
+
+def _datasets(res, plt):
+    """The datasets sweep: views/s bars per mesh (clraster cull back, cull none, Open3D),
+    each clraster bar labelled with its ratio to Open3D."""
+    ds = res.get("datasets") or {}
+    rows = ds.get("rows") or []
+    if not rows:
+        return None
+    import numpy as np
+
+    series = [("clraster cull=back", "#1f77b4", lambda r: r["clraster"].get("back"), "back"),
+              ("clraster cull=none", "#17becf", lambda r: r["clraster"].get("none"), "none"),
+              ("Open3D RaycastingScene", "#2ca02c", lambda r: r["open3d"], None)]
+    x = np.arange(len(rows))
+    width = 0.27
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    for j, (label, color, get, cull) in enumerate(series):
+        vals = [(get(r) or {}).get("median_views_per_s") or 0.0 for r in rows]
+        if not any(vals):
+            continue
+        bars = ax.bar(x + (j - 1) * width, vals, width, color=color, label=label)
+        for b, r, v in zip(bars, rows, vals, strict=True):
+            ratio = r["ratio_vs_open3d"].get(cull) if cull else None
+            if v and ratio is not None:
+                ax.annotate(f"{ratio:.2f}×", (b.get_x() + b.get_width() / 2, v),
+                            ha="center", va="bottom", fontsize=7.5, xytext=(0, 2),
+                            textcoords="offset points")
+    ax.set_xticks(x, [f"{r['mesh']}\n{r['triangles']:,} tri" for r in rows])
+    ax.set_ylabel("views per second (median of rounds)")
+    st = ds["settings"]
+    ax.set_title(_title(res, f"Dataset job (depth + ids + normals) at {st['size'][0]}×"
+                             f"{st['size'][1]}, {st['views']} views: clraster vs Open3D"),
+                 fontsize=10)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8.5)
     fig.tight_layout()
     return fig

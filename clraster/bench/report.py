@@ -45,10 +45,12 @@ def results_record(*, argv: list[str], a: argparse.Namespace, machine: dict,
                    peer: dict, configs: list[dict], targets: list[dict],
                    startup: dict | None, memory: list[dict], memory_method: str,
                    skipped: list[str], errors: list[str],
-                   scale: dict | None = None) -> dict[str, Any]:
+                   scale: dict | None = None, datasets: dict | None = None) -> dict[str, Any]:
     """The results document of a run, less ``elapsed_s`` and ``plots`` (the caller adds them
     last, in that order, then passes it through :func:`jsonable`). `scale` is the scale
-    sweep's summary (`clraster.bench.scale.scale_summary`; None without that sweep)."""
+    sweep's summary (`clraster.bench.scale.scale_summary`; None without that sweep),
+    `datasets` the datasets sweep's (`clraster.bench.datasets.run_sweep`; None without
+    it)."""
     return {
         "schema": SCHEMA,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -59,12 +61,16 @@ def results_record(*, argv: list[str], a: argparse.Namespace, machine: dict,
                      "twin_max_triangles": a.twin_max_triangles, "cull": a.cull,
                      "sweeps": a.sweeps, "meshes": str(a.meshes), "no_twin": a.no_twin,
                      "scale_scenes": getattr(a, "scale_scenes", None),
-                     "scale_repeat": getattr(a, "scale_repeat", None)},
+                     "scale_repeat": getattr(a, "scale_repeat", None),
+                     "views": getattr(a, "views", None),
+                     "datasets_meshes": getattr(a, "datasets_meshes", None),
+                     "datasets_size": getattr(a, "datasets_size", None)},
         "machine": machine,
         "peer": peer,
         "configs": configs,
         "targets": targets,
         "scale": scale,
+        "datasets": datasets,
         "startup": startup,
         "memory": memory,
         "memory_method": memory_method,
@@ -119,7 +125,7 @@ def markdown(res: dict) -> str:
     """results.md of a results dict: one section after another, each a list of lines."""
     L: list[str] = []
     for section in (_md_header, _md_targets, _md_configs, _md_fill, _md_stages, _md_funnel,
-                    _md_scale, _md_startup, _md_memory, _md_lists):
+                    _md_scale, _md_datasets, _md_startup, _md_memory, _md_lists):
         L += section(res)
     return "\n".join(L) + "\n"
 
@@ -195,6 +201,8 @@ def _md_config_row(c: dict) -> str:
 
 
 def _md_configs(res: dict) -> list[str]:
+    if not res["configs"]:   # a run of the datasets sweep alone
+        return []
     L = ["", "## Configurations", "",
          "| sweep | scene | triangles | size | mode | OpenCL ms | twin ms (runs) | "
          "speedup | llvmpipe ms | clraster/llvmpipe | depth+ids ms | depth+ids/llvmpipe | "
@@ -251,6 +259,8 @@ def _md_stages(res: dict) -> list[str]:
     stages: list[str] = []
     for c in res["configs"]:
         stages += [k for k in c["opencl"]["stages_median_ms"] if k not in stages]
+    if not stages:
+        return []
     L = ["", "## Per-stage times (OpenCL, median ms)", "",
          "| configuration | " + " | ".join(stages) + " | frame |",
          "|---|" + "---:|" * (len(stages) + 1)]
@@ -311,6 +321,39 @@ def _md_scale(res: dict) -> list[str]:
     for key, what in (("failed", "failed"), ("not_measured", "not measured")):
         if sc.get(key):
             L += [f"- {what}: {x}" for x in sc[key]]
+    return L
+
+
+def _md_datasets(res: dict) -> list[str]:
+    """The datasets sweep: views/s of clraster (cull back, none) and Open3D per mesh."""
+    ds = res.get("datasets")
+    if not ds:
+        return []
+    st = ds["settings"]
+    L = ["", f"## Datasets sweep ({st['size'][0]}×{st['size'][1]}, {st['views']} views, "
+             f"median of {st['repeat']} rounds)", "", ds["method"], "",
+         f"Peer: {ds['open3d']['reason']}.", "",
+         "| mesh | triangles | clraster cull=back views/s | clraster cull=none views/s | "
+         "Open3D views/s | back / Open3D | none / Open3D | ids agree with Open3D (back, "
+         "none) | covered |", "|---|---:|---:|---:|---:|---:|---:|---|---:|"]
+    for r in ds["rows"]:
+        cl, o3d, ratio = r["clraster"], r["open3d"], r["ratio_vs_open3d"]
+
+        def rate(x: dict) -> str:
+            if "median_views_per_s" not in x:
+                return "skipped"
+            runs = ", ".join(f"{v:.1f}" for v in x["runs_views_per_s"])
+            return f"**{x['median_views_per_s']:.1f}** ({runs})"
+
+        agree = [cl[c]["ids_agree_open3d"] for c in ("back", "none") if c in cl]
+        L.append(f"| {r['mesh']} | {r['triangles']:,} | "
+                 + " | ".join(rate(cl[c]) if c in cl else "—" for c in ("back", "none"))
+                 + f" | {rate(o3d)} | {_x(ratio.get('back'), '.2f')} | "
+                 f"{_x(ratio.get('none'), '.2f')} | "
+                 + (", ".join(f"{a:.2%}" for a in agree) if None not in agree else "—")
+                 + f" | {next(iter(cl.values()))['covered_fraction']:.0%} |")
+    L += ["", "views/s: bold the median, then each round's; covered: the first view's "
+              "pixels with a triangle (clraster)."]
     return L
 
 
@@ -379,6 +422,13 @@ def summary_lines(res: dict) -> str:
         lines.append(f"{c['id']:<42} OpenCL {_f(c['opencl']['median_ms']):>8} ms  twin "
                      f"{_f(c['twin'].get('median_ms')):>9} ms  x{_f(c['speedup_vs_twin']):>6}"
                      f"  llvmpipe {_f(pe):>8} ms")
+    for r in (res.get("datasets") or {}).get("rows", []):
+        cl, o3d = r["clraster"], r["open3d"].get("median_views_per_s")
+        lines.append(f"datasets {r['mesh']:<12} " + "  ".join(
+            f"cull={c} {_f(v['median_views_per_s'])} views/s"
+            + (f" ({r['ratio_vs_open3d'][c]:.2f}x Open3D)" if c in r["ratio_vs_open3d"]
+               else "") for c, v in cl.items())
+            + f"  Open3D {_f(o3d)} views/s")
     sc = res.get("scale")
     if sc and sc.get("fit"):
         fit = sc["fit"]

@@ -5,7 +5,8 @@ Nothing here renders or times anything. A scene is named on the command line
 (:class:`Config`) is scene × image size × culling mode (:data:`MODES`); :func:`build_matrix`
 turns the requested sweeps into the list of configurations; :func:`evaluate_targets` says,
 from the JSON records of a run, whether the issue's targets were met. The scale sweep's
-scenes, views, fit and goals are `clraster.bench.scale`.
+scenes, views, fit and goals are `clraster.bench.scale`; the datasets sweep (views/s of many
+views against Open3D, not a scene × size × mode configuration) is `clraster.bench.datasets`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from clraster.bench.datasets import datasets_targets
 from clraster.bench.scale import SCALE_VIEWS, scale_targets
 
 #: Short names of the meshes in ../shared/meshes (see meshes.json there).
@@ -46,9 +48,11 @@ MODES: dict[str, dict[str, Any]] = {
 TWIN_MODE = {"off": "off", "frustum": "frustum", "occlusion": "occlusion"}
 
 #: The sweeps `--sweeps` may name (see :func:`build_matrix`); ``all`` names every one.
-SWEEPS = ("triangles", "pixels", "culling", "fill", "scale")
+SWEEPS = ("triangles", "pixels", "culling", "fill", "scale", "datasets")
 #: The sweeps of a run without `--sweeps`: the scale sweep (10M-200M triangles, ~4.5 min on
-#: its own with its memory probes on 2 cores, see bench/README.md) runs only when named.
+#: its own with its memory probes on 2 cores, see bench/README.md) runs only when named, and
+#: so does the datasets sweep (a few minutes of 200-view rounds; its peer, Open3D, is
+#: usually installed in another environment than llvmpipe's, see bench/README.md).
 DEFAULT_SWEEPS = ("triangles", "pixels", "culling", "fill")
 
 #: Scenes of the fill sweep: frames a few large triangles fill (per-pixel work: raster,
@@ -328,6 +332,8 @@ def build_matrix(a: argparse.Namespace) -> list[Config]:
         for s in getattr(a, "scale_scenes", None) or []:
             for view in SCALE_VIEWS:
                 add(f"{s}@{view}", a.size, "frustum", "scale")
+    # the datasets sweep is not a configuration of this matrix: it times views/s of many
+    # views per mesh (`clraster.bench.datasets.run_sweep`, called by the command line)
     order: dict[tuple, int] = {}
     for c in out.values():
         order.setdefault(c.scene.geometry, len(order))
@@ -345,9 +351,11 @@ def _find(configs: list[dict], pred) -> dict | None:
     return max(found, key=lambda c: c["triangles"]) if found else None
 
 
-def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dict]:
+def evaluate_targets(configs: list[dict], scale: dict | None = None,
+                     datasets: dict | None = None) -> list[dict]:
     """The issue's targets, each met / missed / not measured (met None) with the figures;
-    the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`)."""
+    the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`), the
+    datasets sweep's from its summary `datasets` (`clraster.bench.datasets`)."""
     out = []
 
     def target(name, desc, cfg, value, threshold, ok_if, why_none, unit="×"):
@@ -429,4 +437,4 @@ def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dic
            "plant ≥ 10M triangles: clraster without object culling / with occlusion culling",
            plant, own, 6.0, ">=", "no plant ≥ 10M triangles in both occlusion and off modes "
            "in this run")
-    return out + scale_targets(scale)
+    return out + scale_targets(scale) + datasets_targets(datasets)
