@@ -4,7 +4,10 @@ pays it (checks, tables, launch and read-back), and the kernel's own time from p
 events.
 
     python bench/shade_device.py                    # median of 9 after 3 warm-ups, ms
-    python bench/shade_device.py --rounds 15 --plant 0 --modes flat,smooth,colors
+    python bench/shade_device.py --rounds 15 --plant 0 --modes flat,smooth,tints,colors
+
+Modes: flat, smooth, tints (a per-instance colour) run in the kernel's 8-pixel lanes;
+colors (vertex colours) and texture in its per-pixel path.
 
 The machine is shared: compare rows of one run, or interleave runs of two checkouts.
 """
@@ -41,6 +44,7 @@ def modes(target, mesh) -> dict[str, dict]:
     img = rng.integers(0, 256, (256, 256, 3), np.uint8)
     uv = rng.random((n, 2))
     return {"flat": {}, "smooth": {"smooth": True},
+            "tints": {"per_instance_colors": rng.random((1, 3))},
             "colors": {"colors": rng.random((n, 3))},
             "texture": {"texture": (uv, img)}}
 

@@ -252,3 +252,99 @@ def test_bad_ids_are_refused_as_on_the_host(scene):
         shade(frame, small, per_instance_colors=lambda i, inst: (1, 0, 0))
     with pytest.raises(ValueError, match="ids outside"):
         shade(frame, small, smooth=True)
+
+
+# -- the 8-pixel lanes of shade_pixels (flat and smooth without colour sources) -------------
+
+@pytest.fixture(scope="module")
+def crowd() -> Scene:
+    """48 small instances (spheres and boxes; mirrored, scaled, rotated, sheared) packed
+    side by side, so that many groups of 8 consecutive pixels span two or more instances
+    and the lanes gather a different instance matrix and tint per lane."""
+    sphere = Mesh.from_trimesh(trimesh.creation.icosphere(subdivisions=1, radius=0.3))
+    box = Mesh.from_trimesh(trimesh.creation.box(extents=(0.5, 0.4, 0.3)))
+    rng = np.random.default_rng(11)
+    items = []
+    for j in range(48):
+        t = np.eye(4)
+        a = rng.uniform(0.0, 2.0 * np.pi)
+        t[:3, :3] = trimesh.transformations.rotation_matrix(a, rng.normal(size=3))[:3, :3]
+        t[:3, :3] = t[:3, :3] @ np.diag(rng.uniform(0.6, 1.3, 3))
+        if j % 5 == 0:
+            t[:3, :3] = t[:3, :3] @ np.diag([-1.0, 1.0, 1.0])   # mirrored
+        t[:3, 3] = (-2.1 + 0.6 * (j % 8), -1.3 + 0.55 * (j // 8), -0.5)
+        items.append((sphere if j % 2 else box, t))
+    return Scene(items)
+
+
+CROWD_MODES = [{}, {"smooth": True}, {"two_sided": False, "light_dir": (0.2, -0.5, 0.8)},
+               {"smooth": True, "alpha": True, "background": (3, 250, 7)},
+               {"per_instance_colors": "random"},
+               {"per_instance_colors": "random", "smooth": True, "two_sided": False}]
+
+
+@pytest.mark.parametrize("kw", CROWD_MODES, ids=lambda kw: ",".join(kw) or "flat")
+def test_lanes_across_instances_equal_the_host_path(crowd, kw, monkeypatch):
+    if kw.get("per_instance_colors") == "random":
+        tints = np.random.default_rng(5).integers(0, 256, (len(crowd.instances), 3), np.uint8)
+        kw = {**kw, "per_instance_colors": tints}
+    frame = get_renderer(W, H).render(crowd, Camera.look_at(
+        (0.0, 0.0, 4.2), (0.0, 0.0, -0.5), fov_y=60.0, near=0.5, far=20.0))
+    ids = frame.triangle_id
+    inst, _ = crowd.split_ids(ids[ids >= 0])
+    # the case under test happens: groups of 8 (row-major, as the kernel takes them)
+    # holding pixels of two instances
+    flat_inst = np.full(ids.size, -1)
+    flat_inst[(ids >= 0).reshape(-1)] = inst
+    groups = flat_inst[: ids.size // 8 * 8].reshape(-1, 8)
+    mixed = [len(set(g[g >= 0].tolist())) > 1 for g in groups]
+    assert sum(mixed) >= 20 and len(np.unique(inst)) >= 30
+    want = shade(host_twin(frame), crowd, **kw)
+    _no_host(monkeypatch)
+    got = shade(frame, crowd, **kw)
+    assert got.shape == want.shape
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1
+
+
+@pytest.mark.parametrize("smooth", [False, True])
+def test_lanes_on_a_plane_match_the_lambert_formula(smooth, monkeypatch):
+    """A quad filling the frame, tilted: every pixel's colour is the analytic
+    round(255 · albedo · (ambient + (1 − ambient) · |n · l|)) of its one normal (a planar
+    quad's vertex normals are its face normal), computed here in float64."""
+    quad = Mesh(np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64),
+                np.array([[0, 1, 2], [0, 2, 3]]))
+    tilt = np.eye(4)
+    tilt[:3, :3] = trimesh.transformations.rotation_matrix(0.5, (1.0, 0.3, 0.0))[:3, :3]
+    tilt[:3, :3] *= 4.0
+    sc = Scene([(quad, tilt)])
+    frame = get_renderer(W, H).render(sc, Camera.look_at((0.0, 0.0, 3.0), (0.0, 0.0, 0.0),
+                                                         fov_y=50.0, near=0.5, far=20.0))
+    assert (frame.triangle_id >= 0).all()
+    light = np.array([0.3, -0.4, 0.85])
+    tint = np.array([[0.9, 0.5, 0.25]])
+    _no_host(monkeypatch)
+    got = shade(frame, sc, smooth=smooth, light_dir=light, per_instance_colors=tint)
+    n = tilt[:3, :3] @ np.array([0.0, 0.0, 1.0])   # a rotation times 4: M⁻ᵀ n ∥ M n
+    n /= np.linalg.norm(n)
+    lam = abs(n @ (light / np.linalg.norm(light)))
+    want = np.rint(255.0 * tint[0] * (0.22 + 0.78 * lam))
+    assert np.abs(got.reshape(-1, 3).astype(float) - want).max() <= 1.0
+
+
+@pytest.mark.parametrize("lane", range(8))
+def test_a_bad_id_in_any_lane_is_refused(scene, lane):
+    """An id out of range at any position of a group of 8 covered pixels raises (the
+    lanes hand such a group to the per-pixel path, which flags it)."""
+    frame = get_renderer(W, H).render(scene, camera())
+    ids = frame.triangle_id.reshape(-1)
+    groups = np.flatnonzero((ids[: ids.size // 8 * 8].reshape(-1, 8) >= 0).all(axis=1))
+    assert groups.size
+    g = groups[groups.size // 2]
+    for bad in (-2, scene.n_faces):
+        keep = int(ids[8 * g + lane])
+        ids[8 * g + lane] = bad
+        for smooth in (False, True):
+            with pytest.raises(ValueError, match="ids outside"):
+                shade(frame, scene, smooth=smooth)
+        ids[8 * g + lane] = keep
+    shade(frame, scene)   # restored: no error

@@ -96,7 +96,8 @@ class ResolveTables:
     normal_mats: float64 (I, 9) row-major M⁻ᵀ of each instance's 3×3 part (zero for a
         singular one: its normals are zero).
     vnormals: float32 (V, 3) area-weighted unit vertex normals in pool order (made on the
-        first smooth request: `smooth_normals`).
+        first smooth request: `smooth_normals`; per face, quantized, for smooth shading:
+        `face_vertex_normals`).
     """
 
     inst_base: np.ndarray
@@ -160,6 +161,20 @@ class ResolveTables:
                 np.cumsum(sizes[:-1], out=got[1:])
             object.__setattr__(self, "_vbase", got)
         return got
+
+    def face_vertex_normals(self, pool: GeometryPool) -> np.ndarray:
+        """int16 (F, 16): per row of ``face_verts``, its three vertices' normals
+        (`smooth_normals`) as snorm16, ``round(32767 · n)``, x y z of each vertex in the
+        face's order, then 7 zeros: one 32-byte row (a cache line) per face for the
+        shading kernel's smooth lanes (kernels/resolve.cl FACE_VN_ROW). 32 bytes a face:
+        the dragon's 871K faces take 28 MB, so it is made anew for each upload, not kept
+        here (the shading stage keeps its device copy)."""
+        vn = self.smooth_normals(pool)
+        out = np.zeros((self.face_verts.shape[0], 16), np.int16)
+        if out.shape[0]:
+            q = np.rint(vn[self.face_verts].reshape(-1, 9) * np.float32(32767.0))
+            out[:, :9] = np.clip(q, -32767, 32767)
+        return out
 
     def smooth_normals(self, pool: GeometryPool) -> np.ndarray:
         """float32 (V, 3) vertex normals parallel to ``pool.positions`` (cached)."""

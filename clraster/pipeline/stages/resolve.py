@@ -69,7 +69,8 @@ class ShadeBuffers:
     table, face normals and vertex normals are `ResolveBuffers`'. Per scene: inst_base
     int32 (I,), bucket int32 (B,), inst_row int32 (I,), inst_nrm float32 (I, 12); per colour
     sources: inst_src int32 (I, 8), colours float32 (N, 4), uvs float32 (M, 2), texels
-    float32 (T, 4); per call (host buffers): inst_col float32 (I, 4), bad int32 (1,).
+    float32 (T, 4); per call (host buffers): inst_col float32 (I, 4), bad int32 (1,). On
+    the first smooth call: face_vn int16 (F, 16) (`ResolveTables.face_vertex_normals`).
     """
 
     inst_base: GrowBuffer
@@ -80,6 +81,7 @@ class ShadeBuffers:
     colours: GrowBuffer
     uvs: GrowBuffer
     texels: GrowBuffer
+    face_vn: GrowBuffer
     inst_col: GrowBuffer
     bad: GrowBuffer
 
@@ -98,13 +100,14 @@ class ResolveStage:
         self.buffers = ResolveBuffers(*(GrowBuffer(ctx) for _ in range(7)),
                                       *(GrowBuffer(ctx, host=True) for _ in range(2)))
         self.shade_buffers = ShadeBuffers(
-            *(GrowBuffer(ctx) for _ in range(8)),
+            *(GrowBuffer(ctx) for _ in range(9)),
             *(GrowBuffer(ctx, host=True) for _ in range(2)))
         self._tables: ResolveTables | None = None
         self._shade_tables: ResolveTables | None = None
         self._sources_key: object = None
         self._sources: ShadeSources | None = None
         self._smooth = False
+        self._face_vn = False   # face_vn holds the shading tables' (a smooth call was made)
 
     def _upload_tables(self, queue: cl.CommandQueue, pool: GeometryPool,
                        tables: ResolveTables, smooth: bool) -> bool:
@@ -203,7 +206,11 @@ class ResolveStage:
                             (sb.inst_nrm, tables.shade_normal_mats())):
                 put(gb, arr, "shading table")
             self._shade_tables, self._sources_key = tables, None
+            self._face_vn = False
             copied = True
+        if smooth and not self._face_vn:
+            put(sb.face_vn, tables.face_vertex_normals(pool), "face vertex normal table")
+            self._face_vn = copied = True
         if sources is not None and sources_key != self._sources_key:
             for gb, arr in ((sb.inst_src, sources.inst_src), (sb.colours, sources.colours),
                             (sb.uvs, sources.uvs), (sb.texels, sources.texels)):
@@ -217,7 +224,8 @@ class ResolveStage:
         _, shift = tables.buckets()
         return (sb.bucket.ensure(1), np.int32(shift), sb.inst_base.ensure(1),
                 np.int32(tables.inst_base.size), sb.inst_row.ensure(1), b.face_verts.ensure(1),
-                b.face_nrm.ensure(1), b.vnormals.ensure(1), sb.inst_nrm.ensure(1))
+                b.face_nrm.ensure(1), b.vnormals.ensure(1), sb.face_vn.ensure(1),
+                sb.inst_nrm.ensure(1))
 
     def _frame_buffer(self, arr: np.ndarray, dtype: type) -> tuple[cl.Buffer, np.ndarray]:
         """A read-only device buffer over a frame array (in place on a CPU device)."""
