@@ -65,6 +65,7 @@
  * in vertex.cl and raster.cl; CLRASTER_FALLBACKS=all). */
 #ifdef CLRASTER_PORTABLE
 #define CLRASTER_NO_RINTF
+#define CLRASTER_NO_SQRTF
 #define CLRASTER_NO_CTZ
 #define CLRASTER_NO_NONTEMPORAL_STORE
 #define CLRASTER_NO_PREFETCH
@@ -81,6 +82,15 @@
 #define RINTF(x) rint(x)
 #else
 #define RINTF(x) __builtin_rintf(x)
+#endif
+
+/* Correctly rounded float square root, a scalar: clang's builtin is one sqrtss, and eight
+ * in a row one vsqrtps (PoCL's sqrt() is a call, not inlined). Fallback: OpenCL's sqrt, the
+ * same bits where the runtime rounds it correctly, as OpenCL 1.2 requires of sqrt. */
+#ifdef CLRASTER_NO_SQRTF
+#define SQRTF(x) sqrt(x)
+#else
+#define SQRTF(x) __builtin_sqrtf(x)
 #endif
 
 /* Index of the lowest set bit of x != 0 (uint). PoCL's clz() is a call into its library,

@@ -9,25 +9,14 @@
  * ymm in `perf annotate`, even without branches), and their scalar code spent much of its
  * time in calls to library routines (sqrt, fabs, fmax, min, floor, vload8, any). So the
  * code below avoids OpenCL builtins that PoCL does not inline: abs by a mask, max / min /
- * clamp by comparisons, floor by truncation, any by an OR of the lanes, sqrt through SQRTF,
- * unaligned vectors through LOAD8U / STORE8U. bench/README.md's log has the measurements. */
+ * clamp by comparisons, floor by truncation, any by an OR of the lanes, sqrt through SQRTF
+ * (common.h), unaligned vectors through LOAD8U / STORE8U. bench/README.md's log has the measurements. */
 #include "common.h"
 
 #define LANES 8
 /* FXAA pixels per work-item (a multiple of LANES) */
 #ifndef FXAA_SPAN
 #define FXAA_SPAN 16
-#endif
-
-/* Correctly rounded float sqrt, a scalar: clang's builtin is one sqrtss (PoCL's sqrt() is
- * a call, not inlined); eight of them in a row become one vsqrtps. Fallback: OpenCL's sqrt,
- * the same bits where the runtime rounds it correctly (PoCL, Intel). The host's probe
- * (clraster.pipeline.features) does not test this builtin yet: -DCLRASTER_PORTABLE (or a
- * CLRASTER_NO_SQRTF a probe may define) takes the fallback. */
-#if defined(CLRASTER_PORTABLE) || defined(CLRASTER_NO_SQRTF)
-#define SQRTF(x) sqrt(x)
-#else
-#define SQRTF(x) __builtin_sqrtf(x)
 #endif
 
 static inline float8 sqrt8(float8 v)

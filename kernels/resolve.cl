@@ -362,15 +362,6 @@ inline void prefetch_verts(__global const int *ids, int a, int b, int lo, int hi
  * as shade_one up to float rounding (lam = (n · l) / |n| instead of n scaled to unit length
  * first; |s| ≥ 1e-6 tested as s · s ≥ 1e-12), so within the twin's 1/255. */
 
-/* Correctly rounded float sqrt, a scalar: clang's builtin is one sqrtss (PoCL's sqrt() is
- * a call, not inlined), eight in a row one vsqrtps; as post.cl's SQRTF. Fallback: OpenCL's
- * sqrt (CLRASTER_PORTABLE, or a CLRASTER_NO_SQRTF a probe may define). */
-#if defined(CLRASTER_PORTABLE) || defined(CLRASTER_NO_SQRTF)
-#define SQRTF(x) sqrt(x)
-#else
-#define SQRTF(x) __builtin_sqrtf(x)
-#endif
-
 /* 8 ints / floats at any int's alignment: Clang's ext_vector_type typedef of element
  * alignment (one vmovups), or OpenCL's vload8 (a call in PoCL) where the compiler lacks it
  * (common.h's probe: the same values). */

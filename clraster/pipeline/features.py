@@ -72,6 +72,10 @@ def _ctz() -> tuple[np.ndarray, np.ndarray]:
                                               for v in u], np.int32)
 
 
+def _sqrt() -> tuple[np.ndarray, np.ndarray]:
+    return np.sqrt(np.abs(_F_IN[:8])), np.zeros(0, np.int32)
+
+
 def _copy_twice() -> tuple[np.ndarray, np.ndarray]:
     return _F_IN[:8] * np.float32(2), np.zeros(0, np.int32)
 
@@ -96,6 +100,8 @@ def _unaligned() -> tuple[np.ndarray, np.ndarray]:
 #: macro (CLRASTER_NO_<NAME>) selects its fallback in kernels/common.h or at its use.
 FEATURES: dict[str, Feature] = {f.name: f for f in (
     Feature("rintf", "for (int k = 0; k < 8; ++k) fo[k] = __builtin_rintf(fi[k]);", _rint),
+    Feature("sqrtf", "for (int k = 0; k < 8; ++k) fo[k] = __builtin_sqrtf(fabs(fi[k]));",
+            _sqrt),
     Feature("ctz", "for (int k = 0; k < 8; ++k) io[k] = (int)__builtin_ctz((uint)ii[k]);",
             _ctz),
     Feature("nontemporal_store", "for (int k = 0; k < 8; ++k) "
