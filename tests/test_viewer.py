@@ -7,6 +7,7 @@ distance, hand-computed pyramid texels, the ids bijection), its frames against
 from __future__ import annotations
 
 import asyncio
+import gc
 import io
 import json
 import math
@@ -27,7 +28,7 @@ pytest.importorskip("aiohttp", reason="the viewer needs aiohttp: pip install 'cl
 from clraster.culling.fates import Fate  # noqa: E402
 from clraster.pipeline.renderer import Renderer  # noqa: E402
 from clraster.viewer import pictures  # noqa: E402
-from clraster.viewer.engine import Engine, ViewState  # noqa: E402
+from clraster.viewer.engine import SCALES, Engine, ViewState  # noqa: E402
 from clraster.viewer.protocol import BadMessage, apply, parse, unpack_frame  # noqa: E402
 from clraster.viewer.scene import FlyCamera, TargetError, load_target  # noqa: E402
 from clraster.viewer.server import BUSY_CODE, ViewerServer  # noqa: E402
@@ -203,6 +204,7 @@ def test_occlusion_toggle_changes_the_funnel(plant, engine):
 
 
 def test_third_person_pane_colours_clusters_by_fate(plant, engine):
+    engine.frame(ViewState(plant.start, mode="fates"))   # a history: occlusion-culled ones
     pic = engine.frame(ViewState(plant.start, mode="fates", lossless=True))
     img = _png(pic.main)
     present = {f for f, c in pictures.FATE_COLORS.items()
@@ -210,6 +212,46 @@ def test_third_person_pane_colours_clusters_by_fate(plant, engine):
     assert {Fate.DRAWN, Fate.FRUSTUM_CULLED, Fate.OCCLUSION_CULLED} <= present
     assert np.any(np.all(img == (255, 240, 60), axis=-1))   # the frustum lines
     assert pic.inset   # the first-person picture moves to the pane
+
+
+def test_pane_is_the_fates_over_the_outside_view_and_the_frustum_lines(plant):
+    # oracle: the outside view rendered again, each pixel's fate through ClusterFates, and
+    # the frustum's lines rendered twice (every fragment / depth-tested) as documented
+    from clraster.pipeline.lines import LineRenderer, frustum_segments
+    from clraster.viewer.inspect import (
+        FRUSTUM_COLOR,
+        FRUSTUM_HIDDEN_COLOR,
+        SHADE_BASE,
+        ThirdPerson,
+    )
+
+    pw, ph = 120, 72
+    pane = ThirdPerson(plant, Renderer(pw, ph), LineRenderer(pw, ph))
+    cam = plant.start.moved(np.add(plant.start.eye, (2.0, 0.0, 0.5)), 20.0, -4.0)
+    fp = Renderer(W, H)
+    fp.render(plant.scene, cam.camera(), occlusion=True)   # a history: occlusion-culled ones
+    fates = fp.render(plant.scene, cam.camera(), occlusion=True, fates=True).fates
+    fp_vp = cam.camera().view_projection(W, H)
+    img = pictures.rgb(pane.picture(fates, fp_vp, cam.eye[1], None)[0]).astype(int)
+    base = pane._base(cam.eye[1], None)
+    segs = frustum_segments(fp_vp)
+    oracle = LineRenderer(pw, ph)
+    hidden = oracle.render(segs, base.view_proj).mask
+    shown = oracle.render(segs, base.view_proj, depth=base.depth, depth_bias=1e-4).mask
+    assert shown.any() and (hidden & ~shown).any()
+    assert np.all(img[shown] == FRUSTUM_COLOR)
+    assert np.all(img[hidden & ~shown] == FRUSTUM_HIDDEN_COLOR)
+    ids = Renderer(pw, ph).render(plant.scene, base.camera,
+                                  clip_planes=pane.planes(cam.eye[1], None)[0]).triangle_id
+    assert np.all(img[(ids < 0) & ~hidden] == pictures.BACKGROUND)
+    surf = (ids >= 0) & ~hidden
+    fate = fates.id_fate(ids[surf])
+    colour = np.array([pictures.FATE_COLORS[f] for f in Fate], float)[fate]
+    got = img[surf]
+    light = got.sum(1) / colour.sum(1)   # each pixel: its fate's colour, Lambert-shaded
+    assert np.all((light > SHADE_BASE - 0.02) & (light < 1.02))
+    assert np.abs(got - colour * light[:, None]).max() <= 3
+    assert len(set(fate.tolist())) >= 3
 
 
 def test_moving_frames_drop_resolution_not_freshness(plant):
@@ -222,6 +264,52 @@ def test_moving_frames_drop_resolution_not_freshness(plant):
     assert e.needs_refine(ViewState(cam2, seq=2))
     c = e.frame(ViewState(cam2, seq=2))
     assert c.header["scale"] == 1.0 and not e.needs_refine(ViewState(cam2, seq=2))
+
+
+def test_every_scale_is_a_fresh_renderers_frame(plant):
+    # the renderers of the reduced scales share the full-size one's device state and
+    # occlusion history: each frame must still be what a renderer of its own would draw
+    e = Engine(plant, W, H)
+    cam = plant.start
+    for k, s in enumerate([*SCALES, *SCALES[::-1]]):
+        cam = cam.moved(np.add(cam.eye, (0.3, 0.0, 0.1)), cam.yaw + 3.0, cam.pitch)
+        pic = e.frame(ViewState(cam, mode="ids", lossless=True, seq=k), s)
+        assert pic.header["scale"] == s
+        ref = _reported_render(plant, pic.header)
+        assert np.array_equal(pictures.ids_from_rgb(_png(pic.main)), ref.triangle_id), s
+
+
+def _rss_mib() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _live(cls) -> int:
+    gc.collect()
+    return sum(1 for o in gc.get_objects() if type(o) is cls)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/statm")
+def test_memory_stays_flat_across_scales_modes_and_the_pane():
+    # a renderer per scale (and per pane) held its own copy of the scene's geometry pool
+    # and stage buffers: ~100 MiB each for this plant, ~450 MiB for the 10M one
+    from clraster.pipeline.drawlist import GeometryPool
+    from clraster.pipeline.stages.chain import StageChain
+
+    vs = load_target("plant:2M", W, H)
+    pools, chains = _live(GeometryPool), _live(StageChain)
+    e = Engine(vs, W, H)
+    cam = vs.start
+    e.frame(ViewState(cam, inset=True), 1.0)   # warm-up: the scene uploaded, buffers grown
+    rss0 = _rss_mib()
+    for k in range(3 * len(SCALES)):
+        cam = cam.moved(np.add(cam.eye, (0.2, 0.0, 0.0)), cam.yaw + 2.0, cam.pitch)
+        mode = "fates" if k % 3 == 2 else "shaded"   # fates: a pane at the view's size
+        e.frame(ViewState(cam, mode=mode, seq=k), SCALES[k % len(SCALES)])
+    grown = _rss_mib() - rss0
+    assert _live(GeometryPool) - pools == 1   # one host copy of the scene's geometry
+    assert _live(StageChain) - chains == 1    # one set of device stage buffers
+    assert grown < 40, f"RSS grew {grown:.0f} MiB over frames at every scale"
 
 
 # -- the server --------------------------------------------------------------------------
@@ -273,6 +361,47 @@ def test_token_second_page_bad_messages_and_vanishing_pages():
             header, main, _ = unpack_frame((await ws.receive()).data)
             assert header["n"] == 1 and main[:2] == b"\xff\xd8"   # a JPEG
             await ws.close()
+
+    asyncio.run(check_with_timeout(check))
+
+
+def test_stream_follows_the_camera_in_order_then_refines_at_full_scale():
+    import aiohttp
+
+    async def check(server, base, token):
+        server.engine.budget_ms = 1e-3   # every moving frame reduced
+        async with aiohttp.ClientSession() as http:
+            ws = await http.ws_connect(f"{base}/ws?token={token}")
+            assert json.loads((await ws.receive()).data)["t"] == "hello"
+            headers = [unpack_frame((await ws.receive()).data)[0]]
+            eye = np.array(server.scene.start.eye)
+            for k in range(1, 7):   # a walk: each camera a new frame
+                eye = eye + (0.3, 0.0, 0.0)
+                await ws.send_str(json.dumps({"t": "cam", "seq": k, "eye": eye.tolist(),
+                                              "yaw": 10.0 * k, "pitch": 0}))
+                # two cameras before the first ack: the next frame renders while one is
+                # being encoded or sent
+                if k % 2 == 0:
+                    for _ in range(2):
+                        h = unpack_frame((await ws.receive()).data)[0]
+                        headers.append(h)
+                        await ws.send_str(json.dumps({"t": "ack", "n": h["n"]}))
+            while headers[-1]["seq"] != 6 or headers[-1]["scale"] != 1.0:   # at rest
+                h = unpack_frame((await ws.receive()).data)[0]
+                headers.append(h)
+                await ws.send_str(json.dumps({"t": "ack", "n": h["n"]}))
+            await ws.close()
+        ns = [h["n"] for h in headers]
+        seqs = [h["seq"] for h in headers]
+        assert ns == list(range(1, len(ns) + 1))          # sent in render order
+        assert seqs == sorted(seqs) and seqs[-1] == 6      # never an older camera
+        # a new camera's first frame is reduced (moving); a camera at rest gets one more,
+        # at full scale (the last one here)
+        pairs = list(zip(headers[:-1], headers[1:], strict=True))
+        new = [h for prev, h in pairs if h["seq"] != prev["seq"]]
+        assert len(new) >= 3 and all(h["scale"] < 1.0 for h in new)
+        assert all(h["scale"] == 1.0 for prev, h in pairs if h["seq"] == prev["seq"])
+        assert headers[-1]["camera"]["eye"] == eye.tolist()
 
     asyncio.run(check_with_timeout(check))
 

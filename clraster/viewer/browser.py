@@ -64,15 +64,21 @@ class Page:
 
     async def wait_for(self, expression: str, timeout: float = 30.0,
                        interval: float = 0.05) -> Any:
-        """Poll `expression` until it is truthy; return it (TimeoutError after `timeout`)."""
+        """Poll `expression` until it is truthy; return it (TimeoutError after `timeout`).
+        A JavaScript exception counts as "not yet": right after `Chromium.open` the page may
+        still be loading, before its script has defined what `expression` reads."""
         loop = asyncio.get_running_loop()
         end = loop.time() + timeout
+        error = ""
         while True:
-            value = await self.evaluate(expression)
+            try:
+                value = await self.evaluate(expression)
+            except RuntimeError as exc:   # (named in the TimeoutError if it never passes)
+                value, error = None, f" (last: {exc})"
             if value:
                 return value
             if loop.time() > end:
-                raise TimeoutError(f"waited {timeout} s for {expression}")
+                raise TimeoutError(f"waited {timeout} s for {expression}{error}")
             await asyncio.sleep(interval)
 
     async def key(self, code: str, down: bool) -> None:

@@ -37,10 +37,12 @@ from .pictures import (
 )
 from .scene import FlyCamera, ViewerScene
 
-__all__ = ["INSET", "SCALES", "Engine", "Picture", "ViewState"]
+__all__ = ["INSET", "SCALES", "Engine", "Picture", "Rendered", "ViewState"]
 
-#: Render scales tried while the camera moves, largest first (1.0 = the full size).
-SCALES = (1.0, 0.75, 0.5, 0.375)
+#: Render scales tried while the camera moves, largest first (1.0 = the full size). At the
+#: smallest ones a frame is mostly per-triangle and host work, not pixels; the last one
+#: is the fallback when none fits the budget.
+SCALES = (1.0, 0.75, 0.5, 0.375, 0.25)
 #: The third-person pane's size as a fraction of the view's width and height.
 INSET = 0.3
 #: Weight of the newest frame in the per-scale moving average of frame times.
@@ -79,6 +81,20 @@ class Picture:
 
 
 @dataclass
+class Rendered:
+    """A rendered, not yet coloured frame (`Engine.render` → `Engine.finish`): the state,
+    the scale, the `clraster.Camera` rendered, the `clraster.Frame` (depth, ids; fates
+    when the pane or mode needs them; overdraw in mode "overdraw") and the render's
+    milliseconds (scale choice included)."""
+
+    state: ViewState
+    scale: float
+    camera: Any
+    frame: Any
+    render_ms: float
+
+
+@dataclass
 class _Timing:
     ms: dict[float, float] = field(default_factory=dict)
 
@@ -89,7 +105,9 @@ class _Timing:
 
 class Engine:
     """Renders `ViewState`s of one `ViewerScene` at ``width × height`` (full scale).
-    Thread-safe (one frame at a time, a lock); the renderers share one OpenCL context."""
+    Thread-safe: one `render` at a time and one `finish` at a time, each under its own
+    lock, so a frame's finish may overlap the next frame's render; the renderers share one
+    OpenCL context and one set of device buffers (`renderer`)."""
 
     def __init__(self, vs: ViewerScene, width: int, height: int, *, quality: int = 80,
                  budget_ms: float = 40.0, device: Any = None) -> None:
@@ -104,7 +122,9 @@ class Engine:
         self._renderers: dict[tuple[int, int], Any] = {}
         self._lines: dict[tuple[int, int], Any] = {}
         self._panes: dict[tuple[int, int], ThirdPerson] = {}
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()          # one render at a time
+        self._finish_lock = threading.Lock()   # one finish at a time (beside a render)
+        self._make_lock = threading.Lock()     # renderers and panes made by either
         self._timing = _Timing()
         self._last: tuple[float, ...] | None = None   # the camera of the previous frame
         self.last_scale = 1.0
@@ -112,24 +132,37 @@ class Engine:
     # -- renderers ------------------------------------------------------------------------
 
     def renderer(self, w: int, h: int) -> Any:
-        """The `clraster.Renderer` of size w × h (made on first use, kept)."""
-        from ..pipeline.renderer import Renderer
-
-        if (w, h) not in self._renderers:
-            self._renderers[(w, h)] = Renderer(w, h, context=self.context)
-        return self._renderers[(w, h)]
+        """The first-person `clraster.Renderer` of size w × h (made on first use, kept).
+        Every size shares the full-size renderer's device state and occlusion history
+        (`_shared_renderer`): one copy of the scene and one set of stage buffers, whatever
+        the scales walked."""
+        with self._make_lock:
+            full = (self.width, self.height)
+            if full not in self._renderers:
+                self._renderers[full] = _shared_renderer(self.context, *full, None, None)
+            r = self._renderers.get((w, h))
+            if r is None:
+                base = self._renderers[full]
+                r = self._renderers[(w, h)] = _shared_renderer(self.context, w, h, base,
+                                                               base._history)
+            return r
 
     def pane(self, w: int, h: int) -> ThirdPerson:
-        """The third-person pane of size w × h (its own renderer: the pane is not walked,
-        so it must not disturb the first-person renderer's occlusion history)."""
+        """The third-person pane of size w × h. Its renderer shares the first-person one's
+        device state but has its own occlusion history (the pane is not walked: it must not
+        disturb the first-person history; it renders without occlusion culling anyway)."""
         from ..pipeline.lines import LineRenderer
-        from ..pipeline.renderer import Renderer
+        from ..pipeline.twophase import OcclusionHistory
 
-        if (w, h) not in self._panes:
-            lines = self._lines.setdefault((w, h), LineRenderer(w, h, context=self.context))
-            self._panes[(w, h)] = ThirdPerson(vs=self.vs, renderer=Renderer(
-                w, h, context=self.context), lines=lines)
-        return self._panes[(w, h)]
+        base = self.renderer(self.width, self.height)
+        with self._make_lock:
+            if (w, h) not in self._panes:
+                lines = self._lines.get((w, h))
+                if lines is None:
+                    lines = self._lines[(w, h)] = LineRenderer(w, h, context=self.context)
+                self._panes[(w, h)] = ThirdPerson(vs=self.vs, renderer=_shared_renderer(
+                    self.context, w, h, base, OcclusionHistory()), lines=lines)
+            return self._panes[(w, h)]
 
     def inset_size(self) -> tuple[int, int]:
         return max(16, round(self.width * INSET)), max(16, round(self.height * INSET))
@@ -160,33 +193,48 @@ class Engine:
     # -- one frame ------------------------------------------------------------------------
 
     def frame(self, state: ViewState, scale: float | None = None) -> Picture:
-        """Render, colour and encode `state` (at `scale`, default `choose_scale`)."""
+        """Render, colour and encode `state` (at `scale`, default `choose_scale`):
+        ``finish(render(state, scale))``."""
+        return self.finish(self.render(state, scale))
+
+    def render(self, state: ViewState, scale: float | None = None) -> Rendered:
+        """The first half of `frame`: render `state` (at `scale`, default `choose_scale`).
+        One render at a time (a lock); `finish` of the previous frame may run beside it on
+        another thread (the server does so: the renderer releases the GIL while it waits
+        for the device)."""
         if state.mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {state.mode!r}")
         with self._lock:
             t0 = time.perf_counter()
             s = self.choose_scale(state) if scale is None else scale
-            pic = self._frame(state, s)
-            total = (time.perf_counter() - t0) * 1e3
-            self._timing.add(s, total)
+            w, h = max(16, round(self.width * s)), max(16, round(self.height * s))
+            cam = state.camera.camera()
+            planes = None if state.cut is None else np.array([[0.0, -1.0, 0.0, state.cut]])
+            frame = self.renderer(w, h).render(
+                self.vs.scene, cam, frustum=state.frustum, cones=state.cones,
+                occlusion=state.occlusion,
+                fates=state.inset or state.mode == "fates",   # the pane's colours
+                overdraw=state.mode == "overdraw", clip_planes=planes,
+                outputs=("depth", "ids"))
             self._last = _camera_key(state.camera)
             self.last_scale = s
+            return Rendered(state, s, cam, frame, (time.perf_counter() - t0) * 1e3)
+
+    def finish(self, r: Rendered) -> Picture:
+        """The second half of `frame`: colour `r`'s frame for its mode, draw the pane and
+        encode both. One finish at a time (a lock of its own, so it may overlap the next
+        `render`)."""
+        with self._finish_lock:
+            t0 = time.perf_counter()
+            pic = self._finish(r)
+            total = r.render_ms + (time.perf_counter() - t0) * 1e3
+            self._timing.add(r.scale, total)
             pic.header["frame_ms"] = total
             return pic
 
-    def _frame(self, state: ViewState, s: float) -> Picture:
-        vs = self.vs
-        w, h = max(16, round(self.width * s)), max(16, round(self.height * s))
-        cam = state.camera.camera()
-        planes = None if state.cut is None else np.array([[0.0, -1.0, 0.0, state.cut]])
-        r = self.renderer(w, h)
-        t0 = time.perf_counter()
-        frame = r.render(vs.scene, cam, frustum=state.frustum, cones=state.cones,
-                         occlusion=state.occlusion,
-                         fates=state.inset or state.mode == "fates",   # the pane's colours
-                         overdraw=state.mode == "overdraw", clip_planes=planes,
-                         outputs=("depth", "ids"))
-        render_ms = (time.perf_counter() - t0) * 1e3
+    def _finish(self, r: Rendered) -> Picture:
+        state, s, cam, frame = r.state, r.scale, r.camera, r.frame
+        h, w = frame.triangle_id.shape
         t1 = time.perf_counter()
         proj = cam.projection(w, h)
         near, far = state.camera.near, state.camera.far
@@ -234,7 +282,7 @@ class Engine:
             "fates": {f.name.lower(): n for f, n in frame.fates.counts().items()}
             if frame.fates is not None else {},
             "times_ms": {**{k: round(v, 3) for k, v in st.timings_ms.items()},
-                         "render": round(render_ms, 3), "colour": round(colour_ms, 3),
+                         "render": round(r.render_ms, 3), "colour": round(colour_ms, 3),
                          "encode": round(encode_ms, 3)},
             "main_bytes": len(main_bytes), "inset_bytes": len(inset_bytes), **info,
         }
@@ -243,6 +291,29 @@ class Engine:
     def screenshot(self, state: ViewState) -> Picture:
         """`state` at full scale as a lossless PNG, without the pane."""
         return self.frame(replace(state, lossless=True, inset=False), 1.0)
+
+
+def _shared_renderer(context: Any, w: int, h: int, base: Any, history: Any) -> Any:
+    """A `clraster.Renderer` of w × h; with a ``base`` renderer, one that shares base's
+    queue, stage chain (the scene's uploaded geometry pool and the per-pass buffers, which
+    `FrameParams` size per frame), pyramid stage, plan cache (the scene's host
+    `GeometryPool`) and lock, with ``history`` as its occlusion history.
+
+    Why: a renderer per render scale held its own copies — ~450 MiB each for the 10M
+    plant (the pool on the host and on the device, stage buffers grown to a pass) — so a
+    walk that reached every scale and the pane grew by ~1.8 GiB. Shared, the frames are
+    exactly a fresh renderer's (tests/test_viewer.py checks it), since the stages take the
+    image size from each frame's parameters; the shared lock serializes their frames.
+    One occlusion history for every first-person scale also keeps phase 1's guess (last
+    frame's visible clusters) current when the scale changes: visibility is per cluster,
+    not per pixel, and culling is conservative whatever the history."""
+    from ..pipeline.renderer import Renderer
+
+    r = Renderer(w, h, context=context)
+    if base is not None:
+        r.queue, r.chain, r.pyramid = base.queue, base.chain, base.pyramid
+        r._plans, r._lock, r._history = base._plans, base._lock, history
+    return r
 
 
 def _camera_key(c: FlyCamera) -> tuple[float, ...]:

@@ -36,6 +36,8 @@ FRUSTUM_HIDDEN_COLOR = (165, 150, 70)
 #: Shading of the fate colours: ``colour · (SHADE_BASE + (1 − SHADE_BASE) · |n · l|)``.
 SHADE_BASE = 0.45
 _LIGHT = np.array([0.35, 0.85, 0.45]) / np.linalg.norm([0.35, 0.85, 0.45])
+#: Depth bias (window depth) of the frustum lines against the pane's surfaces.
+_LINE_BIAS = 1e-4
 
 
 def storey_floor(vs: ViewerScene, eye_y: float) -> float | None:
@@ -52,8 +54,10 @@ def storey_floor(vs: ViewerScene, eye_y: float) -> float | None:
 @dataclass
 class _Base:
     """One outside render, kept: the camera, its (4, 4) view-projection, depth (H, W)
-    float32, covered mask (H, W) bool, and per covered pixel (row-major) its instance,
-    mesh-local face and Lambert factor."""
+    float32, covered mask (H, W) bool, per covered pixel (row-major) its instance and
+    mesh-local face, and ``shades``: uint32 (len(Fate), covered pixels), each covered
+    pixel's packed colour under each fate (the fate colour times its Lambert factor), so a
+    frame's picture is one gather."""
 
     camera: Camera
     view_proj: np.ndarray
@@ -61,7 +65,7 @@ class _Base:
     covered: np.ndarray
     instance: np.ndarray
     face: np.ndarray
-    light: np.ndarray
+    shades: np.ndarray
     cluster_key: np.ndarray | None = None   # keys in the fates' numbering, made on first use
 
 
@@ -122,8 +126,11 @@ class ThirdPerson:
             nw[sel] = n[face[sel]] @ m.T
         length = np.linalg.norm(nw, axis=1)
         lam = np.abs(nw @ _LIGHT) / np.where(length > 0, length, 1.0)
+        light = (SHADE_BASE + (1.0 - SHADE_BASE) * lam)[:, None]
+        palette = np.array([FATE_COLORS[f] for f in Fate], np.float64)
+        shades = np.stack([pack(np.clip(c * light, 0, 255).astype(np.uint8)) for c in palette])
         base = _Base(cam, cam.view_projection(self.width, self.height), frame.depth,
-                     covered, inst, face, (SHADE_BASE + (1.0 - SHADE_BASE) * lam)[:, None])
+                     covered, inst, face, shades)
         if len(self._bases) > 8:   # a walk through many storeys: keep the memory bounded
             self._bases.clear()
         self._bases[key] = base
@@ -136,20 +143,22 @@ class ThirdPerson:
         outside camera's view-projection (row-major lists) and the clip plane height."""
         base = self._base(eye_y, cut_y)
         out = np.full((self.height, self.width), pack(np.array(BACKGROUND)), np.uint32)
-        palette = np.array([FATE_COLORS[f] for f in Fate], np.float64)
         if fates is None:
-            fate = np.zeros(base.instance.size, np.intp)
+            out[base.covered] = base.shades[Fate.DRAWN]
         else:
             if base.cluster_key is None:
                 base.cluster_key = (fates.instance_key_base[base.instance]
                                     + fates.face_cluster(base.instance, base.face))
             fate = fates.fate[base.cluster_key]
-        out[base.covered] = pack(np.clip(palette[fate] * base.light, 0, 255).astype(np.uint8))
-        segs = _frustum(fp_view_proj)
-        hidden = self.lines.render(segs, base.view_proj)
-        shown = self.lines.render(segs, base.view_proj, depth=base.depth, depth_bias=1e-4)
-        out[hidden.mask] = pack(np.array(FRUSTUM_HIDDEN_COLOR))
-        out[shown.mask] = pack(np.array(FRUSTUM_COLOR))
+            out[base.covered] = base.shades[fate, np.arange(fate.size)]
+        # one line render, every fragment: a pixel's nearest fragment passes the depth test
+        # (z <= depth + bias, float32, as the kernel's) iff any of its fragments does, so
+        # this is the depth-tested render's mask without a second render
+        lines = self.lines.render(_frustum(fp_view_proj), base.view_proj)
+        hidden = lines.mask
+        shown = hidden & (lines.depth <= base.depth + np.float32(_LINE_BIAS))
+        out[hidden] = pack(np.array(FRUSTUM_HIDDEN_COLOR))
+        out[shown] = pack(np.array(FRUSTUM_COLOR))
         _, _, top = self.planes(eye_y, cut_y)
         return out, {"view_proj": base.view_proj.tolist(), "cut": top}
 

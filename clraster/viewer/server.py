@@ -17,10 +17,12 @@ old connection closes a moment later, still gets in). A page that goes away mid-
 dropped when its frame is sent; the frame in the render thread finishes and is discarded.
 
 Frames: `frame_loop` renders whenever the page's state changed (or a reduced frame can be
-refined) and fewer than `protocol.IN_FLIGHT` frames await the page's acknowledgement, always
-from the latest state: states that arrive while a frame renders are merged, never queued.
-All renders run on one worker thread (`Engine` is not re-entrant), so the event loop stays
-free for input.
+refined, once the camera has rested `REFINE_AFTER_S`) and fewer than `protocol.IN_FLIGHT`
+frames are being finished or await the page's acknowledgement, always from the latest
+state: states that arrive while a frame renders are merged, never queued. Renders run on
+one worker thread (`Engine.render`), colouring and encoding on another (`Engine.finish`),
+so a frame is encoded while the next one renders; frames are sent in render order. The
+event loop stays free for input.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from .engine import Engine, ViewState
 from .protocol import IN_FLIGHT, BadMessage, apply, pack_frame, parse
 from .scene import ViewerScene, load_target
 
-__all__ = ["BUSY_CODE", "ViewerServer"]
+__all__ = ["BUSY_CODE", "REFINE_AFTER_S", "ViewerServer"]
 
 log = logging.getLogger("clraster.viewer")
 
@@ -46,6 +48,10 @@ log = logging.getLogger("clraster.viewer")
 BUSY_CODE = 4409
 #: Largest WebSocket message aiohttp reads at all; larger ones close the connection (1009).
 _WS_MAX = 64 * 1024
+#: Seconds the camera must rest before a reduced frame is rendered again at full scale: a
+#: full-scale frame takes several reduced ones' time, and an input arriving while it
+#: renders waits for it, so it is not started in a pause between two inputs of a walk.
+REFINE_AFTER_S = 0.15
 
 
 @dataclass
@@ -58,6 +64,8 @@ class _Session:
     acked: int = 0            # frames acknowledged
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     dropped: int = 0          # bad messages
+    finishing: int = 0        # frames rendered, being coloured / encoded, not yet sent
+    changed: float = 0.0      # event-loop time of the last state change
 
 
 class ViewerServer:
@@ -80,7 +88,11 @@ class ViewerServer:
         self.load_error: str | None = None
         self.loaded = asyncio.Event()
         self._session: _Session | None = None
+        # renders on one thread, colouring and encoding on another (`Engine.render`,
+        # `Engine.finish`): a frame is encoded while the next one renders
         self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clraster-view")
+        self._finisher = concurrent.futures.ThreadPoolExecutor(
+            1, thread_name_prefix="clraster-encode")
         self._runner: Any = None
         self._load_task: asyncio.Task | None = None
         self.frames_sent = 0
@@ -145,6 +157,7 @@ class ViewerServer:
         if self._load_task is not None and not self._load_task.done():
             self._load_task.cancel()
         self._pool.shutdown(wait=False, cancel_futures=True)
+        self._finisher.shutdown(wait=False, cancel_futures=True)
 
     # -- routes ---------------------------------------------------------------------------
 
@@ -249,12 +262,14 @@ class ViewerServer:
             elif session.state is not None:
                 session.state = apply(session.state, msg)
                 session.version += 1
+                session.changed = asyncio.get_running_loop().time()
             session.wake.set()
         except BadMessage as exc:
             self._drop(session, str(exc))
 
     async def _frame_loop(self, session: _Session) -> None:
         loop = asyncio.get_running_loop()
+        sending: asyncio.Future | None = None   # the last frame's finish-and-send
         try:
             while not session.ws.closed:
                 await session.wake.wait()
@@ -262,23 +277,53 @@ class ViewerServer:
                 engine = self.engine
                 if engine is None or session.state is None:
                     continue
-                if session.sent - session.acked >= IN_FLIGHT:
+                if session.sent + session.finishing - session.acked >= IN_FLIGHT:
                     continue   # the page is behind: wait for its ack (latest wins)
                 state = session.state
-                if session.version == session.rendered and not engine.needs_refine(state):
-                    continue
+                if session.version == session.rendered:
+                    if not engine.needs_refine(state):
+                        continue
+                    rest = session.changed + REFINE_AFTER_S - loop.time()
+                    if rest > 0:   # refine once the camera has rested (REFINE_AFTER_S)
+                        loop.call_later(rest, session.wake.set)
+                        continue
                 version = session.version
-                pic = await loop.run_in_executor(self._pool, engine.frame, state)
+                rendered = await loop.run_in_executor(self._pool, engine.render, state)
                 session.rendered = version
-                if session.ws.closed:
-                    break
-                session.sent += 1
-                pic.header["n"] = session.sent
-                await session.ws.send_bytes(pack_frame(pic.header, pic.main, pic.inset))
-                self.frames_sent += 1
+                session.finishing += 1
+                sending = asyncio.ensure_future(
+                    self._finish_and_send(session, engine, rendered, sending))
                 session.wake.set()   # more to do? (a newer state, a refinement)
         except (ConnectionError, asyncio.CancelledError):
             pass
         except Exception:   # a failed frame must not take the server down: log, end the page
             log.exception("frame failed")
             await session.ws.close(code=1011, message=b"frame failed; see the server log")
+
+    async def _finish_and_send(self, session: _Session, engine: Engine, rendered: Any,
+                               before: asyncio.Future | None) -> None:
+        """Colour and encode ``rendered`` on the finishing thread, then send it once the
+        frame ``before`` it was sent (frames go out in render order)."""
+        loop = asyncio.get_running_loop()
+        try:
+            try:
+                job = loop.run_in_executor(self._finisher, engine.finish, rendered)
+            except RuntimeError:   # the server is closing: its executors are shut down
+                return
+            pic = await job
+            if before is not None:
+                await asyncio.wait([before])
+            if session.ws.closed:
+                return
+            session.sent += 1
+            pic.header["n"] = session.sent
+            await session.ws.send_bytes(pack_frame(pic.header, pic.main, pic.inset))
+            self.frames_sent += 1
+        except (ConnectionError, asyncio.CancelledError):   # the page went away mid-frame
+            pass
+        except Exception:   # as in the frame loop: log, end the page
+            log.exception("frame failed")
+            await session.ws.close(code=1011, message=b"frame failed; see the server log")
+        finally:
+            session.finishing -= 1
+            session.wake.set()
