@@ -250,8 +250,19 @@ def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
     try:
         cl.enqueue_barrier(r.queue, wait_for=[gate])
         monkeypatch.setattr(device, "_waiter", interrupt_in_the_wait)
-        with pytest.raises(KeyboardInterrupt):
+        try:
             r.render(big, big_cam, frustum=False, cones=False)
+        except KeyboardInterrupt:
+            pass
+        else:
+            monkeypatch.undo()
+            if gate.command_execution_status != complete and not interrupted:
+                # every wait of the pass found its work done: the runtime ran the commands
+                # queued behind the barrier on an incomplete user event (seen once in a CI
+                # run's process with the pip PoCL), so there was nothing to interrupt
+                pytest.skip("the OpenCL runtime ran commands queued behind a barrier on an "
+                            "incomplete user event: no unfinished work to interrupt")
+            pytest.fail("the pass returned while its work was held back, uninterrupted")
         monkeypatch.undo()
         assert fallback.is_alive(), "the pass waited for its work in an uninterruptible call"
         assert r.chain._pending   # the work of the pass is abandoned, and kept alive:
