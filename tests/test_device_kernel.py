@@ -133,7 +133,9 @@ def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue):
             pass
         else:
             _skip_if_the_runtime_ran_past_the_gate(gate, ev)
-            pytest.fail("device.wait returned while its work was held back, uninterrupted")
+            pytest.fail("device.wait returned while its work was held back, uninterrupted "
+                        f"(gate {gate.command_execution_status}, work "
+                        f"{ev.command_execution_status}, interrupt sent: {bool(sent)})")
         latency = time.perf_counter() - sent[0]
         assert fallback.is_alive(), "the wait ended only when its work could run"
         # the slice is 50 ms; the bound leaves room for a loaded machine

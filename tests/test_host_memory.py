@@ -262,7 +262,9 @@ def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
                 # run's process with the pip PoCL), so there was nothing to interrupt
                 pytest.skip("the OpenCL runtime ran commands queued behind a barrier on an "
                             "incomplete user event: no unfinished work to interrupt")
-            pytest.fail("the pass returned while its work was held back, uninterrupted")
+            pytest.fail("the pass returned while its work was held back, uninterrupted "
+                        f"(gate {gate.command_execution_status}, handed over: "
+                        f"{bool(interrupted)})")
         monkeypatch.undo()
         assert fallback.is_alive(), "the pass waited for its work in an uninterruptible call"
         assert r.chain._pending   # the work of the pass is abandoned, and kept alive:
