@@ -233,3 +233,18 @@ def load_shared_mesh(name: str) -> Mesh:
         pytest.skip(f"shared mesh {name} not found in {MESH_DIR} (the shared mesh folder "
                     f"next to the repository is absent)")
     return Mesh.load(path)
+
+
+@pytest.fixture
+def sigint_raises():
+    """SIGINT handled by Python's default handler (KeyboardInterrupt) for the test, whatever
+    the process was started with: a test run started in the background by a
+    non-interactive shell inherits SIGINT ignored, and then ``_thread.interrupt_main()``
+    (the interrupt tests' Ctrl-C) does nothing."""
+    import signal
+
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)

@@ -818,9 +818,9 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
             if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)
                 break
         while ev.command_execution_status > complete:
-            # the runtime's wait returned (or failed) with the marker neither complete nor
-            # failed: returning now would hand the caller buffers the device still writes.
-            # Poll instead, in short sleeps that a signal interrupts.
+            # should the runtime's wait return (or fail) with the marker neither complete
+            # nor failed, returning would hand the caller buffers the device still writes:
+            # poll instead, in short sleeps that a signal interrupts
             log.debug("device wait returned before its marker completed; polling")
             time.sleep(0.002)
         if ev.command_execution_status < 0:   # the command failed: let pyopencl raise
