@@ -235,16 +235,14 @@ def load_shared_mesh(name: str) -> Mesh:
     return Mesh.load(path)
 
 
-@pytest.fixture
-def sigint_raises():
-    """SIGINT handled by Python's default handler (KeyboardInterrupt) for the test, whatever
-    the process was started with: a test run started in the background by a
-    non-interactive shell inherits SIGINT ignored, and then ``_thread.interrupt_main()``
-    (the interrupt tests' Ctrl-C) does nothing."""
+def pytest_configure(config):
+    """SIGINT handled by Python's default handler (KeyboardInterrupt) in the test process,
+    whatever it was started with. A test run started in the background by a
+    non-interactive shell inherits SIGINT ignored: then ``_thread.interrupt_main()`` (the
+    interrupt tests' Ctrl-C) does nothing, and the child processes the Ctrl-C tests start
+    (`clraster render`, `clraster view`) inherit it ignored too and never stop. With a
+    Python handler here, children start with the default action, as from a terminal."""
     import signal
 
-    old = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, old)
+    if signal.getsignal(signal.SIGINT) in (signal.SIG_IGN, signal.SIG_DFL):
+        signal.signal(signal.SIGINT, signal.default_int_handler)

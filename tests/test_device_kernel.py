@@ -82,7 +82,7 @@ SPIN = """__kernel void spin(__global float *a, const int n)
 }"""
 
 
-def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue, sigint_raises):
+def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue):
     """device.wait returns once everything enqueued has run (its helper thread blocks in
     OpenCL's wait); a KeyboardInterrupt during it gets through within a slice (50 ms) while
     the work is unfinished, and the work goes on; the next wait returns when it is done.

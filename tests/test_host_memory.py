@@ -206,7 +206,7 @@ def test_pool_positions_must_be_in_cluster_order():
         stage.upload_pool(queue, shuffled)
 
 
-def test_frame_after_an_interrupted_pass_is_right(monkeypatch, sigint_raises):
+def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
     """Ctrl-C in the middle of a pass leaves its kernels running on the chain's buffers
     (the host-mode draw records among them): the chain keeps itself alive until they are
     done, and the next pass waits for them before the host writes anything, so the next
