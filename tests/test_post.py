@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from lit_scenes import FLOOR, box, mesh_of, quad
 
 import clraster
 from clraster.output.effects import CEL_LEVELS
@@ -19,29 +20,6 @@ from clraster.output.post import (
     outline_mask,
 )
 from clraster.output.shade import render_shaded
-
-
-def quad(c, ex, ey):
-    c, ex, ey = (np.asarray(a, float) for a in (c, ex, ey))
-    return np.array([c - ex - ey, c + ex - ey, c + ex + ey, c - ex + ey]), np.array(
-        [[0, 1, 2], [0, 2, 3]])
-
-
-def box(lo, hi):
-    b = trimesh.creation.box(bounds=[lo, hi])
-    return np.asarray(b.vertices), np.asarray(b.faces)
-
-
-def mesh_of(*parts) -> clraster.Mesh:
-    vs, fs, o = [], [], 0
-    for v, f in parts:
-        vs.append(v)
-        fs.append(f + o)
-        o += len(v)
-    return clraster.Mesh(np.vstack(vs).astype(np.float32), np.vstack(fs))
-
-
-FLOOR = quad((0, 0, 0), (4, 0, 0), (0, 0, -4))   # normal +y
 
 W, H = 160, 120
 CAMERA = clraster.Camera.look_at((2.5, 3.0, 4.0), (0.0, 0.3, -0.5), near=0.5, far=30.0)

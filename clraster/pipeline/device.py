@@ -817,12 +817,13 @@ def wait(queue: cl.CommandQueue, keep: object = None) -> None:
             # a safety net: should the waiter never return, the status is polled every 50 ms
             if ev.command_execution_status <= complete:   # complete (0) or failed (< 0)
                 break
-        while ev.command_execution_status > complete:
+        if ev.command_execution_status > complete:
             # should the runtime's wait return (or fail) with the marker neither complete
             # nor failed, returning would hand the caller buffers the device still writes:
             # poll instead, in short sleeps that a signal interrupts
             log.debug("device wait returned before its marker completed; polling")
-            time.sleep(0.002)
+            while ev.command_execution_status > complete:
+                time.sleep(0.002)
         if ev.command_execution_status < 0:   # the command failed: let pyopencl raise
             ev.wait()
     except BaseException:   # KeyboardInterrupt: the device goes on regardless

@@ -1,0 +1,109 @@
+"""The setup_triangles kernel alone, on inputs captured from one frame, built from variants
+of kernels/setup.cl that stop at a given step: where a dense mesh's setup time goes.
+
+    python bench/setup_variants.py ../shared/meshes/stanford_dragon_vrip.ply 640 480
+
+One frame is rendered to capture the setup stage's inputs (the vertex stage's outputs, the
+draws); then each variant is built from the working tree's source with one substitution
+(timing only: a variant's results are wrong by design, and are never read) and launched
+``--rounds`` times in turn with the same arguments; min and median kernel times (OpenCL
+profiling events) are printed. Variants: ``base`` (the kernel), ``indices`` (return once the
+work-item has its triangle), ``facing`` (after the facing determinant), ``box`` (after the
+pixel box), ``no_store`` (after make_piece, before the record is stored), ``no_values``
+(make_piece without the value planes). bench/README.md's log quotes a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import warnings
+
+import numpy as np
+import pyopencl as cl
+
+import clraster
+import clraster.pipeline.device as dev
+import clraster.pipeline.stages.setup as setup_stage
+from clraster.base.config import RasterConfig
+from clraster.base.layout import CLUSTER_MAX
+
+#: variant → (text of kernels/setup.cl, the same text with an early exit added)
+_EXIT = "if (width > 0) { status[t] = st; tile1[t] = TILE1_NONE; return; }"
+VARIANTS = {
+    "indices": ("    uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];\n",
+                "    if (width > 0) { status[t] = ST_NO_SAMPLE; tile1[t] = TILE1_NONE; return; }\n"
+                "    uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];\n"),
+    "facing": ("        st = facing(c0, c1, c2, draw_cull(cull, dflags));\n",
+               "        st = facing(c0, c1, c2, draw_cull(cull, dflags));\n"
+               "        " + _EXIT + "\n"),
+    "box": ("    if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;\n",
+            "    if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;\n"
+            "    if (width > 0) return ST_NO_SAMPLE;\n"),
+    "no_store": ("                            zs, zo, &pc, &sw);\n"
+                 "            if (st == ST_RASTER) {\n",
+                 "                            zs, zo, &pc, &sw);\n            " + _EXIT + "\n"
+                 "            if (st == ST_RASTER) {\n"),
+    "no_values": ("    double iw0 = 1.0 / a.w, iw1",
+                  "    if (hw > 0.0) { pc->pad = 0; return; }\n    double iw0 = 1.0 / a.w, iw1"),
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mesh")
+    ap.add_argument("width", type=int)
+    ap.add_argument("height", type=int)
+    ap.add_argument("--rounds", type=int, default=30)
+    a = ap.parse_args()
+
+    captured = {}
+    run = setup_stage.SetupStage.run
+
+    def capture(self, queue, geo, verts, params, max_pieces=None):
+        captured["args"] = (self, queue, geo, verts, params)
+        return run(self, queue, geo, verts, params, max_pieces)
+
+    setup_stage.SetupStage.run = capture   # type: ignore[method-assign]
+    mesh = clraster.Mesh.load(a.mesh)
+    lo, hi = mesh.bounds()
+    centre, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    cam = clraster.Camera.look_at(eye=centre + np.array([0.3, 0.2, 1.0]) * size * 0.9,
+                                  target=centre, fov_y=45, near=size * 0.05, far=size * 5)
+    r = clraster.Renderer(a.width, a.height)
+    r.render(mesh, cam)
+    setup_stage.SetupStage.run = run   # type: ignore[method-assign]
+    stage, queue, geo, verts, params = captured["args"]
+    b = stage.buffers
+    args = (verts.clip.buf, verts.outcode.buf, verts.win.buf, geo.draws.buf,
+            np.uint32(geo.n_draws), geo.clusters.buf, geo.local_tris.buf, geo.face_ids.buf,
+            geo.positions.buf, verts.clip64.buf, verts.rnum.buf, geo.uplanes.buf,
+            np.int32(geo.n_user), np.uint32(geo.uclip), verts.ucode.buf,
+            np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
+            np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),
+            b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf, stage.flag.buf)
+    gsize, lsize = (max(geo.n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,)
+    source = dev.kernel_source("setup")
+    options = [*RasterConfig().build_options(), *dev.feature_options(r.context)]
+    kernels = {}
+    for name, (old, new) in {"base": ("", ""), **VARIANTS}.items():
+        if old and old not in source:
+            raise SystemExit(f"variant {name}: kernels/setup.cl no longer has {old!r}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            prg = cl.Program(r.context, source.replace(old, new, 1) if old else source)
+            kernels[name] = prg.build(options=options).setup_triangles
+    times: dict[str, list[float]] = {name: [] for name in kernels}
+    for _ in range(a.rounds + 1):
+        for name, k in kernels.items():
+            ev = k(queue, gsize, lsize, *args)
+            ev.wait()
+            times[name].append((ev.profile.end - ev.profile.start) * 1e-6)
+    print(f"{mesh.n_faces:,} triangles at {a.width}x{a.height}, {geo.n_tris:,} sent to "
+          f"setup; setup_triangles alone, {a.rounds} rounds (after one):")
+    for name, t in times.items():
+        print(f"  {name:10s} min {min(t[1:]):6.2f} ms  median {statistics.median(t[1:]):6.2f} ms")
+
+
+if __name__ == "__main__":
+    main()
