@@ -115,14 +115,22 @@ def test_ssao_bad_options(renderer):
 # -- FXAA ----------------------------------------------------------------------------------------
 
 def test_luma_weights():
-    rgb = np.array([[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]], np.float32)
-    np.testing.assert_allclose(luma(rgb)[0], [0.299, 0.587, 0.114], rtol=1e-6)
+    rgb = np.array([[[255, 0, 0], [0, 255, 0], [0, 0, 255]]], np.uint8)
+    np.testing.assert_allclose(luma(rgb)[0], [0.299 * 255, 0.587 * 255, 0.114 * 255],
+                               rtol=1e-6)
 
 
 def test_fxaa_leaves_flat_and_gently_varying_images_alone():
     y, x = np.mgrid[0:40, 0:50]
-    ramp = np.stack([x / 200.0, y / 200.0, np.full(x.shape, 0.3)], axis=-1)
-    np.testing.assert_array_equal(fxaa(ramp), ramp.astype(np.float32))
+    ramp = np.stack([x, y, np.full(x.shape, 80)], axis=-1).astype(np.uint8)
+    np.testing.assert_array_equal(fxaa(ramp), ramp)
+
+
+@pytest.mark.parametrize("bad", [np.zeros((4, 5, 3), np.float32), np.zeros((4, 5, 4), np.uint8),
+                                 np.zeros((4, 5), np.uint8), np.zeros((0, 5, 3), np.uint8)])
+def test_fxaa_takes_8_bit_rgb_only(bad):
+    with pytest.raises(PostError, match=r"uint8 \(H, W, 3\)"):
+        fxaa(bad)
 
 
 def test_fxaa_blends_a_staircase_edge_by_its_coverage():
@@ -137,8 +145,8 @@ def test_fxaa_blends_a_staircase_edge_by_its_coverage():
     ss = 16
     yy, xx = np.mgrid[0:h * ss, 0:w * ss] + 0.5
     cov = (yy / ss > 8.0 + (xx / ss) / 8.0).reshape(h, ss, w, ss).mean(axis=(1, 3))
-    img = np.repeat(hard[..., None], 3, axis=2)
-    out = fxaa(img)[..., 0]
+    img = np.repeat((hard * 255).astype(np.uint8)[..., None], 3, axis=2)
+    out = fxaa(img)[..., 0] / 255.0
     near = np.abs(cov - hard) > 0.02
     err_in = np.abs(hard - cov)[near].mean()
     err_out = np.abs(out - cov)[near].mean()

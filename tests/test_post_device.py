@@ -47,9 +47,11 @@ def test_device_passes_registered_for_opencl_renderers(renderer):
 
 @pytest.mark.parametrize("cam", range(len(CAMERAS)))
 def test_fxaa_kernel_equals_twin(renderer, cam):
-    img = render_shaded(renderer, scene(), CAMERAS[cam]).astype(np.float32) / 255.0
+    img = render_shaded(renderer, scene(), CAMERAS[cam])
     dev = device_passes(renderer)
-    np.testing.assert_array_equal(dev.fxaa(img), post.fxaa(img))
+    want = post.fxaa(img)
+    assert np.mean(np.any(want != img, axis=-1)) > 0.01   # edges to compare
+    np.testing.assert_array_equal(dev.fxaa(img), want)
 
 
 @pytest.mark.parametrize("reversed_z", [False, True])
@@ -72,13 +74,63 @@ def test_ssao_kernel_equals_twin(reversed_z, size):
     assert want.min() < 0.9   # there is occlusion to compare
 
 
+def bumpy_ground(n: int = 24, seed: int = 5) -> clraster.Mesh:
+    """A height field over [-2, 2]² with random heights in [0, 0.35): its taps' directions
+    spread over every angle to the normal, so every bias has lanes on both sides of it."""
+    rng = np.random.default_rng(seed)
+    xs = np.linspace(-2.0, 2.0, n)
+    gx, gz = np.meshgrid(xs, xs)
+    verts = np.stack([gx, rng.random((n, n)) * 0.35, gz], axis=-1).reshape(-1, 3)
+    i = np.arange(n * n).reshape(n, n)
+    a, b, c, d = i[:-1, :-1], i[:-1, 1:], i[1:, :-1], i[1:, 1:]
+    faces = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),
+                            np.stack([b, c, d], -1).reshape(-1, 3)])
+    return clraster.Mesh.from_trimesh(trimesh.Trimesh(verts, faces, process=False))
+
+
+@pytest.mark.parametrize("bias", [0.0, 0.3, 0.8])
+def test_ssao_kernel_equals_twin_on_a_bumpy_ground_for_any_bias(bias):
+    """The taps kernel skips a tap's square root and division where its 8 lanes' terms are
+    provably 0 (vd² below bias² · |v|² less a margin): the same bits as the twin, which
+    always divides, whatever the bias, on a surface whose taps lie at every angle."""
+    w, h = 203, 97
+    r = clraster.Renderer(w, h)
+    cam = clraster.Camera.look_at((0.5, 3.0, 2.5), (0.0, 0.0, 0.0), near=0.5, far=30.0)
+    frame = r.render(bumpy_ground(), cam, cull="none")
+    n = pixel_normals(frame, bumpy_ground())
+    vp = cam.view_projection(w, h)
+    params = post.SSAO(radius=0.5, bias=bias).checked(1.0)
+    got = device_passes(r).ssao(frame.depth, n, vp, False, params)
+    want = post.ssao(frame.depth, n, vp, False, params)
+    np.testing.assert_array_equal(got, want)
+    covered = frame.triangle_id >= 0
+    assert covered.mean() > 0.5
+    # pixels with occluding taps (terms > 0, divided) and pixels with none (all skipped)
+    assert 0.2 < np.mean(want[covered] < 1.0) < 0.99
+
+
+def test_ssao_kernel_fallbacks_equal_twin(monkeypatch):
+    """With every Clang builtin's fallback (CLRASTER_FALLBACKS=all: the transposes and the
+    contiguous tap loads lane by lane, OpenCL's sqrt, vload8...) the same bits."""
+    monkeypatch.setenv("CLRASTER_FALLBACKS", "all")
+    w, h = 203, 97
+    r = clraster.Renderer(w, h)
+    cam = CAMERAS[0]
+    frame = r.render(scene(), cam)
+    n = pixel_normals(frame, scene())
+    vp = cam.view_projection(w, h)
+    params = post.SSAO(radius=0.4).checked(1.0)
+    got = DevicePasses(r.context).ssao(frame.depth, n, vp, False, params)
+    np.testing.assert_array_equal(got, post.ssao(frame.depth, n, vp, False, params))
+
+
 @pytest.mark.parametrize("shape", [(41, 77), (30, 50), (9, 5)])
 def test_fxaa_kernel_equals_twin_on_edge_heavy_odd_sizes(renderer, shape):
     """Random hard edges nearly everywhere (every lane group takes the edge path), widths
     that end in a partial lane group and one narrower than a lane group."""
     rng = np.random.default_rng(sum(shape))
-    img = (rng.random(shape + (3,)) > 0.5).astype(np.float32)
-    img[::3] *= 0.6
+    img = np.where(rng.random(shape + (3,)) > 0.5, 255, 0).astype(np.uint8)
+    img[::3] = (img[::3] * 0.6).astype(np.uint8)
     want = post.fxaa(img)
     assert np.mean(np.any(want != img, axis=-1)) > 0.3
     np.testing.assert_array_equal(device_passes(renderer).fxaa(img), want)

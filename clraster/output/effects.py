@@ -202,9 +202,13 @@ class Effects:
             edge = outline_mask(covered, _linear_depth(depth, vp, rev), n_img, self.outlines)
             rgb[edge[covered]] = np.asarray(self.outlines.color, np.float64) / 255.0
         image = _compose(covered, rgb, k, background, alpha)
-        if self.aa == "fxaa":
-            image[..., :3] = passes.fxaa(image[..., :3])
         out = np.clip(np.rint(image * 255.0), 0, 255).astype(np.uint8)
+        if self.aa == "fxaa":
+            # on the 8-bit image, as FXAA runs on its RGBA8 target; alpha is kept
+            if alpha:
+                out[..., :3] = passes.fxaa(out[..., :3])
+            else:
+                out = passes.fxaa(out)
         if not self.return_layers:
             return out
         return out, ShadeLayers(_down(lit_layer, k), _down(ao_img, k), _down_normals(n_img, k),

@@ -19,9 +19,11 @@ world units: the point's neighbourhood that can occlude it. A plane with nothing
 gets exactly 1 (v·n = 0 up to depth rounding, which β absorbs); an inside corner gets less.
 
 **FXAA** (`fxaa`): Timothy Lottes' FXAA 3.11 "quality" PC path, preset 12 (5 search steps
-of 1, 1.5, 2, 4, 12 pixels), subpix 0.75, edge threshold 0.166, minimum 0.0833, luma
-``0.299 R + 0.587 G + 0.114 B`` of the display-space colour, bilinear reads with clamp to
-edge, computed in float32 in the order of the original shader.
+of 1, 1.5, 2, 4, 12 pixels), subpix 0.75, edge threshold 0.166, minimum 0.0833, on the
+8-bit display image as the original runs on its RGBA8 target: luma
+``0.299 R + 0.587 G + 0.114 B`` of the 0..255 channel values (the minimum threshold scaled
+by 255 with it), bilinear reads with clamp to edge, computed in float32 in the order of the
+original shader, the blended colour rounded to the nearest 8-bit value (ties to even).
 
 **Cel** (`cel_quantize`): each light's diffuse term ``d ∈ [0, 1]`` becomes
 ``min(⌊d · levels⌋, levels − 1) / (levels − 1)``. **Outlines** (`outline_mask`): a covered
@@ -47,14 +49,17 @@ from .lights import Light, ShadowMap, ndc_grid, shadow_lookup
 
 __all__ = ["FXAA_STEPS", "NUMPY_PASSES", "SSAO", "Outlines", "Passes", "PostError",
            "cel_quantize", "fxaa", "luma", "outline_mask", "passes_for", "register_passes",
-           "ssao", "ssao_inputs", "ssao_linear_depth", "ssao_origin", "ssao_prepare_matrix",
-           "ssao_radius_scale", "ssao_taps", "ssao_taps_pass", "ssao_upsample", "world_positions"]
+           "rgb8", "ssao", "ssao_inputs", "ssao_linear_depth", "ssao_origin",
+           "ssao_prepare_matrix", "ssao_radius_scale", "ssao_taps", "ssao_taps_pass",
+           "ssao_upsample", "world_positions"]
 
 #: FXAA 3.11 preset 12: search step lengths in pixels (FXAA_QUALITY__P0..P4).
 FXAA_STEPS = (1.0, 1.5, 2.0, 4.0, 12.0)
 FXAA_SUBPIX = 0.75
 FXAA_EDGE_THRESHOLD = 0.166
 FXAA_EDGE_THRESHOLD_MIN = 0.0833
+#: The minimum threshold in the luma units of 8-bit channels (float32 0.0833 · 255).
+FXAA_EDGE_THRESHOLD_MIN_8 = np.float32(FXAA_EDGE_THRESHOLD_MIN) * np.float32(255.0)
 #: Turns of the SSAO tap spiral; coprime with the usual tap counts, so taps spread in angle.
 SSAO_TURNS = 7.0
 #: Most SSAO taps per pixel.
@@ -154,19 +159,22 @@ def ssao_radius_scale(vp: np.ndarray, radius: float, height: int) -> np.float32:
 
 def ssao_inputs(depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed_z: bool,
                 radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """SSAO's first pass (kernel ``ssao_prepare``), at half resolution: for each low-res
-    pixel (i, j) of the ``(⌈H/2⌉, ⌈W/2⌉)`` grid, the full-res pixel (2i, 2j) it stands for.
-    float32 (h2, w2, 4) positions relative to `ssao_origin` with the projected radius in
+    """SSAO's first pass at half resolution: for each low-res pixel (i, j) of the
+    ``(⌈H/2⌉, ⌈W/2⌉)`` grid, the full-res pixel (2i, 2j) it stands for. float32 (h2, w2, 4)
+    positions relative to `ssao_origin` (inf on the background) with the projected radius in
     *low-res* pixels as w (0 on the background), and float32 (h2, w2, 4) normals turned
-    towards the camera with the pixel's `ssao_linear_depth` as w (inf on the background).
+    towards the camera (0 on the background) with the pixel's `ssao_linear_depth` as w (inf
+    on the background). The device splits this differently, to the same bits: kernel
+    ``ssao_prepare`` writes the positions and the linear depths, kernel ``ssao`` turns its
+    centre pixels' normals itself.
 
-    All in float32, in the kernel's order: the pixel centre's NDC ``(nx, ny, nz, 1)``,
+    All in float32, in the kernels' order: the pixel centre's NDC ``(nx, ny, nz, 1)``,
     ``hom = M · ndc`` (M = `ssao_prepare_matrix`, rows summed left to right), the linear
-    depth ``z = 1 / hom.w``, the point ``hom.xyz · z``, the radius ``k · hom.w``
+    depth ``z = 1 / hom.w``, the point ``p = hom.xyz · z``, the radius ``k · hom.w``
     (`ssao_radius_scale`); the normal is negated where it points along the view ray
-    ``p − pn`` (pn: the pixel's point on the near plane, ``homn = M · (nx, ny, −1, 1)``),
-    tested without a division as ``n · (hom.xyz · homn.w − homn.xyz · hom.w) > 0``
-    (both w > 0)."""
+    ``p − pn`` (pn: the pixel's point on the near plane, ``g.xyz / g.w`` with
+    ``g = M · (nx, ny, −1, 1)``), tested without a division as ``n · (p · g.w − g.xyz) > 0``
+    (g.w > 0)."""
     f32 = np.float32
     h, w = depth.shape
     d = np.ascontiguousarray(depth[::2, ::2], dtype=f32)
@@ -176,19 +184,19 @@ def ssao_inputs(depth: np.ndarray, normals: np.ndarray, vp: np.ndarray, reversed
     nx = ((np.arange(0, w, 2, dtype=f32) + f32(0.5)) * sx - f32(1.0))[None, :]
     ny = (f32(1.0) - (np.arange(0, h, 2, dtype=f32) + f32(0.5)) * sy)[:, None]
     nz = (f32(1.0) - f32(2.0) * d) if reversed_z else (f32(2.0) * d - f32(1.0))
+    p4 = np.zeros(covered.shape + (4,), f32)
+    n4 = np.zeros(covered.shape + (4,), f32)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         hom = [((m[r, 0] * nx + m[r, 1] * ny) + m[r, 2] * nz) + m[r, 3] for r in range(4)]
-        homn = [((m[r, 0] * nx + m[r, 1] * ny) - m[r, 2]) + m[r, 3] for r in range(4)]
+        g = [((m[r, 0] * nx + m[r, 1] * ny) - m[r, 2]) + m[r, 3] for r in range(4)]
         z = f32(1.0) / hom[3]
-        ray = [hom[c] * homn[3] - homn[c] * hom[3] for c in range(3)]
+        for c in range(3):
+            p4[..., c] = np.where(covered, hom[c] * z, f32(np.inf))
+        p4[..., 3] = np.where(covered, ssao_radius_scale(vp, radius, h) * hom[3], f32(0.0))
+        ray = [p4[..., c] * g[3] - g[c] for c in range(3)]
         n = normals[::2, ::2].astype(f32)
         flip = ((n[..., 0] * ray[0] + n[..., 1] * ray[1]) + n[..., 2] * ray[2]) > f32(0.0)
-        n = np.where(flip[..., None], -n, n)
-        p4 = np.zeros(covered.shape + (4,), f32)
-        n4 = np.zeros(covered.shape + (4,), f32)
-        for c in range(3):
-            p4[..., c] = np.where(covered, hom[c] * z, f32(0.0))
-        p4[..., 3] = np.where(covered, ssao_radius_scale(vp, radius, h) * hom[3], f32(0.0))
+    n = np.where(flip[..., None], -n, n)
     n4[..., :3] = np.where(covered[..., None], n, f32(0.0))
     n4[..., 3] = np.where(covered, z, f32(np.inf))
     return p4, n4
@@ -241,12 +249,14 @@ def ssao_taps_pass(p4: np.ndarray, n4: np.ndarray, params: SSAO) -> np.ndarray:
         ok = (qx >= 0) & (qx < w) & (qy >= 0) & (qy < h)
         qxc, qyc = np.clip(qx, 0, w - 1), np.clip(qy, 0, h - 1)
         ok &= covered[qyc, qxc] & ~((qx == xs) & (qy == ys))
-        v = p4[qyc, qxc, :3] - p
-        vv = (v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]) + v[:, 2] * v[:, 2]
-        ok &= vv < r2
-        vn = ((v[:, 0] * nv[:, 0] + v[:, 1] * nv[:, 1]) + v[:, 2] * nv[:, 2]) / np.sqrt(
-            np.where(ok, vv, f32(1.0)))
-        term = (f32(1.0) - vv * inv_r2) * np.maximum(vn - bias, f32(0.0))
+        # a background tap's point is at infinity: |v|² < R² fails (inf, or nan × 0 in vn)
+        with np.errstate(invalid="ignore", over="ignore"):
+            v = p4[qyc, qxc, :3] - p
+            vv = (v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]) + v[:, 2] * v[:, 2]
+            ok &= vv < r2
+            vn = ((v[:, 0] * nv[:, 0] + v[:, 1] * nv[:, 1]) + v[:, 2] * nv[:, 2]) / np.sqrt(
+                np.where(ok, vv, f32(1.0)))
+            term = (f32(1.0) - vv * inv_r2) * np.maximum(vn - bias, f32(0.0))
         occ = occ + np.where(ok, term, f32(0.0))
     ao = f32(1.0) - (f32(params.strength) / f32(params.samples)) * occ
     out[ys, xs] = np.clip(ao, f32(0.0), f32(1.0))
@@ -322,10 +332,21 @@ def ssao_upsample(depth: np.ndarray, z_low: np.ndarray, ao_low: np.ndarray, vp: 
 # -- FXAA 3.11 ---------------------------------------------------------------------------------
 
 def luma(rgb: np.ndarray) -> np.ndarray:
-    """float32 (H, W) luma of float (H, W, 3) display-space RGB."""
-    c = rgb.astype(np.float32)
+    """float32 (H, W) luma ``(0.299 R + 0.587 G) + 0.114 B`` of (H, W, 3) RGB, in the units
+    of its channels (0..255 for the uint8 images `fxaa` takes)."""
+    c = np.asarray(rgb).astype(np.float32)
     return (c[..., 0] * np.float32(0.299) + c[..., 1] * np.float32(0.587)
             + c[..., 2] * np.float32(0.114))
+
+
+def rgb8(rgb: Any, name: str = "fxaa") -> np.ndarray:
+    """`rgb` as a C-contiguous uint8 (H, W, 3) image, or a PostError saying what it was."""
+    a = np.asarray(rgb)
+    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[2] != 3 or 0 in a.shape:
+        raise PostError(f"{name} takes an 8-bit RGB image, uint8 (H, W, 3) with H, W >= 1, got "
+                        f"{a.dtype} {a.shape}; quantize a float image in [0, 1] with "
+                        f"np.rint(img * 255).astype(np.uint8) and drop any alpha first")
+    return np.ascontiguousarray(a)
 
 
 def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -351,10 +372,11 @@ def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def fxaa(rgb: np.ndarray) -> np.ndarray:
-    """FXAA 3.11 (module docstring) of float (H, W, 3) RGB in [0, 1]: float32 (H, W, 3)."""
-    img = np.ascontiguousarray(rgb, dtype=np.float32)
-    h, w = img.shape[:2]
-    lum = luma(img)
+    """FXAA 3.11 (module docstring) of an 8-bit display image, uint8 (H, W, 3): a new uint8
+    (H, W, 3)."""
+    img = rgb8(rgb)
+    c = img.astype(np.float32)
+    lum = luma(c)
     pad = np.pad(lum, 1, mode="edge")
     lM = lum
     lN, lS = pad[:-2, 1:-1], pad[2:, 1:-1]
@@ -362,7 +384,7 @@ def fxaa(rgb: np.ndarray) -> np.ndarray:
     range_max = np.maximum(np.maximum(lN, lW), np.maximum(lE, np.maximum(lS, lM)))
     range_min = np.minimum(np.minimum(lN, lW), np.minimum(lE, np.minimum(lS, lM)))
     rng = range_max - range_min
-    todo = ~(rng < np.maximum(np.float32(FXAA_EDGE_THRESHOLD_MIN),
+    todo = ~(rng < np.maximum(FXAA_EDGE_THRESHOLD_MIN_8,
                               range_max * np.float32(FXAA_EDGE_THRESHOLD)))
     out = img.copy()
     ys, xs = np.nonzero(todo)
@@ -457,7 +479,7 @@ def fxaa(rgb: np.ndarray) -> np.ndarray:
     offset = np.maximum(np.where(good, pixel_offset, f32(0.0)), subpix_h)
     fx = np.where(horz, pmx, pmx + offset * length_sign)
     fy = np.where(horz, pmy + offset * length_sign, pmy)
-    out[ys, xs] = _bilinear(img, fx, fy)
+    out[ys, xs] = np.rint(_bilinear(c, fx, fy)).astype(np.uint8)
     return out
 
 
