@@ -32,7 +32,7 @@ FILES = {"spot": "spot.ply", "bunny": "stanford_bunny.ply",
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scene", choices=[*FILES, "plant10m"])
+    ap.add_argument("scene", choices=[*FILES, "plant10m", "quad", "empty"])
     ap.add_argument("--frames", type=int, default=10)
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--evict", type=int, default=0, metavar="MB",
@@ -50,7 +50,12 @@ def main(argv: list[str] | None = None) -> int:
     cl.Kernel.__call__ = recording_call
     from clraster import Camera, Mesh, Renderer
     kw = {}
-    if a.scene == "plant10m":
+    if a.scene in ("quad", "empty"):   # the harness's fill scenes (clraster.bench.spec)
+        from clraster.bench.spec import close_camera, quad_mesh
+
+        target = quad_mesh()
+        cam = close_camera(*target.bounds(), w, h, away=a.scene == "empty")
+    elif a.scene == "plant10m":
         from clraster.world.generators import plant, plant_inside_camera
         target = plant(10_100_000)
         cam = plant_inside_camera(target, w, h)

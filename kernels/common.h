@@ -93,6 +93,14 @@
 #define SQRTF(x) __builtin_sqrtf(x)
 #endif
 
+/* The same for a double (one sqrtsd; PoCL's double sqrt() is a call too), under the same
+ * probe: a compiler with one builtin has the other. Only for kernels with cl_khr_fp64. */
+#ifdef CLRASTER_NO_SQRTF
+#define SQRTD(x) sqrt(x)
+#else
+#define SQRTD(x) __builtin_sqrt(x)
+#endif
+
 /* Index of the lowest set bit of x != 0 (uint). PoCL's clz() is a call into its library,
  * not inlined; clang's builtin is one tzcnt. Fallback: OpenCL 1.2's clz. */
 #ifdef CLRASTER_NO_CTZ

@@ -21,11 +21,30 @@
 #define RS_NEED_POINT (RS_LINEAR | RS_DISTANCE | RS_POINTS)
 #define RS_NEED_NORMAL (RS_NORMALS | RS_SMOOTH | RS_CAM_NORMALS | RS_CAM_SMOOTH)
 
+/* 8 ints / floats at any int's alignment: Clang's ext_vector_type typedef of element
+ * alignment (one vmovups), or OpenCL's vload8 (a call in PoCL) where the compiler lacks it
+ * (common.h's probe: the same values). */
+#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
+#define LOAD_I8(p) vload8(0, (p))
+#define LOAD_F8(p) vload8(0, (p))
+#else
+typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
+typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
+#define LOAD_I8(p) (*(__global const int8u *)(p))
+#define LOAD_F8(p) (*(__global const float8u *)(p))
+#endif
+
+/* any lane of a comparison mask set (OpenCL's any() is a call in PoCL) */
+inline bool any8(int8 m)
+{
+    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
+}
+
 /* v scaled to unit length (times the reciprocal of its length: one division, not three);
  * zero when its length is zero or not finite (a degenerate face) */
 inline double3 unit3(double3 v)
 {
-    double len = sqrt((v.x * v.x + v.y * v.y) + v.z * v.z);
+    double len = SQRTD((v.x * v.x + v.y * v.y) + v.z * v.z);
     if (!(len > 0.0 && len <= DBL_MAX))
         return (double3)(0.0, 0.0, 0.0);
     double r = 1.0 / len;
@@ -66,6 +85,59 @@ inline double3 blend3(double b0, double b1, double b2, double3 a, double3 b, dou
                      (b0 * a.z + b1 * b.z) + b2 * c.z);
 }
 
+/* How far ahead of the 16-pixel chunk being resolved its successors' face rows (and,
+ * behind them, the rows' vertices) are asked for, in pixels: as the shading's ROWS_AHEAD
+ * and VERTS_AHEAD below. Speed only (bench/README.md's log). */
+#define RESOLVE_ROWS_AHEAD 32
+#define RESOLVE_VERTS_AHEAD 16
+
+/* The face row of triangle `id` of instance `inst` (first id lo): its row in face_verts
+ * and face_nrm. */
+#define FACE_ROW(id) (mesh_fbase[inst_mesh[inst]] + ((id) - lo))
+
+/* Ask for the face rows of the covered pixels in [a, b) whose id is in the last instance's
+ * range [lo, hi) (vert = 0), or for the vertices those rows name (vert = 1: the rows were
+ * asked for a chunk earlier): random accesses into tables of megabytes, each a cache miss;
+ * asked for together they are fetched in parallel instead of one per pixel. */
+inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int hi, int inst,
+                             int want, int vert, __global const int *inst_mesh,
+                             __global const int *mesh_fbase, __global const int *face_verts,
+                             __global const float *face_nrm,
+                             __global const float *positions, __global const float *vnormals)
+{
+    for (int q = a; q < b; ++q) {
+        int id = ids[q];
+        if (!(id >= lo && id < hi)) continue;
+        int row = FACE_ROW(id);
+        if (!vert) {
+            PREFETCH(face_verts + 3 * row);
+            if (want & RS_NEED_NORMAL) PREFETCH(face_nrm + 3 * row);
+            continue;
+        }
+        __global const int *fv = face_verts + 3 * row;
+        if (want & RS_NEED_POINT) {
+            PREFETCH(positions + 3 * fv[0]);
+            PREFETCH(positions + 3 * fv[1]);
+            PREFETCH(positions + 3 * fv[2]);
+        }
+        if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
+            PREFETCH(vnormals + 3 * fv[0]);
+            PREFETCH(vnormals + 3 * fv[1]);
+            PREFETCH(vnormals + 3 * fv[2]);
+        }
+    }
+}
+
+/* 16 pixels' background values from pixel p (a multiple of 16; the host's arrays are
+ * page-aligned): vector stores where the compiler has element-aligned vector types, else
+ * pixel by pixel (the same values). */
+#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
+#define FILL_BG(T, ptr, n, v) for (int k_ = 0; k_ < (n); ++k_) (ptr)[k_] = (v)
+#else
+#define FILL_BG(T, ptr, n, v)                                                              \
+    for (int k_ = 0; k_ < (n); k_ += 8) *(__global T##8 *)((ptr) + k_) = (T##8)(v)
+#endif
+
 __kernel void resolve_pixels(
     __global const int *ids,           /* (H·W) triangle ids, −1 background */
     __global const float *bary,        /* (H·W, 3) barycentrics (any buffer without them) */
@@ -83,82 +155,138 @@ __kernel void resolve_pixels(
     __global const double *cam,        /* fwd (3), eye (3), V⁻ᵀ (9), orthographic */
     __global uchar *mask, __global float *lin, __global float *dist, __global double *pts,
     __global float *n_face, __global float *n_smooth, __global float *n_cam,
-    __global float *n_cam_smooth)
+    __global float *n_cam_smooth,
+    /* enqueued behind a raster that skips a bin list that did not fit (raster.cl,
+     * BIN_LIST_OVER with the same summary and cap), the resolve skips too: its ids were
+     * not written (the pass is drawn again, and resolved again behind it); bin_cap < 0:
+     * after the frame, nothing to check */
+    __global const int *bin_summary, int bin_cap)
 {
+    if (bin_cap >= 0 && BIN_LIST_OVER(bin_summary, bin_cap)) return;
     int p0 = get_global_id(0) * span;
     int p1 = imin(p0 + span, npx);
     int lo = 1, hi = 0, inst = 0;   /* the last instance's id range [lo, hi) */
-    for (int p = p0; p < p1; ++p) {
-        int id = ids[p];
-        if (id < 0) {
-            if (want & RS_MASK) mask[p] = 0;
-            if (want & RS_LINEAR) lin[p] = INFINITY;
-            if (want & RS_DISTANCE) dist[p] = INFINITY;
-            if (want & RS_POINTS) { pts[3 * p] = 0.0; pts[3 * p + 1] = 0.0; pts[3 * p + 2] = 0.0; }
-            double3 z = (double3)(0.0, 0.0, 0.0);
-            if (want & RS_NORMALS) store3f(n_face, p, z);
-            if (want & RS_SMOOTH) store3f(n_smooth, p, z);
-            if (want & RS_CAM_NORMALS) store3f(n_cam, p, z);
-            if (want & RS_CAM_SMOOTH) store3f(n_cam_smooth, p, z);
-            continue;
-        }
-        if (want & RS_MASK) mask[p] = 1;
-        if (!(id >= lo && id < hi)) {
-            /* the last instance whose first id is <= id (empty instances share their
-             * successor's first id: the last of equals is the one with faces) */
-            int a = 0, b = n_inst;   /* inst_base[a] <= id < inst_base[b] (b = I: none) */
-            while (b - a > 1) {
-                int m = (a + b) >> 1;
-                if (inst_base[m] <= id) a = m; else b = m;
-            }
-            inst = a;
-            lo = inst_base[a];
-            hi = b < n_inst ? inst_base[b] : INT_MAX;
-        }
-        int row = mesh_fbase[inst_mesh[inst]] + (id - lo);
-        int ia = face_verts[3 * row], ib = face_verts[3 * row + 1], ic = face_verts[3 * row + 2];
-        double b0 = 0.0, b1 = 0.0, b2 = 0.0;
-        if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH)) {
-            b0 = (double)bary[3 * p];
-            b1 = (double)bary[3 * p + 1];
-            b2 = (double)bary[3 * p + 2];
-        }
-        if (want & RS_NEED_POINT) {
-            double3 q = blend3(b0, b1, b2, load3(positions, ia), load3(positions, ib),
-                               load3(positions, ic));
-            __global const double *m = inst_model + 12 * inst;
-            double3 wp = (double3)(MAT_ROW(m, 0, q.x, q.y, q.z), MAT_ROW(m, 1, q.x, q.y, q.z),
-                                   MAT_ROW(m, 2, q.x, q.y, q.z));
-            double3 off = (double3)(wp.x - cam[3], wp.y - cam[4], wp.z - cam[5]);
-            double along = (cam[0] * off.x + cam[1] * off.y) + cam[2] * off.z;
-            if (want & RS_LINEAR) lin[p] = (float)along;
-            if (want & RS_DISTANCE) {
-                double d = cam[15] != 0.0 ? along
-                                          : sqrt((off.x * off.x + off.y * off.y) + off.z * off.z);
-                dist[p] = (float)d;
-            }
-            if (want & RS_POINTS) {
-                pts[3 * p] = wp.x;
-                pts[3 * p + 1] = wp.y;
-                pts[3 * p + 2] = wp.z;
+    int pref = p0, prefv = p0;      /* rows / vertices of pixels below these were asked for */
+    for (int p = p0; p < p1;) {
+        if (p + 16 <= p1) {
+            /* 16 background pixels (the common case away from the surface): one test of
+             * the ids (-1 is all ones: all are −1 iff their AND is) and vector stores */
+            int8 v = LOAD_I8(ids + p) & LOAD_I8(ids + p + 8);
+            int4 v4 = v.lo & v.hi;
+            int2 v2 = v4.lo & v4.hi;
+            if ((v2.x & v2.y) == -1) {
+                if (want & RS_MASK) FILL_BG(uchar, mask + p, 16, 0);
+                if (want & RS_LINEAR) FILL_BG(float, lin + p, 16, INFINITY);
+                if (want & RS_DISTANCE) FILL_BG(float, dist + p, 16, INFINITY);
+                if (want & RS_POINTS) FILL_BG(double, pts + 3 * p, 48, 0.0);
+                if (want & RS_NORMALS) FILL_BG(float, n_face + 3 * p, 48, 0.0f);
+                if (want & RS_SMOOTH) FILL_BG(float, n_smooth + 3 * p, 48, 0.0f);
+                if (want & RS_CAM_NORMALS) FILL_BG(float, n_cam + 3 * p, 48, 0.0f);
+                if (want & RS_CAM_SMOOTH) FILL_BG(float, n_cam_smooth + 3 * p, 48, 0.0f);
+                p += 16;
+                /* keep asking for the rows ahead across the background, so that a covered
+                 * run's first rows are on their way before it starts */
+                int ahead = imin(p + RESOLVE_ROWS_AHEAD, p1);
+                if (pref < ahead && (want & (RS_NEED_POINT | RS_NEED_NORMAL))) {
+                    resolve_prefetch(ids, imax(pref, p), ahead, lo, hi, inst, want, 0,
+                                     inst_mesh, mesh_fbase, face_verts, face_nrm, positions,
+                                     vnormals);
+                    pref = ahead;
+                }
+                continue;
             }
         }
-        if (want & RS_NEED_NORMAL) {
-            double3 fn = load3(face_nrm, row);
-            __global const double *nm = inst_nrm + 9 * inst;
-            if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
-                double3 w = round32(unit3(mat3(nm, fn)));
-                if (want & RS_NORMALS) store3f(n_face, p, w);
-                if (want & RS_CAM_NORMALS) store3f(n_cam, p, unit3(mat3(cam + 6, w)));
+        int e = imin(p + 16, p1);
+        int ahead = imin(e + RESOLVE_ROWS_AHEAD, p1);
+        if (pref < ahead && (want & (RS_NEED_POINT | RS_NEED_NORMAL))) {
+            resolve_prefetch(ids, imax(pref, p), ahead, lo, hi, inst, want, 0, inst_mesh,
+                             mesh_fbase, face_verts, face_nrm, positions, vnormals);
+            pref = ahead;
+        }
+        ahead = imin(e + RESOLVE_VERTS_AHEAD, p1);
+        if (prefv < ahead && (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH))) {
+            resolve_prefetch(ids, imax(prefv, p), ahead, lo, hi, inst, want, 1, inst_mesh,
+                             mesh_fbase, face_verts, face_nrm, positions, vnormals);
+            prefv = ahead;
+        }
+        for (; p < e; ++p) {
+            int id = ids[p];
+            if (id < 0) {
+                if (want & RS_MASK) mask[p] = 0;
+                if (want & RS_LINEAR) lin[p] = INFINITY;
+                if (want & RS_DISTANCE) dist[p] = INFINITY;
+                if (want & RS_POINTS) {
+                    pts[3 * p] = 0.0;
+                    pts[3 * p + 1] = 0.0;
+                    pts[3 * p + 2] = 0.0;
+                }
+                double3 z = (double3)(0.0, 0.0, 0.0);
+                if (want & RS_NORMALS) store3f(n_face, p, z);
+                if (want & RS_SMOOTH) store3f(n_smooth, p, z);
+                if (want & RS_CAM_NORMALS) store3f(n_cam, p, z);
+                if (want & RS_CAM_SMOOTH) store3f(n_cam_smooth, p, z);
+                continue;
             }
-            if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
-                double3 s = blend3(b0, b1, b2, load3(vnormals, ia), load3(vnormals, ib),
-                                   load3(vnormals, ic));
-                /* vertex normals that cancel give no direction: the face's own there */
-                if (!(sqrt((s.x * s.x + s.y * s.y) + s.z * s.z) >= 1e-6)) s = fn;
-                double3 w = round32(unit3(mat3(nm, s)));
-                if (want & RS_SMOOTH) store3f(n_smooth, p, w);
-                if (want & RS_CAM_SMOOTH) store3f(n_cam_smooth, p, unit3(mat3(cam + 6, w)));
+            if (want & RS_MASK) mask[p] = 1;
+            if (!(id >= lo && id < hi)) {
+                /* the last instance whose first id is <= id (empty instances share their
+                 * successor's first id: the last of equals is the one with faces) */
+                int a = 0, b = n_inst;   /* inst_base[a] <= id < inst_base[b] (b = I: none) */
+                while (b - a > 1) {
+                    int m = (a + b) >> 1;
+                    if (inst_base[m] <= id) a = m; else b = m;
+                }
+                inst = a;
+                lo = inst_base[a];
+                hi = b < n_inst ? inst_base[b] : INT_MAX;
+            }
+            int row = mesh_fbase[inst_mesh[inst]] + (id - lo);
+            int ia = face_verts[3 * row], ib = face_verts[3 * row + 1];
+            int ic = face_verts[3 * row + 2];
+            double b0 = 0.0, b1 = 0.0, b2 = 0.0;
+            if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH)) {
+                b0 = (double)bary[3 * p];
+                b1 = (double)bary[3 * p + 1];
+                b2 = (double)bary[3 * p + 2];
+            }
+            if (want & RS_NEED_POINT) {
+                double3 q = blend3(b0, b1, b2, load3(positions, ia), load3(positions, ib),
+                                   load3(positions, ic));
+                __global const double *m = inst_model + 12 * inst;
+                double3 wp = (double3)(MAT_ROW(m, 0, q.x, q.y, q.z), MAT_ROW(m, 1, q.x, q.y, q.z),
+                                       MAT_ROW(m, 2, q.x, q.y, q.z));
+                double3 off = (double3)(wp.x - cam[3], wp.y - cam[4], wp.z - cam[5]);
+                double along = (cam[0] * off.x + cam[1] * off.y) + cam[2] * off.z;
+                if (want & RS_LINEAR) lin[p] = (float)along;
+                if (want & RS_DISTANCE) {
+                    double d = cam[15] != 0.0
+                                   ? along
+                                   : SQRTD((off.x * off.x + off.y * off.y) + off.z * off.z);
+                    dist[p] = (float)d;
+                }
+                if (want & RS_POINTS) {
+                    pts[3 * p] = wp.x;
+                    pts[3 * p + 1] = wp.y;
+                    pts[3 * p + 2] = wp.z;
+                }
+            }
+            if (want & RS_NEED_NORMAL) {
+                double3 fn = load3(face_nrm, row);
+                __global const double *nm = inst_nrm + 9 * inst;
+                if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
+                    double3 w = round32(unit3(mat3(nm, fn)));
+                    if (want & RS_NORMALS) store3f(n_face, p, w);
+                    if (want & RS_CAM_NORMALS) store3f(n_cam, p, unit3(mat3(cam + 6, w)));
+                }
+                if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
+                    double3 s = blend3(b0, b1, b2, load3(vnormals, ia), load3(vnormals, ib),
+                                       load3(vnormals, ic));
+                    /* vertex normals that cancel give no direction: the face's own there */
+                    if (!(SQRTD((s.x * s.x + s.y * s.y) + s.z * s.z) >= 1e-6)) s = fn;
+                    double3 w = round32(unit3(mat3(nm, s)));
+                    if (want & RS_SMOOTH) store3f(n_smooth, p, w);
+                    if (want & RS_CAM_SMOOTH) store3f(n_cam_smooth, p, unit3(mat3(cam + 6, w)));
+                }
             }
         }
     }
@@ -362,24 +490,6 @@ inline void prefetch_verts(__global const int *ids, int a, int b, int lo, int hi
  * as shade_one up to float rounding (lam = (n · l) / |n| instead of n scaled to unit length
  * first; |s| ≥ 1e-6 tested as s · s ≥ 1e-12), so within the twin's 1/255. */
 
-/* 8 ints / floats at any int's alignment: Clang's ext_vector_type typedef of element
- * alignment (one vmovups), or OpenCL's vload8 (a call in PoCL) where the compiler lacks it
- * (common.h's probe: the same values). */
-#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-#define LOAD_I8(p) vload8(0, (p))
-#define LOAD_F8(p) vload8(0, (p))
-#else
-typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
-#define LOAD_I8(p) (*(__global const int8u *)(p))
-#define LOAD_F8(p) (*(__global const float8u *)(p))
-#endif
-
-/* any lane of a comparison mask set (OpenCL's any() is a call in PoCL) */
-inline bool any8(int8 m)
-{
-    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
-}
 
 inline int hmax8(int8 v)
 {

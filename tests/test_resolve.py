@@ -253,3 +253,45 @@ def test_batch_paths_ask_the_device(monkeypatch):
     m = want.resolved["mask"]
     np.testing.assert_array_equal(v["points"][:, :3], want.resolved["points"][m])
     np.testing.assert_array_equal(v["points"][:, 3:], want.resolved["normals"][m])
+
+
+def test_resolve_enqueued_behind_the_raster(scene, monkeypatch):
+    """A frame drawn in one pass has its resolve enqueued right behind its raster (no
+    separate resolve after the frame's wait), also when the pass is drawn twice (a close
+    frame after a far one: its bin list outgrows the entry buffer, is scattered and drawn
+    again, and the resolve enqueued again behind the second raster); a frame streamed in
+    many passes
+    resolves after its last. All give the twin's outputs, bit for bit."""
+    from clraster import Renderer
+    from clraster.pipeline.stages.bin import BinStage
+    from clraster.pipeline.stages.resolve import ResolveStage
+
+    after: list[int] = []
+    redrawn: list[bool] = []
+    run, settle = ResolveStage.run, BinStage.settle
+
+    def counted_run(self, *a, **k):
+        after.append(1)
+        return run(self, *a, **k)
+
+    def seen_settle(self, *a, **k):
+        redrawn.append(settle(self, *a, **k))
+        return redrawn[-1]
+
+    monkeypatch.setattr(ResolveStage, "run", counted_run)
+    monkeypatch.setattr(BinStage, "settle", seen_settle)
+    names = ("mask", "linear_depth", "points", "smooth_normals")
+    cam = camera()
+    want = reference.Renderer(W, H).render(scene, cam, outputs=names).resolved
+    fresh = Renderer(W, H)
+    far = Camera.look_at((1.0, 2.2, 60.0), (0.0, 0.0, -0.6), fov_y=50.0, near=1.0, far=90.0)
+    fresh.render(scene, far, outputs=names)   # a short bin list: a small entry buffer
+    frames = [fresh.render(scene, cam, outputs=names), fresh.render(scene, cam, outputs=names)]
+    assert redrawn[-2:] == [True, False], redrawn   # the first close frame was drawn twice
+    assert after == []
+    small = Renderer(W, H, config=RasterConfig(batch_triangles=256, batch_entries=1024))
+    frames.append(small.render(scene, cam, outputs=names))
+    assert after == [1]
+    for f in frames:
+        for n in names:
+            np.testing.assert_array_equal(f.resolved[n], want[n], err_msg=n)

@@ -152,10 +152,12 @@ class Backend(Protocol[Out]):
 
     def _draw_pass(self, pool: GeometryPool, draws: FrameDraws, params: FrameParams,
                    totals: FrameTotals, into: Out | None, max_entries: int | None,
-                   options: FrameOptions) -> Out:
+                   options: FrameOptions, follow: Any = None) -> Out:
         """One pass of the stage chain over ``draws`` into ``into`` (None: cleared
         buffers), adding its counts and times to ``totals``; `BinBudgetExceeded` before
-        anything is drawn when its bin list would hold more than ``max_entries``."""
+        anything is drawn when its bin list would hold more than ``max_entries``.
+        ``follow``: what the backend's optional ``_follow_resolve`` made (None for a
+        backend without it)."""
         ...
 
     def _hiz_step(self, params: FrameParams) -> HiZ:
@@ -205,9 +207,17 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
                       _resolve(backend, plan, camera, o, out, stats.timings_ms), backend)
     totals = FrameTotals(timings_ms={"cull (host)": t_cull})
     occluded = None
+    # a backend that can enqueue the resolve behind the raster (the OpenCL renderer) does,
+    # for a frame drawn in one pass (one with several would resolve after each)
+    follow = None
+    follow_make = getattr(backend, "_follow_resolve", None)
+    if (o.resolve and fd is not None and follow_make is not None
+            and fd.n_tris <= config.batch_triangles):
+        follow = follow_make(plan.pool, *_resolve_inputs(backend, plan, camera, o))
 
     def one_pass(batch: FrameDraws, max_entries: int | None, into: Out | None) -> Out:
-        return backend._draw_pass(plan.pool, batch, params, totals, into, max_entries, o)
+        return backend._draw_pass(plan.pool, batch, params, totals, into, max_entries, o,
+                                  follow)
 
     def draw(draws: FrameDraws, into: Out | None) -> Out:
         # a frame (or an occlusion phase) as a stream of bounded passes
@@ -226,22 +236,36 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
             occluded = res.occluded_keys if o.fates else None
     finally:
         backend._end_frame()
-    resolved = _resolve(backend, plan, camera, o, out, totals.timings_ms)
+    resolved = _resolve(backend, plan, camera, o, out, totals.timings_ms, follow)
     return _frame(backend._buffers(out), totals.stats(counts),
                   ClusterFates.from_plan(plan, occluded) if o.fates else None, o, resolved,
                   backend)
 
 
-def _resolve(backend: Backend[Out], plan: Any, camera: CameraLike, o: FrameOptions, out: Out,
-             timings_ms: dict[str, float]) -> tuple[dict[str, np.ndarray], ResolveView | None]:
-    """The resolve outputs asked for (none: nothing runs) and the view they were made for;
-    their time goes to ``timings_ms["resolve"]``."""
-    if not o.resolve:
-        return {}, None
+def _resolve_inputs(backend: Backend[Out], plan: Any, camera: CameraLike, o: FrameOptions
+                    ) -> tuple[ResolveTables, ResolveView]:
     tables = resolve_tables(plan.pool, plan.scene)
     view = resolve_view(plan.pool, plan.scene, camera, backend.width, backend.height,
                         o.resolve)
-    arrays, ms = backend._resolve(plan.pool, tables, view, out)
+    return tables, view
+
+
+def _resolve(backend: Backend[Out], plan: Any, camera: CameraLike, o: FrameOptions, out: Out,
+             timings_ms: dict[str, float], follow: Any = None
+             ) -> tuple[dict[str, np.ndarray], ResolveView | None]:
+    """The resolve outputs asked for (none: nothing runs) and the view they were made for;
+    their time goes to ``timings_ms["resolve"]``. ``follow``: the backend's resolve
+    enqueued behind the raster (its `_follow_resolve`), used when it followed the frame's
+    last raster launch."""
+    if not o.resolve:
+        return {}, None
+    made = None if follow is None else follow.result(out)
+    if made is not None:
+        arrays, ms = made
+        view = follow.view
+    else:
+        tables, view = _resolve_inputs(backend, plan, camera, o)
+        arrays, ms = backend._resolve(plan.pool, tables, view, out)
     timings_ms["resolve"] = timings_ms.get("resolve", 0.0) + ms
     return arrays, view
 

@@ -33,7 +33,7 @@ from .stages import post as _post_passes  # noqa: F401
 from .stages.chain import StageChain
 from .stages.pyramid import Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
-from .stages.resolve import ResolveStage
+from .stages.resolve import ResolveFollow, ResolveStage
 from .twophase import OcclusionHistory
 
 __all__ = ["Renderer", "check_render_kwargs", "check_render_options"]
@@ -237,10 +237,20 @@ class Renderer:
 
     def _draw_pass(self, pool: GeometryPool, draws: FrameDraws, params: FrameParams,
                    totals: FrameTotals, into: RasterOutput | None, max_entries: int | None,
-                   options: FrameOptions) -> RasterOutput:
+                   options: FrameOptions, follow: ResolveFollow | None = None
+                   ) -> RasterOutput:
         return self.chain.draw(self.queue, pool, draws, params, totals, into=into,
                                overdraw=options.overdraw, max_entries=max_entries,
-                               bary=options.bary)
+                               bary=options.bary, follow=follow)
+
+    def _follow_resolve(self, pool: GeometryPool, tables: ResolveTables,
+                        view: ResolveView) -> ResolveFollow:
+        """The frame's resolve, to be enqueued behind its raster (`ResolveFollow`)."""
+        if self._resolver is None:
+            self._resolver = ResolveStage(self.context, self.config)
+        return ResolveFollow(self._resolver, self.chain.geometry.buffers, pool, tables, view,
+                             self.width, self.height,
+                             cast(RasterStage, self.chain.raster).pool)
 
     def _hiz_step(self, params: FrameParams) -> HiZ:
         self._pyramid = None

@@ -93,7 +93,8 @@ class Renderer:
 
     def _draw_pass(self, pool: GeometryPool, draws: FrameDraws, params: FrameParams,
                    totals: FrameTotals, into: Images | None, max_entries: int | None,
-                   options: FrameOptions) -> Images:
+                   options: FrameOptions, follow: Any = None) -> Images:
+        # (no _follow_resolve: the twin resolves after the frame, follow is None)
         return _one_pass(pool, draws, params, self.config, totals, into, max_entries)
 
     def _hiz_step(self, params: FrameParams) -> HiZ:

@@ -13,7 +13,7 @@ frame drawn in several passes into the same frame buffers reports the sums.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, cast
 
 import pyopencl as cl
@@ -172,7 +172,8 @@ class StageChain:
 
     def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
              totals: FrameTotals, *, into: RasterOutput | None = None,
-             overdraw: bool = False, max_entries: int | None = None, bary: bool = True
+             overdraw: bool = False, max_entries: int | None = None, bary: bool = True,
+             follow: Callable[[cl.CommandQueue, RasterOutput, BinBuffers], None] | None = None
              ) -> RasterOutput:
         """`bin`, then rasterize into ``into`` (the frame buffers of an earlier pass of the
         same frame, whose depth and ids take part in the depth test) or, when None, into
@@ -183,17 +184,23 @@ class StageChain:
         nothing runs: ``into`` is returned as it is, or fresh cleared buffers.
         ``max_entries``: as in `bin` (over it, nothing is drawn or counted). ``bary``:
         fresh buffers get barycentrics (False: none computed, ``out.bary`` is None).
+        ``follow(queue, out, bins)``: called right after each raster launch, before the
+        wait, to enqueue what reads the frame (`clraster.pipeline.stages.resolve.
+        ResolveFollow`; ``bins``: the launch's bin buffers, whose list the raster skips
+        when it did not fit); the wait keeps it alive.
 
         This is one pass of whatever size ``fd`` is; `clraster.pipeline.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
         """
         with self._pass(queue, leaves_work=False):
             return self._draw_pass(queue, pool, fd, params, totals, into, overdraw,
-                                   max_entries, bary)
+                                   max_entries, bary, follow)
 
     def _draw_pass(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
                    totals: FrameTotals, into: RasterOutput | None, overdraw: bool,
-                   max_entries: int | None, bary: bool) -> RasterOutput:
+                   max_entries: int | None, bary: bool,
+                   follow: Callable[[cl.CommandQueue, RasterOutput, BinBuffers], None] | None
+                   ) -> RasterOutput:
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
                 into = cast(RasterStage, self.raster).clear(queue, params, overdraw, bary)
@@ -208,7 +215,9 @@ class StageChain:
         setup = self.setup.buffers
         out, load = raster.outputs(params, into, overdraw, bary)
         events["raster"] = [raster.launch(queue, setup, bins, params, out, load)]
-        raster.wait(queue, out)
+        if follow is not None:
+            follow(queue, out, bins)
+        raster.wait(queue, out, follow)
         if bins.pending:
             # the scatter and raster ran without waiting for the list's length (BinStage.run
             # with defer); a list that did not fit drew nothing: scattered again, drawn again
@@ -219,7 +228,9 @@ class StageChain:
                 raise
             if again:
                 events["raster"].append(raster.launch(queue, setup, bins, params, out, load))
-                raster.wait(queue, out)
+                if follow is not None:
+                    follow(queue, out, bins)
+                raster.wait(queue, out, follow)
         rstats = raster.finish(queue, params, out)
         totals.clip_pieces += n_clip
         totals.binned_entries += bins.n_entries

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import mmap
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import pyopencl as cl
@@ -177,10 +177,11 @@ class RasterStage:
         (docs/ARCHITECTURE.md)."""
         self._window(queue, params)
 
-    def wait(self, queue: cl.CommandQueue, out: RasterOutput) -> None:
-        """Wait (interruptibly, `device.wait`) for what is enqueued, ``out`` kept alive
-        should the wait be interrupted (and the stage's own buffers: seg_stats)."""
-        wait(queue, keep=(out, self.buffers))
+    def wait(self, queue: cl.CommandQueue, out: RasterOutput, keep: Any = None) -> None:
+        """Wait (interruptibly, `device.wait`) for what is enqueued, ``out`` (and ``keep``:
+        what was enqueued behind the raster) kept alive should the wait be interrupted
+        (and the stage's own buffers: seg_stats)."""
+        wait(queue, keep=(out, self.buffers, keep))
 
     def finish(self, queue: cl.CommandQueue, params: FrameParams,
                out: RasterOutput) -> np.ndarray:

@@ -13,7 +13,7 @@ import pyopencl as cl
 
 from ...base.config import RasterConfig
 from ..arraypool import ArrayPool, page_aligned
-from ..device import kernel, program, shares_host_memory, wait
+from ..device import event_ms, kernel, program, shares_host_memory, wait
 from ..drawlist import GeometryPool
 from ..resolving import (
     OUTPUT_BITS,
@@ -86,6 +86,64 @@ class ShadeBuffers:
     bad: GrowBuffer
 
 
+@dataclass
+class PendingResolve:
+    """A resolve enqueued (`ResolveStage.enqueue`): its output arrays (name → array, written
+    by the kernel), the buffers over them (in the kernel's argument order), its event.
+    Keep it alive until a wait has seen the kernel complete."""
+
+    outs: dict[str, np.ndarray]
+    args: list[cl.Buffer]
+    event: cl.Event
+
+
+class ResolveFollow:
+    """The frame's resolve enqueued right behind each raster launch (`StageChain.draw`'s
+    ``follow``), so the wait for the raster covers it too: no host round trip (a wait, the
+    host's resolve set-up, a second wait) between the last pass and the outputs. The
+    latest enqueue is the one after the frame's last raster launch; an earlier one (a
+    pass redrawn, or an earlier pass of a streamed frame) is kept alive until `result`,
+    past the wait that saw it finish."""
+
+    def __init__(self, stage: ResolveStage, geometry: GeometryBuffers, pool: GeometryPool,
+                 tables: ResolveTables, view: ResolveView, width: int, height: int,
+                 arrays: ArrayPool) -> None:
+        self._stage, self._geometry, self._pool = stage, geometry, pool
+        self._tables, self._view, self._size, self._arrays = tables, view, (width, height), arrays
+        self._pending: PendingResolve | None = None
+        self._after: Any = None   # the frame buffers the last enqueue read
+        self._queue: cl.CommandQueue | None = None
+        self._stale: list[PendingResolve] = []
+
+    @property
+    def view(self) -> ResolveView:
+        """The view the outputs are made for."""
+        return self._view
+
+    def __call__(self, queue: cl.CommandQueue, out: Any, bins: Any) -> None:
+        """Enqueue the resolve of ``out`` (a `RasterOutput` whose raster over the
+        `BinBuffers` ``bins`` was just enqueued: where that raster skips a list that did
+        not fit, so does the resolve)."""
+        if self._pending is not None:
+            self._stale.append(self._pending)
+        bary = out.bufs[2] if out.bary is not None else None
+        self._pending = self._stage.enqueue(queue, self._geometry, self._pool, self._tables,
+                                            self._view, out.bufs[1], bary, *self._size,
+                                            self._arrays, bins)
+        self._after, self._queue = out, queue
+
+    def result(self, out: Any) -> tuple[dict[str, np.ndarray], float] | None:
+        """After the frame's last wait: the outputs (name → array) of the resolve enqueued
+        after the last raster launch into ``out`` and its milliseconds, or None when none
+        was (the caller resolves then)."""
+        self._stale.clear()
+        pending, self._pending = self._pending, None
+        if pending is None or self._after is not out or self._queue is None:
+            return None
+        outs, ev = self._stage.collect(self._queue, pending)
+        return outs, event_ms([ev])
+
+
 class ResolveStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
         opts = (*config.build_options(),
@@ -144,7 +202,22 @@ class ResolveStage:
         in the device buffers ``ids`` and ``bary``; ``geometry`` holds ``pool``'s
         positions (`GeometryStage.upload_pool`). Returns name → array (readable on return;
         shapes, dtypes, background values: `clraster.pipeline.reference.resolve.resolve`)
-        and the kernel's event. Call while the queue is idle (after the frame's last pass)."""
+        and the kernel's event. Call while the queue is idle (after the frame's last pass):
+        `enqueue`, a wait, `collect`."""
+        pending = self.enqueue(queue, geometry, pool, tables, view, ids, bary, width, height,
+                               arrays)
+        wait(queue, keep=(pending, self.buffers))
+        return self.collect(queue, pending)
+
+    def enqueue(self, queue: cl.CommandQueue, geometry: GeometryBuffers, pool: GeometryPool,
+                tables: ResolveTables, view: ResolveView, ids: cl.Buffer,
+                bary: cl.Buffer | None, width: int, height: int, arrays: ArrayPool,
+                bins: Any = None) -> PendingResolve:
+        """`run`'s kernel enqueued behind whatever is on the queue (the frame's raster:
+        `ResolveFollow`), its output arrays allocated; wait for the queue (keeping the
+        result and this stage's buffers alive), then `collect`. ``bins``: the
+        `BinBuffers` of the raster just enqueued, whose skip (a bin list that did not fit)
+        the kernel repeats; None after the frame."""
         b = self.buffers
         smooth = any(n in view.names for n in ("smooth_normals", "smooth_camera_normals"))
         if self._upload_tables(queue, pool, tables, smooth):
@@ -172,17 +245,24 @@ class ResolveStage:
                          b.inst_mesh.ensure(1), b.mesh_fbase.ensure(1), b.face_verts.ensure(1),
                          b.face_nrm.ensure(1),
                          positions, vnormals, b.inst_model.ensure(1), b.inst_nrm.ensure(1),
-                         b.cam.ensure(1), *args)
-        wait(queue, keep=(args, outs, self.buffers))
+                         b.cam.ensure(1), *args,
+                         bins.summary.buf if bins is not None else ids,
+                         np.int32(bins.cap if bins is not None else -1))
+        return PendingResolve(outs, args, ev)
+
+    def collect(self, queue: cl.CommandQueue, pending: PendingResolve
+                ) -> tuple[dict[str, np.ndarray], cl.Event]:
+        """After the wait that followed `enqueue`: the outputs (made readable where the
+        device does not work in host memory) and the kernel's event."""
         if not shares_host_memory(self.ctx):
-            for name, buf in zip(_IMAGES, args, strict=True):
-                if name in outs:
+            for name, buf in zip(_IMAGES, pending.args, strict=True):
+                if name in pending.outs:
+                    out = pending.outs[name]
                     mapped, _ = cl.enqueue_map_buffer(queue, buf, cl.map_flags.READ, 0,
-                                                      outs[name].shape, outs[name].dtype,
-                                                      is_blocking=False)
+                                                      out.shape, out.dtype, is_blocking=False)
                     mapped.base.release(queue)
             queue.finish()
-        return outs, ev
+        return pending.outs, pending.event
 
     def _upload_shade(self, queue: cl.CommandQueue, pool: GeometryPool,
                       tables: ResolveTables, smooth: bool, sources: ShadeSources | None,
