@@ -85,20 +85,16 @@ inline double3 blend3(double b0, double b1, double b2, double3 a, double3 b, dou
                      (b0 * a.z + b1 * b.z) + b2 * c.z);
 }
 
-/* How far ahead of the 16-pixel chunk being resolved its successors' face rows (and,
- * behind them, the rows' vertices) are asked for, in pixels: as the shading's ROWS_AHEAD
- * and VERTS_AHEAD below. Speed only (bench/README.md's log). */
-#define RESOLVE_ROWS_AHEAD 32
-#define RESOLVE_VERTS_AHEAD 16
-
 /* The face row of triangle `id` of instance `inst` (first id lo): its row in face_verts
  * and face_nrm. */
 #define FACE_ROW(id) (mesh_fbase[inst_mesh[inst]] + ((id) - lo))
 
 /* Ask for the face rows of the covered pixels in [a, b) whose id is in the last instance's
- * range [lo, hi) (vert = 0), or for the vertices those rows name (vert = 1: the rows were
- * asked for a chunk earlier): random accesses into tables of megabytes, each a cache miss;
- * asked for together they are fetched in parallel instead of one per pixel. */
+ * range [lo, hi) (vert = 0), or for the vertices those rows name (vert = 1): random
+ * accesses into tables of megabytes; asked for together, a chunk's are fetched in parallel
+ * instead of one dependent miss after another. Asked for right before the chunk is
+ * resolved: asking 8–32 pixels ahead, or the vertices a chunk before their use, was slower
+ * (bench/README.md's log). */
 inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int hi, int inst,
                              int want, int vert, __global const int *inst_mesh,
                              __global const int *mesh_fbase, __global const int *face_verts,
@@ -166,7 +162,6 @@ __kernel void resolve_pixels(
     int p0 = get_global_id(0) * span;
     int p1 = imin(p0 + span, npx);
     int lo = 1, hi = 0, inst = 0;   /* the last instance's id range [lo, hi) */
-    int pref = p0, prefv = p0;      /* rows / vertices of pixels below these were asked for */
     for (int p = p0; p < p1;) {
         if (p + 16 <= p1) {
             /* 16 background pixels (the common case away from the surface): one test of
@@ -184,31 +179,16 @@ __kernel void resolve_pixels(
                 if (want & RS_CAM_NORMALS) FILL_BG(float, n_cam + 3 * p, 48, 0.0f);
                 if (want & RS_CAM_SMOOTH) FILL_BG(float, n_cam_smooth + 3 * p, 48, 0.0f);
                 p += 16;
-                /* keep asking for the rows ahead across the background, so that a covered
-                 * run's first rows are on their way before it starts */
-                int ahead = imin(p + RESOLVE_ROWS_AHEAD, p1);
-                if (pref < ahead && (want & (RS_NEED_POINT | RS_NEED_NORMAL))) {
-                    resolve_prefetch(ids, imax(pref, p), ahead, lo, hi, inst, want, 0,
-                                     inst_mesh, mesh_fbase, face_verts, face_nrm, positions,
-                                     vnormals);
-                    pref = ahead;
-                }
                 continue;
             }
         }
         int e = imin(p + 16, p1);
-        int ahead = imin(e + RESOLVE_ROWS_AHEAD, p1);
-        if (pref < ahead && (want & (RS_NEED_POINT | RS_NEED_NORMAL))) {
-            resolve_prefetch(ids, imax(pref, p), ahead, lo, hi, inst, want, 0, inst_mesh,
-                             mesh_fbase, face_verts, face_nrm, positions, vnormals);
-            pref = ahead;
-        }
-        ahead = imin(e + RESOLVE_VERTS_AHEAD, p1);
-        if (prefv < ahead && (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH))) {
-            resolve_prefetch(ids, imax(prefv, p), ahead, lo, hi, inst, want, 1, inst_mesh,
-                             mesh_fbase, face_verts, face_nrm, positions, vnormals);
-            prefv = ahead;
-        }
+        if (want & (RS_NEED_POINT | RS_NEED_NORMAL))
+            resolve_prefetch(ids, p, e, lo, hi, inst, want, 0, inst_mesh, mesh_fbase,
+                             face_verts, face_nrm, positions, vnormals);
+        if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH))
+            resolve_prefetch(ids, p, e, lo, hi, inst, want, 1, inst_mesh, mesh_fbase,
+                             face_verts, face_nrm, positions, vnormals);
         for (; p < e; ++p) {
             int id = ids[p];
             if (id < 0) {
