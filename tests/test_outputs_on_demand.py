@@ -123,3 +123,25 @@ def test_renderer_frames_survive_recycling(scene):
     assert np.array_equal(kept.depth, ref[0]) and np.array_equal(kept.triangle_id, ref[1])
     assert np.array_equal(kept.barycentrics, ref[2])
     assert r.chain.raster.pool.free_bytes > 0
+
+
+def test_resized_renderer_shares_device_state_and_draws_fresh_frames(scene):
+    """`Renderer.resized`: the queue, stage chain, plan cache and lock are the base's (the
+    occlusion history too unless share_history=False), and every frame, at either size and
+    in any order, is exactly a fresh renderer's (occlusion culling is conservative, so a
+    shared history changes no pixel)."""
+    base = Renderer(96, 64)
+    small = base.resized(48, 32)
+    other = base.resized(40, 30, share_history=False)
+    for r in (small, other):
+        assert (r.queue, r.chain, r.pyramid, r._plans, r._lock) == (
+            base.queue, base.chain, base.pyramid, base._plans, base._lock)
+    assert small._history is base._history and other._history is not base._history
+    for occlusion in (False, True, True):
+        for r in (base, small, other, small):
+            cam = plant_inside_camera(scene, r.width, r.height)
+            got = r.render(scene, cam, occlusion=occlusion)
+            want = Renderer(r.width, r.height).render(scene, cam, occlusion=occlusion)
+            assert got.depth.shape == (r.height, r.width)
+            assert np.array_equal(got.triangle_id, want.triangle_id)
+            assert np.array_equal(got.depth, want.depth)

@@ -115,6 +115,26 @@ class Renderer:
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
         self._resolver: ResolveStage | None = None   # built on the first resolve output
 
+    def resized(self, width: int, height: int, *, share_history: bool = True) -> Renderer:
+        """A renderer of ``width`` × ``height`` on this one's device state: its queue, stage
+        chain (the scene's geometry pool uploaded once, and the per-pass buffers, which each
+        frame's parameters size), Hi-Z pyramid stage, plan cache (the scene's host geometry
+        pool) and lock. So the scene is held once however many sizes are used (a viewer's
+        render scales), and frames of all of them are serialized. Its frames are exactly a
+        fresh renderer's of that size (and config).
+
+        share_history: True (default): this renderer's occlusion history too — a view
+        walked at changing sizes keeps phase 1's guess (last frame's visible clusters)
+        current; visibility is per cluster and culling conservative whatever the history.
+        False: a fresh one (a second view that must not disturb the first's).
+        """
+        r = Renderer(width, height, config=self.config, context=self.context)
+        r.queue, r.chain, r.pyramid = self.queue, self.chain, self.pyramid
+        r._plans, r._lock = self._plans, self._lock
+        if share_history:
+            r._history = self._history
+        return r
+
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
                overdraw: bool = False, fates: bool = False, reversed_z: bool = False,

@@ -134,17 +134,15 @@ class Engine:
     def renderer(self, w: int, h: int) -> Any:
         """The first-person `clraster.Renderer` of size w × h (made on first use, kept).
         Every size shares the full-size renderer's device state and occlusion history
-        (`_shared_renderer`): one copy of the scene and one set of stage buffers, whatever
+        (`Renderer.resized`): one copy of the scene and one set of stage buffers, whatever
         the scales walked."""
         with self._make_lock:
             full = (self.width, self.height)
             if full not in self._renderers:
-                self._renderers[full] = _shared_renderer(self.context, *full, None, None)
+                self._renderers[full] = _renderer(self.context, *full)
             r = self._renderers.get((w, h))
             if r is None:
-                base = self._renderers[full]
-                r = self._renderers[(w, h)] = _shared_renderer(self.context, w, h, base,
-                                                               base._history)
+                r = self._renderers[(w, h)] = self._renderers[full].resized(w, h)
             return r
 
     def pane(self, w: int, h: int) -> ThirdPerson:
@@ -152,7 +150,6 @@ class Engine:
         device state but has its own occlusion history (the pane is not walked: it must not
         disturb the first-person history; it renders without occlusion culling anyway)."""
         from ..pipeline.lines import LineRenderer
-        from ..pipeline.twophase import OcclusionHistory
 
         base = self.renderer(self.width, self.height)
         with self._make_lock:
@@ -160,8 +157,8 @@ class Engine:
                 lines = self._lines.get((w, h))
                 if lines is None:
                     lines = self._lines[(w, h)] = LineRenderer(w, h, context=self.context)
-                self._panes[(w, h)] = ThirdPerson(vs=self.vs, renderer=_shared_renderer(
-                    self.context, w, h, base, OcclusionHistory()), lines=lines)
+                self._panes[(w, h)] = ThirdPerson(
+                    vs=self.vs, renderer=base.resized(w, h, share_history=False), lines=lines)
             return self._panes[(w, h)]
 
     def inset_size(self) -> tuple[int, int]:
@@ -293,27 +290,15 @@ class Engine:
         return self.frame(replace(state, lossless=True, inset=False), 1.0)
 
 
-def _shared_renderer(context: Any, w: int, h: int, base: Any, history: Any) -> Any:
-    """A `clraster.Renderer` of w × h; with a ``base`` renderer, one that shares base's
-    queue, stage chain (the scene's uploaded geometry pool and the per-pass buffers, which
-    `FrameParams` size per frame), pyramid stage, plan cache (the scene's host
-    `GeometryPool`) and lock, with ``history`` as its occlusion history.
-
-    Why: a renderer per render scale held its own copies — ~450 MiB each for the 10M
-    plant (the pool on the host and on the device, stage buffers grown to a pass) — so a
-    walk that reached every scale and the pane grew by ~1.8 GiB. Shared, the frames are
-    exactly a fresh renderer's (tests/test_viewer.py checks it), since the stages take the
-    image size from each frame's parameters; the shared lock serializes their frames.
-    One occlusion history for every first-person scale also keeps phase 1's guess (last
-    frame's visible clusters) current when the scale changes: visibility is per cluster,
-    not per pixel, and culling is conservative whatever the history."""
+def _renderer(context: Any, w: int, h: int) -> Any:
+    """The full-size `clraster.Renderer`; every other size is its `Renderer.resized` (one
+    copy of the scene and of the stage buffers, whatever the scales walked: a renderer per
+    render scale held its own — ~450 MiB each for the 10M plant, the pool on the host and
+    on the device and stage buffers grown to a pass — and a walk that reached every scale
+    and the pane grew by ~1.8 GiB; tests/test_viewer.py checks the frames)."""
     from ..pipeline.renderer import Renderer
 
-    r = Renderer(w, h, context=context)
-    if base is not None:
-        r.queue, r.chain, r.pyramid = base.queue, base.chain, base.pyramid
-        r._plans, r._lock, r._history = base._plans, base._lock, history
-    return r
+    return Renderer(w, h, context=context)
 
 
 def _camera_key(c: FlyCamera) -> tuple[float, ...]:
