@@ -6,7 +6,8 @@
  *
  * One work-item per span of `span` consecutive pixels (row-major), looping: neighbouring
  * pixels mostly share an instance, so the instance found last is tried first before the
- * binary search over the instances' first ids. Only the outputs whose RS_* bit is in `want`
+ * binary search over the instances' first ids; a group of 8 covered pixels all of that
+ * instance is resolved in double8 lanes (resolve_lanes), the others pixel by pixel. Only the outputs whose RS_* bit is in `want`
  * are written (the others' arguments are some other buffer, untouched).
  *
  * Values are float64 from the float32 pool positions and barycentrics, FP_CONTRACT off
@@ -134,6 +135,190 @@ inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int 
     for (int k_ = 0; k_ < (n); k_ += 8) *(__global T##8 *)((ptr) + k_) = (T##8)(v)
 #endif
 
+/* ---- resolve_pixels' lanes: 8 consecutive covered pixels of one instance in double8
+ * values, the scalar body's double operations in its order lane by lane (FP_CONTRACT is
+ * off), so each lane's bits are the scalar path's. Lane masks are long8 of -1/0 from
+ * double8 comparisons, applied with & and ~ on the bits: no select() or ?: on them (PoCL
+ * 3.0 cached programs with select on 8-lane 64-bit vectors without their kernels; Oclgrind
+ * 21.10 computes ?: and ! on integer vector masks wrong). */
+#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
+/* (lane by lane: PoCL 3.0 cached the program built with convert_double8, convert_float8
+ * and vstore8 here without its kernels) */
+#define LANES8(f, v) f((v).s0), f((v).s1), f((v).s2), f((v).s3), f((v).s4), f((v).s5),       \
+                     f((v).s6), f((v).s7)
+#define AS_DOUBLE(x) ((double)(x))
+#define AS_FLOAT(x) ((float)(x))
+#define STORE_F8(v, p)                                                                      \
+    { float8 s_ = (v); __global float *d_ = (p);                                           \
+      d_[0] = s_.s0; d_[1] = s_.s1; d_[2] = s_.s2; d_[3] = s_.s3;                           \
+      d_[4] = s_.s4; d_[5] = s_.s5; d_[6] = s_.s6; d_[7] = s_.s7; }
+#define STORE_C8(v, p)                                                                      \
+    for (int c_ = 0; c_ < 8; ++c_) (p)[c_] = (v).s0
+#define TO_D8(v) ((double8)(LANES8(AS_DOUBLE, v)))
+#define TO_F8(v) ((float8)(LANES8(AS_FLOAT, v)))
+#else
+typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
+#define STORE_F8(v, p) (*(__global float8u *)(p) = (v))
+#define STORE_C8(v, p) (*(__global uchar8u *)(p) = (v))
+#define TO_D8(v) __builtin_convertvector((v), double8)
+#define TO_F8(v) __builtin_convertvector((v), float8)
+#endif
+
+/* lane k of x, y, z (double8) from the float triple at t + 3 · idx.sk */
+#define GATHER3(x, y, z, t, idx, k)                                                         \
+    { __global const float *g_ = (t) + 3 * (idx).s##k;                                     \
+      x.s##k = (double)g_[0]; y.s##k = (double)g_[1]; z.s##k = (double)g_[2]; }
+#define GATHER3_ALL(x, y, z, t, idx)                                                        \
+    GATHER3(x, y, z, t, idx, 0) GATHER3(x, y, z, t, idx, 1) GATHER3(x, y, z, t, idx, 2)     \
+    GATHER3(x, y, z, t, idx, 3) GATHER3(x, y, z, t, idx, 4) GATHER3(x, y, z, t, idx, 5)     \
+    GATHER3(x, y, z, t, idx, 6) GATHER3(x, y, z, t, idx, 7)
+
+/* the square root of each lane (SQRTD per lane: one vsqrtpd where the compiler joins them) */
+ALWAYS_INLINE double8 sqrt8(double8 s)
+{
+    return (double8)(SQRTD(s.s0), SQRTD(s.s1), SQRTD(s.s2), SQRTD(s.s3), SQRTD(s.s4),
+                     SQRTD(s.s5), SQRTD(s.s6), SQRTD(s.s7));
+}
+
+/* v's bits where mask m (-1/0 per lane) is set, +0.0 elsewhere */
+ALWAYS_INLINE double8 keep8(double8 v, long8 m)
+{
+    return as_double8(as_long8(v) & m);
+}
+
+/* unit3 per lane: *x, *y, *z scaled by the reciprocal of their length, zero where the
+ * length is zero or not finite */
+ALWAYS_INLINE void unit8(double8 *x, double8 *y, double8 *z)
+{
+    double8 len = sqrt8((*x * *x + *y * *y) + *z * *z);
+    long8 ok = (len > 0.0) & (len <= DBL_MAX);
+    double8 r = 1.0 / len;
+    *x = keep8(*x * r, ok);
+    *y = keep8(*y * r, ok);
+    *z = keep8(*z * r, ok);
+}
+
+/* mat3 per lane: row-major 3 × 3 m times (x, y, z), in place */
+ALWAYS_INLINE void mat3_8(__global const double *m, double8 *x, double8 *y, double8 *z)
+{
+    double8 tx = (m[0] * *x + m[1] * *y) + m[2] * *z;
+    double8 ty = (m[3] * *x + m[4] * *y) + m[5] * *z;
+    double8 tz = (m[6] * *x + m[7] * *y) + m[8] * *z;
+    *x = tx; *y = ty; *z = tz;
+}
+
+/* 8 pixels' normals (x, y, z per lane) as 24 interleaved floats at p3 = n + 3 · p */
+ALWAYS_INLINE void store_n8(__global float *p3, double8 x, double8 y, double8 z)
+{
+    float8 a = TO_F8(x), b = TO_F8(y), c = TO_F8(z);
+    STORE_F8(((float8)(a.s0, b.s0, c.s0, a.s1, b.s1, c.s1, a.s2, b.s2)), p3);
+    STORE_F8(((float8)(c.s2, a.s3, b.s3, c.s3, a.s4, b.s4, c.s4, a.s5)), p3 + 8);
+    STORE_F8(((float8)(b.s5, c.s5, a.s6, b.s6, c.s6, a.s7, b.s7, c.s7)), p3 + 16);
+}
+
+/* Resolve pixels [p, p + 8) in lanes when all eight ids are in the last instance's range
+ * [lo, hi) (so covered: lo >= 0); false, with nothing written, otherwise (the scalar path
+ * takes them). `want` asks for a point or a normal. */
+ALWAYS_INLINE bool resolve_lanes(
+    __global const int *ids, __global const float *bary, int p, int want, int lo, int hi,
+    int inst, __global const int *inst_mesh, __global const int *mesh_fbase,
+    __global const int *face_verts, __global const float *face_nrm,
+    __global const float *positions, __global const float *vnormals,
+    __global const double *inst_model, __global const double *inst_nrm,
+    __global const double *cam, __global uchar *mask, __global float *lin,
+    __global float *dist, __global double *pts, __global float *n_face,
+    __global float *n_smooth, __global float *n_cam, __global float *n_cam_smooth)
+{
+    int8 v = LOAD_I8(ids + p);
+    if (any8(~((v >= (int8)(lo)) & (v < (int8)(hi)))))
+        return false;
+    int8 row = v + (int8)(mesh_fbase[inst_mesh[inst]] - lo);
+    int8 ia, ib, ic;
+#define GATHER_FV(k)                                                                        \
+    { __global const int *f_ = face_verts + 3 * row.s##k;                                  \
+      ia.s##k = f_[0]; ib.s##k = f_[1]; ic.s##k = f_[2]; }
+    GATHER_FV(0) GATHER_FV(1) GATHER_FV(2) GATHER_FV(3)
+    GATHER_FV(4) GATHER_FV(5) GATHER_FV(6) GATHER_FV(7)
+#undef GATHER_FV
+    double8 b0 = 0.0, b1 = 0.0, b2 = 0.0;
+    if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH)) {
+        /* 24 consecutive floats: three loads, deinterleaved */
+        float8 x0 = LOAD_F8(bary + 3 * p), x1 = LOAD_F8(bary + 3 * p + 8);
+        float8 x2 = LOAD_F8(bary + 3 * p + 16);
+        b0 = TO_D8(((float8)(x0.s036, x1.s147, x2.s25)));
+        b1 = TO_D8(((float8)(x0.s147, x1.s25, x2.s036)));
+        b2 = TO_D8(((float8)(x0.s25, x1.s036, x2.s147)));
+    }
+    if (want & RS_MASK) STORE_C8((uchar8)(1), mask + p);
+    if (want & RS_NEED_POINT) {
+        double8 ax, ay, az, bx, by, bz, cx, cy, cz;
+        GATHER3_ALL(ax, ay, az, positions, ia)
+        GATHER3_ALL(bx, by, bz, positions, ib)
+        GATHER3_ALL(cx, cy, cz, positions, ic)
+        double8 qx = (b0 * ax + b1 * bx) + b2 * cx;
+        double8 qy = (b0 * ay + b1 * by) + b2 * cy;
+        double8 qz = (b0 * az + b1 * bz) + b2 * cz;
+        __global const double *m = inst_model + 12 * inst;
+        double8 wx = MAT_ROW(m, 0, qx, qy, qz), wy = MAT_ROW(m, 1, qx, qy, qz);
+        double8 wz = MAT_ROW(m, 2, qx, qy, qz);
+        double8 ox = wx - cam[3], oy = wy - cam[4], oz = wz - cam[5];
+        double8 along = (cam[0] * ox + cam[1] * oy) + cam[2] * oz;
+        if (want & RS_LINEAR) STORE_F8(TO_F8(along), lin + p);
+        if (want & RS_DISTANCE) {
+            double8 d = cam[15] != 0.0 ? along : sqrt8((ox * ox + oy * oy) + oz * oz);
+            STORE_F8(TO_F8(d), dist + p);
+        }
+        if (want & RS_POINTS) {
+            __global double *o = pts + 3 * p;
+#define STORE_PT(k) o[3 * k] = wx.s##k; o[3 * k + 1] = wy.s##k; o[3 * k + 2] = wz.s##k;
+            STORE_PT(0) STORE_PT(1) STORE_PT(2) STORE_PT(3)
+            STORE_PT(4) STORE_PT(5) STORE_PT(6) STORE_PT(7)
+#undef STORE_PT
+        }
+    }
+    if (want & RS_NEED_NORMAL) {
+        double8 fx, fy, fz;
+        GATHER3_ALL(fx, fy, fz, face_nrm, row)
+        __global const double *nm = inst_nrm + 9 * inst;
+        if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
+            double8 x = fx, y = fy, z = fz;
+            mat3_8(nm, &x, &y, &z);
+            unit8(&x, &y, &z);
+            x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));   /* round32 */
+            if (want & RS_NORMALS) store_n8(n_face + 3 * p, x, y, z);
+            if (want & RS_CAM_NORMALS) {
+                mat3_8(cam + 6, &x, &y, &z);
+                unit8(&x, &y, &z);
+                store_n8(n_cam + 3 * p, x, y, z);
+            }
+        }
+        if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
+            double8 ax, ay, az, bx, by, bz, cx, cy, cz;
+            GATHER3_ALL(ax, ay, az, vnormals, ia)
+            GATHER3_ALL(bx, by, bz, vnormals, ib)
+            GATHER3_ALL(cx, cy, cz, vnormals, ic)
+            double8 x = (b0 * ax + b1 * bx) + b2 * cx;
+            double8 y = (b0 * ay + b1 * by) + b2 * cy;
+            double8 z = (b0 * az + b1 * bz) + b2 * cz;
+            /* vertex normals that cancel give no direction: the face's own there */
+            long8 strong = sqrt8((x * x + y * y) + z * z) >= 1e-6;
+            x = as_double8((as_long8(x) & strong) | (as_long8(fx) & ~strong));
+            y = as_double8((as_long8(y) & strong) | (as_long8(fy) & ~strong));
+            z = as_double8((as_long8(z) & strong) | (as_long8(fz) & ~strong));
+            mat3_8(nm, &x, &y, &z);
+            unit8(&x, &y, &z);
+            x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));
+            if (want & RS_SMOOTH) store_n8(n_smooth + 3 * p, x, y, z);
+            if (want & RS_CAM_SMOOTH) {
+                mat3_8(cam + 6, &x, &y, &z);
+                unit8(&x, &y, &z);
+                store_n8(n_cam_smooth + 3 * p, x, y, z);
+            }
+        }
+    }
+    return true;
+}
+
 __kernel void resolve_pixels(
     __global const int *ids,           /* (H·W) triangle ids, −1 background */
     __global const float *bary,        /* (H·W, 3) barycentrics (any buffer without them) */
@@ -189,7 +374,20 @@ __kernel void resolve_pixels(
         if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH))
             resolve_prefetch(ids, p, e, lo, hi, inst, want, 1, inst_mesh, mesh_fbase,
                              face_verts, face_nrm, positions, vnormals);
-        for (; p < e; ++p) {
+        for (int g = p; p < e; ++p) {
+            /* at each group of 8 (from the chunk's start): all eight at once where they
+             * are covered pixels of the last instance (resolve_lanes), else one by one */
+            if (p == g) {
+                g = imin(p + 8, e);
+                if (g == p + 8 && (want & (RS_NEED_POINT | RS_NEED_NORMAL))
+                    && resolve_lanes(ids, bary, p, want, lo, hi, inst, inst_mesh, mesh_fbase,
+                                     face_verts, face_nrm, positions, vnormals, inst_model,
+                                     inst_nrm, cam, mask, lin, dist, pts, n_face, n_smooth,
+                                     n_cam, n_cam_smooth)) {
+                    p = g - 1;   /* (the loop's ++p moves on to the next group) */
+                    continue;
+                }
+            }
             int id = ids[p];
             if (id < 0) {
                 if (want & RS_MASK) mask[p] = 0;

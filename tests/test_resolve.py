@@ -295,3 +295,89 @@ def test_resolve_enqueued_behind_the_raster(scene, monkeypatch):
     for f in frames:
         for n in names:
             np.testing.assert_array_equal(f.resolved[n], want[n], err_msg=n)
+
+
+def _lane_scene() -> Scene:
+    """A bent sheet of 3,200 small faces filling most of the frame (whole groups of 8
+    pixels of one instance: kernels/resolve.cl resolve_lanes), part of it doubled by faces
+    of the reverse winding drawn after it (its vertices' normals cancel there, to zero or to
+    lengths under 1e-6: the smooth normals' fallback to the face normal, in some lanes of a
+    group and not in others along the part's edge), and a patch of faces whose normals are
+    made zero or NaN (no face the raster draws has one, so they are set by hand in the
+    mesh's cached table, which device and twin both read: unit3's zero case for a zero and
+    for a non-finite length, in whole groups and in single lanes); a sphere in front of the
+    sheet (groups of two instances)."""
+    n = 40
+    base = grid((-2.4, -1.8, 0.0), (4.8, 0.0, 0.0), (0.0, 3.6, 0.0), n)
+    v = base.vertices.astype(np.float64)
+    v[:, 2] = 0.3 * np.sin(1.3 * v[:, 0]) * np.cos(0.9 * v[:, 1])
+    f = base.faces
+    cell = np.concatenate([np.arange(n * n)] * 2)   # cell i * n + j of each face
+    doubled = f[(cell // n < 14) & (cell % n < 20)]
+    sheet = Mesh(v, np.concatenate([f, doubled[:, ::-1]]))
+    fn = sheet.face_normals().copy()
+    i, j = cell // n, cell % n
+    patch = np.flatnonzero((i >= 4) & (i < 14) & (j >= 24) & (j < 34))
+    fn[patch[::2]] = 0.0
+    fn[patch[1::2]] = np.nan
+    fn.flags.writeable = False
+    sheet._face_normals = fn
+    sphere = Mesh.from_trimesh(trimesh.creation.icosphere(subdivisions=3, radius=0.55))
+    front = np.eye(4)
+    front[:3, 3] = (0.9, 0.5, 0.8)
+    return Scene([(sheet, np.eye(4)), (sphere, front)])
+
+
+def _lane_camera(kind: str) -> Camera:
+    if kind == "orthographic":
+        from conftest import ortho
+
+        view = Camera.look_at((0.2, 0.1, 5.0), (0.2, 0.1, 0.0)).view
+        return Camera.from_matrices(view, ortho(-2.3, 2.3, -1.7, 1.7, 1.0, 10.0))
+    return Camera.look_at((0.2, 0.1, 4.2), (0.1, 0.0, 0.0), fov_y=50.0, near=1.0, far=20.0)
+
+
+@pytest.mark.parametrize("kind", ["perspective", "reversed_z", "orthographic"])
+def test_lane_groups_equal_twin(kind):
+    """Every resolve output, bit for bit against the twin, on a frame with both kinds of
+    8-pixel group resolve_pixels meets: all eight covered by the instance found last (its
+    lanes), and groups mixing instances, the background and the ragged end of the frame
+    (83 × 61 pixels: not multiples of 8 or 16); unit3's zero case and the smooth normals'
+    fallback inside whole groups."""
+    scene = _lane_scene()
+    cam = _lane_camera(kind)
+    rz = kind == "reversed_z"
+    dev = get_renderer(W, H).render(scene, cam, cull="none", outputs=ALL, reversed_z=rz)
+    twin = reference.Renderer(W, H).render(scene, cam, cull="none", outputs=ALL,
+                                           reversed_z=rz)
+    np.testing.assert_array_equal(dev.triangle_id, twin.triangle_id)
+    # the frame has what the test is about (groups of 8 from pixel 0, row-major)
+    ids = dev.triangle_id.reshape(-1)
+    n8 = ids.size // 8
+    base = scene.face_base.reshape(-1)
+    inst = np.where(ids >= 0, np.searchsorted(base, ids, side="right") - 1, -1)
+    groups = inst[:8 * n8].reshape(n8, 8)
+    whole = (groups >= 0).all(1) & (groups == groups[:, :1]).all(1)
+    assert whole.sum() > 200 and (whole & (groups[:, 0] == 1)).sum() > 10
+    two = (groups >= 0).all(1) & ~whole
+    assert two.sum() > 5, "groups of two instances"
+    assert ((groups < 0).any(1) & (groups >= 0).any(1)).sum() > 5, "covered and background"
+    assert ids.size % 8 and ids[8 * n8:].max() >= 0 or ids.size % 16, "a ragged end"
+    nrm, smooth = dev.resolved["normals"], dev.resolved["smooth_normals"]
+    in_whole = np.repeat(whole, 8).reshape(-1)
+    sheet = in_whole & (inst[:8 * n8] == 0)
+    zero = ~nrm.reshape(-1, 3)[:8 * n8].any(1)
+    assert (sheet & zero).sum() >= 16 and not (zero & (inst[:8 * n8] == 1)).any()
+    same = (smooth.reshape(-1, 3)[:8 * n8] == nrm.reshape(-1, 3)[:8 * n8]).all(1)
+    assert (sheet & same).sum() >= 16 and (sheet & ~same).sum() >= 16, "weak smooth normals"
+    for name in RESOLVE_OUTPUTS:
+        np.testing.assert_array_equal(dev.resolved[name], twin.resolved[name],
+                                      err_msg=f"{kind}: {name}")
+    if kind != "perspective":
+        return
+    # and the host's outputs of the same frame
+    for name, want in (("distance", host_outputs.distance(dev, cam, scene)),
+                       ("smooth_normals", host_outputs.normals(dev, scene, smooth=True)),
+                       ("camera_normals",
+                        host_outputs.normals(dev, scene, space="camera", camera=cam))):
+        np.testing.assert_array_equal(dev.resolved[name], want, err_msg=name)
