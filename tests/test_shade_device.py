@@ -1,4 +1,4 @@
-"""Shading on the device (kernels/resolve.cl shade_pixels, shade_ssaa) against its twin, the
+"""Shading on the device (kernels/shade.cl shade_pixels, shade_ssaa) against its twin, the
 NumPy path of `clraster.output.shade.shade` (and of render_shaded's supersampling) on the
 same frame: equal within 1/255 per channel in every mode (flat, smooth, one- and two-sided,
 RGBA, per-instance colours as arrays or callables, vertex and face colours, bilinear

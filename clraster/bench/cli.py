@@ -26,6 +26,7 @@ from clraster.bench.datasets import (
     DATASETS_SIZE,
     DATASETS_VIEWS,
     QUICK_VIEWS,
+    datasets_targets,
     open3d_status,
     run_sweep,
 )
@@ -582,9 +583,10 @@ def _run(a: argparse.Namespace, argv: list[str], configs: list[Config], out: Pat
                 "triangles": estimated_triangles(c.scene, a.meshes)}
                for c in runnable if "scale" in c.sweeps]
     scale = scale_summary(planned, records, memory, errors, a.scale_repeat)
+    targets = evaluate_targets(records, scale) + datasets_targets(datasets)
     res = report.results_record(
         argv=argv, a=a, machine=describe(peer_renderer=peer.reason if peer.ok else None),
-        peer=peer.status(), configs=records, targets=evaluate_targets(records, scale, datasets),
+        peer=peer.status(), configs=records, targets=targets,
         startup=startup, memory=memory, memory_method=MEMORY_METHOD, skipped=skipped,
         errors=errors, scale=scale, datasets=datasets)
     res["elapsed_s"] = time.perf_counter() - t_start

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from clraster.bench.datasets import datasets_targets
 from clraster.bench.scale import SCALE_VIEWS, scale_targets
 
 #: Short names of the meshes in ../shared/meshes (see meshes.json there).
@@ -351,11 +350,11 @@ def _find(configs: list[dict], pred) -> dict | None:
     return max(found, key=lambda c: c["triangles"]) if found else None
 
 
-def evaluate_targets(configs: list[dict], scale: dict | None = None,
-                     datasets: dict | None = None) -> list[dict]:
+def evaluate_targets(configs: list[dict], scale: dict | None = None) -> list[dict]:
     """The issue's targets, each met / missed / not measured (met None) with the figures;
-    the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`), the
-    datasets sweep's from its summary `datasets` (`clraster.bench.datasets`)."""
+    the scale sweep's goals come from its summary `scale` (`clraster.bench.scale`). The
+    datasets sweep's are its own (`clraster.bench.datasets.datasets_targets`, which reads
+    this module's scenes: the caller adds them)."""
     out = []
 
     def target(name, desc, cfg, value, threshold, ok_if, why_none, unit="×"):
@@ -437,4 +436,4 @@ def evaluate_targets(configs: list[dict], scale: dict | None = None,
            "plant ≥ 10M triangles: clraster without object culling / with occlusion culling",
            plant, own, 6.0, ">=", "no plant ≥ 10M triangles in both occlusion and off modes "
            "in this run")
-    return out + scale_targets(scale) + datasets_targets(datasets)
+    return out + scale_targets(scale)

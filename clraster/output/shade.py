@@ -459,7 +459,7 @@ def _shade_on_device(frame: _FrameLike, res: _Resolved, k: int, *, smooth: bool,
                      per_instance_colors: Any, light: np.ndarray, two_sided: bool,
                      background: np.ndarray, alpha: bool) -> np.ndarray | None:
     """`_compose`'s image made on the device of the OpenCL renderer that rendered ``frame``
-    (``frame.source``; kernels/resolve.cl shade_pixels, shade_ssaa; this module's NumPy
+    (``frame.source``; kernels/shade.cl shade_pixels, shade_ssaa; this module's NumPy
     path is its twin, equal within 1/255), or None where the host path shades: a frame from
     the twin or without a renderer, or one without the barycentrics its shading needs (the
     host path then says so). Ids out of range raise as on the host."""

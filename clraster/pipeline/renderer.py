@@ -34,6 +34,7 @@ from .stages.chain import StageChain
 from .stages.pyramid import Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
 from .stages.resolve import ResolveFollow, ResolveStage
+from .stages.shade import ShadeStage
 from .twophase import OcclusionHistory
 
 __all__ = ["Renderer", "check_render_kwargs", "check_render_options"]
@@ -114,6 +115,7 @@ class Renderer:
         self._history = OcclusionHistory()   # two-phase occlusion culling's memory
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
         self._resolver: ResolveStage | None = None   # built on the first resolve output
+        self._shader: ShadeStage | None = None   # built on the first device shading
 
     def resized(self, width: int, height: int, *, share_history: bool = True) -> Renderer:
         """A renderer of ``width`` × ``height`` on this one's device state: its queue, stage
@@ -300,19 +302,17 @@ class Renderer:
                     background: np.ndarray, alpha: bool, k: int = 1) -> np.ndarray | None:
         """The image `clraster.output.shade` makes of ``frame`` (rendered from ``target``, a
         Mesh or Scene; k× the output size for render_shaded's ssaa), made on this
-        renderer's device (kernels/resolve.cl shade_pixels, shade_ssaa; arguments as
-        `ResolveStage.shade`; ``sources``: per instance (vertex colours, face colours,
+        renderer's device (kernels/shade.cl shade_pixels, shade_ssaa; arguments as
+        `ShadeStage.shade`; ``sources``: per instance (vertex colours, face colours,
         texture) as `clraster.pipeline.resolving.shade_sources` takes them, or None, made
         into tables when ``sources_key`` differs from the last call's). None when the frame holds
         ids outside [−1, max_id]. The scene's tables are the resolve stage's, kept per
         geometry pool (this renderer's last target's, or made for ``target``)."""
         check_process(self._pid)
         with self._lock:
-            if self._resolver is None:
-                self._resolver = ResolveStage(self.context, self.config)
+            res = self._shade_stage()
             scene, pool = self._plans.scene_and_pool(target)
             tables = resolve_tables(pool, scene)
-            res = self._resolver
             src = None
             if sources is not None:
                 src = (res._sources if sources_key == res._sources_key
@@ -330,11 +330,17 @@ class Renderer:
         None when the frame holds ids outside [−1, max_id]."""
         check_process(self._pid)
         with self._lock:
-            if self._resolver is None:
-                self._resolver = ResolveStage(self.context, self.config)
             scene, pool = self._plans.scene_and_pool(target)
-            return self._resolver.seen(self.queue, pool, resolve_tables(pool, scene),
-                                       frame.triangle_id, max_id)
+            return self._shade_stage().seen(self.queue, pool, resolve_tables(pool, scene),
+                                            frame.triangle_id, max_id)
+
+    def _shade_stage(self) -> ShadeStage:
+        """The shading kernels (built on first use) over the resolve stage's tables."""
+        if self._resolver is None:
+            self._resolver = ResolveStage(self.context, self.config)
+        if self._shader is None:
+            self._shader = ShadeStage(self._resolver, self.config)
+        return self._shader
 
     def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
              same_depth: bool = False) -> tuple[np.ndarray, float]:

@@ -111,7 +111,7 @@ class ResolveTables:
     def buckets(self) -> tuple[np.ndarray, int]:
         """(bucket int32 (B,), shift): ``bucket[id >> shift]`` is the last instance whose
         first id is ≤ ``id >> shift << shift``, so the instance of ``id`` is found by a
-        forward scan from it (kernels/resolve.cl shade_one); ~`_BUCKET_INSTANCES` instances
+        forward scan from it (kernels/shade.cl shade_one); ~`_BUCKET_INSTANCES` instances
         per bucket (cached)."""
         got = self.__dict__.get("_buckets")
         if got is None:
