@@ -174,29 +174,31 @@ typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
     GATHER3(x, y, z, t, idx, 3) GATHER3(x, y, z, t, idx, 4) GATHER3(x, y, z, t, idx, 5)     \
     GATHER3(x, y, z, t, idx, 6) GATHER3(x, y, z, t, idx, 7)
 
-/* the square root of each lane (SQRTD per lane: one vsqrtpd where the compiler joins them) */
-ALWAYS_INLINE double8 sqrt8(double8 s)
-{
-    return (double8)(SQRTD(s.s0), SQRTD(s.s1), SQRTD(s.s2), SQRTD(s.s3), SQRTD(s.s4),
-                     SQRTD(s.s5), SQRTD(s.s6), SQRTD(s.s7));
-}
+/* The double8 helpers below are macros or take pointers: a double8 passed by value makes
+ * LLVM 14 warn on every build, on CPUs without AVX-512, that the argument "changes the
+ * ABI" (always-inlined or not), which a cold build printed on the user's stderr. */
+
+/* out = the square root of each lane of s (SQRTD per lane: one vsqrtpd where the compiler
+ * joins them) */
+#define SQRT8_INTO(out, s)                                                                  \
+    { double8 t_ = (s);                                                                     \
+      (out) = (double8)(SQRTD(t_.s0), SQRTD(t_.s1), SQRTD(t_.s2), SQRTD(t_.s3),            \
+                        SQRTD(t_.s4), SQRTD(t_.s5), SQRTD(t_.s6), SQRTD(t_.s7)); }
 
 /* v's bits where mask m (-1/0 per lane) is set, +0.0 elsewhere */
-ALWAYS_INLINE double8 keep8(double8 v, long8 m)
-{
-    return as_double8(as_long8(v) & m);
-}
+#define KEEP8(v, m) as_double8(as_long8(v) & (m))
 
 /* unit3 per lane: *x, *y, *z scaled by the reciprocal of their length, zero where the
  * length is zero or not finite */
 ALWAYS_INLINE void unit8(double8 *x, double8 *y, double8 *z)
 {
-    double8 len = sqrt8((*x * *x + *y * *y) + *z * *z);
+    double8 len;
+    SQRT8_INTO(len, (*x * *x + *y * *y) + *z * *z);
     long8 ok = (len > 0.0) & (len <= DBL_MAX);
     double8 r = 1.0 / len;
-    *x = keep8(*x * r, ok);
-    *y = keep8(*y * r, ok);
-    *z = keep8(*z * r, ok);
+    *x = KEEP8(*x * r, ok);
+    *y = KEEP8(*y * r, ok);
+    *z = KEEP8(*z * r, ok);
 }
 
 /* mat3 per lane: row-major 3 × 3 m times (x, y, z), in place */
@@ -209,9 +211,10 @@ ALWAYS_INLINE void mat3_8(__global const double *m, double8 *x, double8 *y, doub
 }
 
 /* 8 pixels' normals (x, y, z per lane) as 24 interleaved floats at p3 = n + 3 · p */
-ALWAYS_INLINE void store_n8(__global float *p3, double8 x, double8 y, double8 z)
+ALWAYS_INLINE void store_n8(__global float *p3, const double8 *x, const double8 *y,
+                            const double8 *z)
 {
-    float8 a = TO_F8(x), b = TO_F8(y), c = TO_F8(z);
+    float8 a = TO_F8(*x), b = TO_F8(*y), c = TO_F8(*z);
     STORE_F8(((float8)(a.s0, b.s0, c.s0, a.s1, b.s1, c.s1, a.s2, b.s2)), p3);
     STORE_F8(((float8)(c.s2, a.s3, b.s3, c.s3, a.s4, b.s4, c.s4, a.s5)), p3 + 8);
     STORE_F8(((float8)(b.s5, c.s5, a.s6, b.s6, c.s6, a.s7, b.s7, c.s7)), p3 + 16);
@@ -266,7 +269,8 @@ ALWAYS_INLINE bool resolve_lanes(
         double8 along = (cam[0] * ox + cam[1] * oy) + cam[2] * oz;
         if (want & RS_LINEAR) STORE_F8(TO_F8(along), lin + p);
         if (want & RS_DISTANCE) {
-            double8 d = cam[15] != 0.0 ? along : sqrt8((ox * ox + oy * oy) + oz * oz);
+            double8 d = along;
+            if (cam[15] == 0.0) SQRT8_INTO(d, (ox * ox + oy * oy) + oz * oz);
             STORE_F8(TO_F8(d), dist + p);
         }
         if (want & RS_POINTS) {
@@ -286,11 +290,11 @@ ALWAYS_INLINE bool resolve_lanes(
             mat3_8(nm, &x, &y, &z);
             unit8(&x, &y, &z);
             x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));   /* round32 */
-            if (want & RS_NORMALS) store_n8(n_face + 3 * p, x, y, z);
+            if (want & RS_NORMALS) store_n8(n_face + 3 * p, &x, &y, &z);
             if (want & RS_CAM_NORMALS) {
                 mat3_8(cam + 6, &x, &y, &z);
                 unit8(&x, &y, &z);
-                store_n8(n_cam + 3 * p, x, y, z);
+                store_n8(n_cam + 3 * p, &x, &y, &z);
             }
         }
         if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
@@ -302,18 +306,20 @@ ALWAYS_INLINE bool resolve_lanes(
             double8 y = (b0 * ay + b1 * by) + b2 * cy;
             double8 z = (b0 * az + b1 * bz) + b2 * cz;
             /* vertex normals that cancel give no direction: the face's own there */
-            long8 strong = sqrt8((x * x + y * y) + z * z) >= 1e-6;
+            double8 len;
+            SQRT8_INTO(len, (x * x + y * y) + z * z);
+            long8 strong = len >= 1e-6;
             x = as_double8((as_long8(x) & strong) | (as_long8(fx) & ~strong));
             y = as_double8((as_long8(y) & strong) | (as_long8(fy) & ~strong));
             z = as_double8((as_long8(z) & strong) | (as_long8(fz) & ~strong));
             mat3_8(nm, &x, &y, &z);
             unit8(&x, &y, &z);
             x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));
-            if (want & RS_SMOOTH) store_n8(n_smooth + 3 * p, x, y, z);
+            if (want & RS_SMOOTH) store_n8(n_smooth + 3 * p, &x, &y, &z);
             if (want & RS_CAM_SMOOTH) {
                 mat3_8(cam + 6, &x, &y, &z);
                 unit8(&x, &y, &z);
-                store_n8(n_cam_smooth + 3 * p, x, y, z);
+                store_n8(n_cam_smooth + 3 * p, &x, &y, &z);
             }
         }
     }
