@@ -134,8 +134,8 @@ def test_resized_renderer_shares_device_state_and_draws_fresh_frames(scene):
     small = base.resized(48, 32)
     other = base.resized(40, 30, share_history=False)
     for r in (small, other):
-        assert (r.queue, r.chain, r.pyramid, r._plans, r._lock) == (
-            base.queue, base.chain, base.pyramid, base._plans, base._lock)
+        assert (r.queue, r.chain, r.pyramid, r._plans, r._lock, r._outputs) == (
+            base.queue, base.chain, base.pyramid, base._plans, base._lock, base._outputs)
     assert small._history is base._history and other._history is not base._history
     for occlusion in (False, True, True):
         for r in (base, small, other, small):

@@ -260,8 +260,8 @@ def test_resolve_enqueued_behind_the_raster(scene, monkeypatch):
     separate resolve after the frame's wait), also when the pass is drawn twice (a close
     frame after a far one: its bin list outgrows the entry buffer, is scattered and drawn
     again, and the resolve enqueued again behind the second raster); a frame streamed in
-    many passes
-    resolves after its last. All give the twin's outputs, bit for bit."""
+    several passes (over the triangle or the entry budget) resolves once, after its last.
+    All give the twin's outputs, bit for bit."""
     from clraster import Renderer
     from clraster.pipeline.stages.bin import BinStage
     from clraster.pipeline.stages.resolve import ResolveStage
@@ -292,6 +292,11 @@ def test_resolve_enqueued_behind_the_raster(scene, monkeypatch):
     small = Renderer(W, H, config=RasterConfig(batch_triangles=256, batch_entries=1024))
     frames.append(small.render(scene, cam, outputs=names))
     assert after == [1]
+    # within the triangle budget but over the entry budget: the second pass turns the
+    # follow off, and the frame resolves once after its passes
+    entries = Renderer(W, H, config=RasterConfig(batch_entries=64))
+    frames.append(entries.render(scene, cam, outputs=names))
+    assert after == [1, 1]
     for f in frames:
         for n in names:
             np.testing.assert_array_equal(f.resolved[n], want[n], err_msg=n)

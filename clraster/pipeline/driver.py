@@ -208,7 +208,8 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
     totals = FrameTotals(timings_ms={"cull (host)": t_cull})
     occluded = None
     # a backend that can enqueue the resolve behind the raster (the OpenCL renderer) does,
-    # for a frame drawn in one pass (one with several would resolve after each)
+    # for a frame drawn in one pass: a frame over the triangle budget is not tried, and a
+    # second pass (the entry budget) turns it off, the frame then resolving after its passes
     follow = None
     follow_make = getattr(backend, "_follow_resolve", None)
     if (o.resolve and fd is not None and follow_make is not None

@@ -40,6 +40,27 @@ from .twophase import OcclusionHistory
 __all__ = ["Renderer", "check_render_kwargs", "check_render_options"]
 
 
+class _OutputStages:
+    """A renderer's resolve and shading stages, each built on first use (their programs
+    and the scene's tables on the device), shared with its `Renderer.resized` renderers:
+    both take the image size per call."""
+
+    def __init__(self, context: cl.Context, config: RasterConfig) -> None:
+        self.context, self.config = context, config
+        self._resolver: ResolveStage | None = None
+        self._shader: ShadeStage | None = None
+
+    def resolver(self) -> ResolveStage:
+        if self._resolver is None:
+            self._resolver = ResolveStage(self.context, self.config)
+        return self._resolver
+
+    def shader(self) -> ShadeStage:
+        if self._shader is None:
+            self._shader = ShadeStage(self.resolver(), self.config)
+        return self._shader
+
+
 class Renderer:
     """Rasterizes meshes on an OpenCL device into depth, triangle-id and barycentric buffers.
 
@@ -114,16 +135,17 @@ class Renderer:
         self._plans = PlanCache()   # the last target's scene and geometry pool
         self._history = OcclusionHistory()   # two-phase occlusion culling's memory
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
-        self._resolver: ResolveStage | None = None   # built on the first resolve output
-        self._shader: ShadeStage | None = None   # built on the first device shading
+        # the resolve and shading stages, built on first use (shared with `resized` ones)
+        self._outputs = _OutputStages(self.context, self.config)
 
     def resized(self, width: int, height: int, *, share_history: bool = True) -> Renderer:
         """A renderer of ``width`` × ``height`` on this one's device state: its queue, stage
         chain (the scene's geometry pool uploaded once, and the per-pass buffers, which each
-        frame's parameters size), Hi-Z pyramid stage, plan cache (the scene's host geometry
-        pool) and lock. So the scene is held once however many sizes are used (a viewer's
-        render scales), and frames of all of them are serialized. Its frames are exactly a
-        fresh renderer's of that size (and config).
+        frame's parameters size), Hi-Z pyramid stage, resolve and shading stages (the
+        scene's tables), plan cache (the scene's host geometry pool) and lock. So the scene
+        is held once however many sizes are used (a viewer's render scales), and frames of
+        all of them are serialized. Its frames are exactly a fresh renderer's of that size
+        (and config).
 
         share_history: True (default): this renderer's occlusion history too — a view
         walked at changing sizes keeps phase 1's guess (last frame's visible clusters)
@@ -131,8 +153,9 @@ class Renderer:
         False: a fresh one (a second view that must not disturb the first's).
         """
         r = Renderer(width, height, config=self.config, context=self.context)
+        r.device_description = self.device_description
         r.queue, r.chain, r.pyramid = self.queue, self.chain, self.pyramid
-        r._plans, r._lock = self._plans, self._lock
+        r._plans, r._lock, r._outputs = self._plans, self._lock, self._outputs
         if share_history:
             r._history = self._history
         return r
@@ -267,11 +290,10 @@ class Renderer:
 
     def _follow_resolve(self, pool: GeometryPool, tables: ResolveTables,
                         view: ResolveView) -> ResolveFollow:
-        """The frame's resolve, to be enqueued behind its raster (`ResolveFollow`)."""
-        if self._resolver is None:
-            self._resolver = ResolveStage(self.context, self.config)
-        return ResolveFollow(self._resolver, self.chain.geometry.buffers, pool, tables, view,
-                             self.width, self.height,
+        """The frame's resolve, to be enqueued behind its raster (`ResolveFollow`; made
+        before the frame's first pass, while the queue is idle)."""
+        return ResolveFollow(self._outputs.resolver(), self.queue, self.chain.geometry.buffers,
+                             pool, tables, view, self.width, self.height,
                              cast(RasterStage, self.chain.raster).pool)
 
     def _hiz_step(self, params: FrameParams) -> HiZ:
@@ -286,14 +308,12 @@ class Renderer:
 
     def _resolve(self, pool: GeometryPool, tables: ResolveTables, view: ResolveView,
                  out: RasterOutput) -> tuple[dict[str, np.ndarray], float]:
-        if self._resolver is None:
-            self._resolver = ResolveStage(self.context, self.config)
         geometry = self.chain.geometry
         geometry.upload_pool(self.queue, pool)   # (a frame with nothing drawn skipped it)
         bary = out.bufs[2] if out.bary is not None else None
-        arrays, ev = self._resolver.run(self.queue, geometry.buffers, pool, tables, view,
-                                        out.bufs[1], bary, self.width, self.height,
-                                        cast(RasterStage, self.chain.raster).pool)
+        arrays, ev = self._outputs.resolver().run(
+            self.queue, geometry.buffers, pool, tables, view, out.bufs[1], bary, self.width,
+            self.height, cast(RasterStage, self.chain.raster).pool)
         return arrays, event_ms([ev])
 
     def shade_frame(self, frame: Frame, target: Any, *, smooth: bool, light: np.ndarray,
@@ -310,7 +330,7 @@ class Renderer:
         geometry pool (this renderer's last target's, or made for ``target``)."""
         check_process(self._pid)
         with self._lock:
-            res = self._shade_stage()
+            res = self._outputs.shader()
             scene, pool = self._plans.scene_and_pool(target)
             tables = resolve_tables(pool, scene)
             src = None
@@ -331,16 +351,8 @@ class Renderer:
         check_process(self._pid)
         with self._lock:
             scene, pool = self._plans.scene_and_pool(target)
-            return self._shade_stage().seen(self.queue, pool, resolve_tables(pool, scene),
-                                            frame.triangle_id, max_id)
-
-    def _shade_stage(self) -> ShadeStage:
-        """The shading kernels (built on first use) over the resolve stage's tables."""
-        if self._resolver is None:
-            self._resolver = ResolveStage(self.context, self.config)
-        if self._shader is None:
-            self._shader = ShadeStage(self._resolver, self.config)
-        return self._shader
+            return self._outputs.shader().seen(self.queue, pool, resolve_tables(pool, scene),
+                                               frame.triangle_id, max_id)
 
     def _hiz(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray, zoff: float = 0.5,
              same_depth: bool = False) -> tuple[np.ndarray, float]:

@@ -173,7 +173,7 @@ class StageChain:
     def draw(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
              totals: FrameTotals, *, into: RasterOutput | None = None,
              overdraw: bool = False, max_entries: int | None = None, bary: bool = True,
-             follow: Callable[[cl.CommandQueue, RasterOutput, BinBuffers], None] | None = None
+             follow: Follow | None = None
              ) -> RasterOutput:
         """`bin`, then rasterize into ``into`` (the frame buffers of an earlier pass of the
         same frame, whose depth and ids take part in the depth test) or, when None, into
@@ -184,10 +184,11 @@ class StageChain:
         nothing runs: ``into`` is returned as it is, or fresh cleared buffers.
         ``max_entries``: as in `bin` (over it, nothing is drawn or counted). ``bary``:
         fresh buffers get barycentrics (False: none computed, ``out.bary`` is None).
-        ``follow(queue, out, bins)``: called right after each raster launch, before the
-        wait, to enqueue what reads the frame (`clraster.pipeline.stages.resolve.
+        ``follow(queue, out, bins, redraw)``: called right after each raster launch, before
+        the wait, to enqueue what reads the frame (`clraster.pipeline.stages.resolve.
         ResolveFollow`; ``bins``: the launch's bin buffers, whose list the raster skips
-        when it did not fit); the wait keeps it alive.
+        when it did not fit; ``redraw``: the pass drawn again); the wait keeps it alive,
+        and should it raise, the frame buffers and it are kept until the queue is done.
 
         This is one pass of whatever size ``fd`` is; `clraster.pipeline.streaming.stream_draws`
         cuts a frame into passes within the config's budget.
@@ -199,7 +200,7 @@ class StageChain:
     def _draw_pass(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
                    totals: FrameTotals, into: RasterOutput | None, overdraw: bool,
                    max_entries: int | None, bary: bool,
-                   follow: Callable[[cl.CommandQueue, RasterOutput, BinBuffers], None] | None
+                   follow: Follow | None
                    ) -> RasterOutput:
         if fd.n_tris == 0:
             if into is None:   # nothing to draw yet: a cleared frame to continue from
@@ -215,8 +216,7 @@ class StageChain:
         setup = self.setup.buffers
         out, load = raster.outputs(params, into, overdraw, bary)
         events["raster"] = [raster.launch(queue, setup, bins, params, out, load)]
-        if follow is not None:
-            follow(queue, out, bins)
+        _follow(queue, follow, out, bins, False)
         raster.wait(queue, out, follow)
         if bins.pending:
             # the scatter and raster ran without waiting for the list's length (BinStage.run
@@ -228,8 +228,7 @@ class StageChain:
                 raise
             if again:
                 events["raster"].append(raster.launch(queue, setup, bins, params, out, load))
-                if follow is not None:
-                    follow(queue, out, bins)
+                _follow(queue, follow, out, bins, True)
                 raster.wait(queue, out, follow)
         rstats = raster.finish(queue, params, out)
         totals.clip_pieces += n_clip
@@ -240,6 +239,23 @@ class StageChain:
         _add_events(totals, events)
         totals.settle()   # the raster waited for the queue: every event is complete
         return out
+
+
+#: `StageChain.draw`'s ``follow``: (queue, frame buffers, bin buffers, redraw) → None.
+Follow = Callable[[cl.CommandQueue, RasterOutput, BinBuffers, bool], None]
+
+
+def _follow(queue: cl.CommandQueue, follow: Follow | None, out: RasterOutput,
+            bins: BinBuffers, redraw: bool) -> None:
+    """``follow`` after a raster launch; on an exception (an interrupt, a failed
+    allocation) the raster still runs: ``out`` and ``follow`` are kept until it is done."""
+    if follow is None:
+        return
+    try:
+        follow(queue, out, bins, redraw)
+    except BaseException:
+        abandon(queue, (out, follow))
+        raise
 
 
 def _add_events(totals: FrameTotals, events: dict[str, list]) -> None:

@@ -1,7 +1,8 @@
 """Resolve host side (kernels/resolve.cl): the per-pixel outputs asked for
 (`clraster.base.checks.RESOLVE_OUTPUTS`) made after the frame's last raster pass from its ids
 and barycentrics and the scene's geometry already on the device (the pool positions the
-vertex stage reads, `GeometryBuffers.positions`), one launch a frame. Device shading
+vertex stage reads, `GeometryBuffers.positions`), one launch a frame (two where a pass is
+drawn again, `ResolveFollow`). Device shading
 (`clraster.pipeline.stages.shade`) reads the tables this stage uploads."""
 
 from __future__ import annotations
@@ -71,34 +72,49 @@ class PendingResolve:
 
 
 class ResolveFollow:
-    """The frame's resolve enqueued right behind each raster launch (`StageChain.draw`'s
-    ``follow``), so the wait for the raster covers it too: no host round trip (a wait, the
-    host's resolve set-up, a second wait) between the last pass and the outputs. The
-    latest enqueue is the one after the frame's last raster launch; an earlier one (a
-    pass redrawn, or an earlier pass of a streamed frame) is kept alive until `result`,
-    past the wait that saw it finish."""
+    """The frame's resolve enqueued right behind the raster launch of a frame drawn in one
+    pass (`StageChain.draw`'s ``follow``), so the wait for the raster covers it too: no
+    host round trip (a wait, the host's resolve set-up, a second wait) between the last
+    pass and the outputs.
 
-    def __init__(self, stage: ResolveStage, geometry: GeometryBuffers, pool: GeometryPool,
-                 tables: ResolveTables, view: ResolveView, width: int, height: int,
-                 arrays: ArrayPool) -> None:
+    Made before the frame's first pass, while the queue is idle: the scene's tables are
+    uploaded then, so a call between a raster launch and its wait only allocates the
+    outputs and enqueues. A pass drawn again (its bin list did not fit, ``redraw``)
+    enqueues it again behind the second raster; the first one skipped with its raster
+    (the kernel reads the same bin summary). A second pass of the frame (a frame the
+    budget streams) turns it off: `result` is then None and the caller resolves once,
+    after the frame."""
+
+    def __init__(self, stage: ResolveStage, queue: cl.CommandQueue, geometry: GeometryBuffers,
+                 pool: GeometryPool, tables: ResolveTables, view: ResolveView, width: int,
+                 height: int, arrays: ArrayPool) -> None:
         self._stage, self._geometry, self._pool = stage, geometry, pool
         self._tables, self._view, self._size, self._arrays = tables, view, (width, height), arrays
+        smooth = any(n in view.names for n in ("smooth_normals", "smooth_camera_normals"))
+        if stage.upload_tables(queue, pool, tables, smooth):
+            queue.finish()   # the host arrays may go: the copies are done (nothing else runs)
         self._pending: PendingResolve | None = None
         self._after: Any = None   # the frame buffers the last enqueue read
         self._queue: cl.CommandQueue | None = None
-        self._stale: list[PendingResolve] = []
+        self._passes = 0
+        self._off = False
 
     @property
     def view(self) -> ResolveView:
         """The view the outputs are made for."""
         return self._view
 
-    def __call__(self, queue: cl.CommandQueue, out: Any, bins: Any) -> None:
+    def __call__(self, queue: cl.CommandQueue, out: Any, bins: Any, redraw: bool) -> None:
         """Enqueue the resolve of ``out`` (a `RasterOutput` whose raster over the
         `BinBuffers` ``bins`` was just enqueued: where that raster skips a list that did
-        not fit, so does the resolve)."""
-        if self._pending is not None:
-            self._stale.append(self._pending)
+        not fit, so does the resolve). ``redraw``: the same pass drawn again. An earlier
+        enqueue is dropped: the wait after its raster saw it complete."""
+        if not redraw:
+            self._passes += 1
+            self._off |= self._passes > 1
+        self._pending = None
+        if self._off:
+            return
         bary = out.bufs[2] if out.bary is not None else None
         self._pending = self._stage.enqueue(queue, self._geometry, self._pool, self._tables,
                                             self._view, out.bufs[1], bary, *self._size,
@@ -109,9 +125,8 @@ class ResolveFollow:
         """After the frame's last wait: the outputs (name → array) of the resolve enqueued
         after the last raster launch into ``out`` and its milliseconds, or None when none
         was (the caller resolves then)."""
-        self._stale.clear()
         pending, self._pending = self._pending, None
-        if pending is None or self._after is not out or self._queue is None:
+        if pending is None or self._off or self._after is not out or self._queue is None:
             return None
         outs, ev = self._stage.collect(self._queue, pending)
         return outs, event_ms([ev])
