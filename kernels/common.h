@@ -138,6 +138,30 @@
 #else
 #define CONVERT_VEC(v, T) __builtin_convertvector(v, T)
 #endif
+/* Vectors at their element's alignment (a draw's first vertex, a pixel row at any column):
+ * Clang's ext_vector_type typedefs, one unaligned vector load or store each. Where the
+ * compiler lacks them (CLRASTER_NO_EXT_VECTOR_TYPE) the kernels use their fallbacks (the
+ * same values); LOAD_I8 / LOAD_F8 fall back to OpenCL's vload8 (a call in PoCL). */
+#ifndef CLRASTER_NO_EXT_VECTOR_TYPE
+typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
+typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));
+typedef double double8u __attribute__((ext_vector_type(8), aligned(8)));
+typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
+typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
+typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
+#define LOAD_I8(p) (*(__global const int8u *)(p))
+#define LOAD_F8(p) (*(__global const float8u *)(p))
+#else
+#define LOAD_I8(p) vload8(0, (p))
+#define LOAD_F8(p) vload8(0, (p))
+#endif
+
+/* any lane of an int8 comparison mask set (-1: OpenCL's any() is a call in PoCL) */
+inline bool any8(int8 m)
+{
+    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
+}
+
 /* A lane mask m (a long8 variable of -1/0) as the int8 of the same -1/0. Fallback: lane by
  * lane (the pip PoCL 3.0 built raster.cl with convert_int8(long8), a library call taking a
  * long8, into a program without its kernel). */

@@ -10,7 +10,8 @@
  * time in calls to library routines (sqrt, fabs, fmax, min, floor, vload8, any). So the
  * code below avoids OpenCL builtins that PoCL does not inline: abs by a mask, max / min /
  * clamp by comparisons, floor by truncation, any by an OR of the lanes, sqrt through SQRTF
- * (common.h), unaligned vectors through LOAD8U / STORE8U. bench/README.md's log has the measurements. */
+ * (common.h), unaligned vectors through common.h's LOAD_F8 and STORE8U below.
+ * bench/README.md's log has the measurements. */
 #include "common.h"
 
 #define LANES 8
@@ -25,23 +26,13 @@ static inline float8 sqrt8(float8 v)
                     SQRTF(v.s5), SQRTF(v.s6), SQRTF(v.s7));
 }
 
-/* Vectors at any float's alignment: Clang's ext_vector_type typedef of element alignment
- * (one vmovups), or OpenCL's vload8 / vstore8 (calls in PoCL) where the compiler lacks it
- * (common.h's probe: the same values). */
+/* 8 floats stored at any float's alignment (loads: common.h's LOAD_F8): the element-aligned
+ * vector type, or OpenCL's vstore8 (a call in PoCL) where the compiler lacks it. */
 #ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-#define LOAD8U(p) vload8(0, (p))
 #define STORE8U(v, p) vstore8((v), 0, (p))
 #else
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
-#define LOAD8U(p) (*(__global const float8u *)(p))
 #define STORE8U(v, p) (*(__global float8u *)(p) = (v))
 #endif
-
-/* any lane of a comparison mask set (OpenCL's any() is a call in PoCL) */
-static inline bool any8(int8 m)
-{
-    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
-}
 
 /* max / min as the twin's np.maximum / np.minimum for non-NaN lanes (fmax is a call) */
 static inline float8 max8(float8 a, float8 b) { return a >= b ? a : b; }
@@ -211,8 +202,8 @@ static inline void ssao_normals8(__global const float *normals, int lx0, int py,
 #define SSAO_LOAD3(p, X, Y, Z)                                                               \
     {                                                                                        \
         __global const float *f_ = (__global const float *)(p);                             \
-        float8 s0_ = LOAD8U(f_), s1_ = LOAD8U(f_ + 8);                                       \
-        float8 s2_ = LOAD8U(f_ + 16), s3_ = LOAD8U(f_ + 24);                                 \
+        float8 s0_ = LOAD_F8(f_), s1_ = LOAD_F8(f_ + 8);                                       \
+        float8 s2_ = LOAD_F8(f_ + 16), s3_ = LOAD_F8(f_ + 24);                                 \
         float8 r0_ = __builtin_shufflevector(s0_, s2_, 0, 1, 2, 3, 8, 9, 10, 11);            \
         float8 r1_ = __builtin_shufflevector(s0_, s2_, 4, 5, 6, 7, 12, 13, 14, 15);          \
         float8 r2_ = __builtin_shufflevector(s1_, s3_, 0, 1, 2, 3, 8, 9, 10, 11);            \
@@ -386,7 +377,7 @@ __kernel void ssao_upsample(__global const float *depth, __global const float *z
     float8 d = (float8)(1.0f);   /* unread where open: the blend below is skipped */
     if (open) {
     } else if (x0 + LANES <= width) {
-        d = LOAD8U(depth + row + x0);
+        d = LOAD_F8(depth + row + x0);
     } else {
         float tmp[LANES];
         for (int k = 0; k < LANES; ++k) tmp[k] = depth[row + imin(x0 + k, width - 1)];
@@ -441,12 +432,11 @@ __kernel void ssao_upsample(__global const float *depth, __global const float *z
  * bilinear reads as the twin's `_bilinear`. Both kernels run LANES pixels per lane group in
  * float8 lanes. */
 
-/* Byte vectors at any alignment (common.h's probe, as LOAD8U) */
+/* Byte vectors at any alignment (common.h's probe, as LOAD_F8) */
 #ifdef CLRASTER_NO_EXT_VECTOR_TYPE
 #define LOADB8(p) vload8(0, (p))
 #define STOREB8(v, p) vstore8((v), 0, (p))
 #else
-typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
 #define LOADB8(p) (*(__global const uchar8u *)(p))
 #define STOREB8(v, p) (*(__global uchar8u *)(p) = (v))
 #endif
@@ -478,7 +468,7 @@ __constant float FXAA_P[5] = {1.0f, 1.5f, 2.0f, 4.0f, 12.0f};
 /* lum row `row` (a row offset) at columns x + i, clamped to [0, w) */
 static inline float8 lum_row8(__global const float *lum, size_t row, int x, int w)
 {
-    if (x >= 0 && x + LANES <= w) return LOAD8U(lum + row + x);
+    if (x >= 0 && x + LANES <= w) return LOAD_F8(lum + row + x);
     float8 v;
     v.s0 = lum[row + imin(imax(x, 0), w - 1)];
     v.s1 = lum[row + imin(imax(x + 1, 0), w - 1)];

@@ -34,8 +34,6 @@
 #define STORE16U(v, p) (vstore8((v).lo, 0, (p)), vstore8((v).hi, 1, (p)))
 #define STORE8U(v, p) vstore8((v), 0, (p))
 #else
-typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
 #define LOAD16U(p) (*(__global const float16u *)(p))
 #define STORE16U(v, p) (*(__global float16u *)(p) = (v))
 #define STORE8U(v, p) (*(__global float8u *)(p) = (v))

@@ -23,25 +23,6 @@
 #define RS_NEED_POINT (RS_LINEAR | RS_DISTANCE | RS_POINTS)
 #define RS_NEED_NORMAL (RS_NORMALS | RS_SMOOTH | RS_CAM_NORMALS | RS_CAM_SMOOTH)
 
-/* 8 ints / floats at any int's alignment: Clang's ext_vector_type typedef of element
- * alignment (one vmovups), or OpenCL's vload8 (a call in PoCL) where the compiler lacks it
- * (common.h's probe: the same values). */
-#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-#define LOAD_I8(p) vload8(0, (p))
-#define LOAD_F8(p) vload8(0, (p))
-#else
-typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
-#define LOAD_I8(p) (*(__global const int8u *)(p))
-#define LOAD_F8(p) (*(__global const float8u *)(p))
-#endif
-
-/* any lane of a comparison mask set (OpenCL's any() is a call in PoCL) */
-inline bool any8(int8 m)
-{
-    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
-}
-
 /* v scaled to unit length (times the reciprocal of its length: one division, not three);
  * zero when its length is zero or not finite (a degenerate face) */
 inline double3 unit3(double3 v)
@@ -158,7 +139,6 @@ inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int 
 #define TO_D8(v) ((double8)(LANES8(AS_DOUBLE, v)))
 #define TO_F8(v) ((float8)(LANES8(AS_FLOAT, v)))
 #else
-typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
 #define STORE_F8(v, p) (*(__global float8u *)(p) = (v))
 #define STORE_C8(v, p) (*(__global uchar8u *)(p) = (v))
 #define TO_D8(v) __builtin_convertvector((v), double8)

@@ -6,25 +6,6 @@
  */
 #include "common.h"
 
-/* 8 ints / floats at any int's alignment: Clang's ext_vector_type typedef of element
- * alignment (one vmovups), or OpenCL's vload8 (a call in PoCL) where the compiler lacks it
- * (common.h's probe: the same values). */
-#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-#define LOAD_I8(p) vload8(0, (p))
-#define LOAD_F8(p) vload8(0, (p))
-#else
-typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
-#define LOAD_I8(p) (*(__global const int8u *)(p))
-#define LOAD_F8(p) (*(__global const float8u *)(p))
-#endif
-
-/* any lane of a comparison mask set (OpenCL's any() is a call in PoCL) */
-inline bool any8(int8 m)
-{
-    return (((m.s0 | m.s1) | (m.s2 | m.s3)) | ((m.s4 | m.s5) | (m.s6 | m.s7))) < 0;
-}
-
 /* v scaled to unit length (times the reciprocal of its length: one division, not three);
  * zero when its length is zero or not finite (a degenerate face) */
 /* ---- Shading (the device side of clraster.output.shade.shade and render_shaded's ssaa;

@@ -37,15 +37,8 @@ typedef double8 dvec;
 typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
 typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 
-/* Unaligned vectors (a draw's first vertex has no particular alignment) for the stores of
- * a full set of lanes (Clang's ext_vector_type: only with CLRASTER_LANE_STORES, common.h). */
-#ifdef CLRASTER_LANE_STORES
-typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
-typedef double double8u __attribute__((ext_vector_type(8), aligned(8)));
-typedef int int8u __attribute__((ext_vector_type(8), aligned(4)));
-typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
-typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
-#endif
+/* The stores of a full set of lanes use common.h's element-aligned vector types (a draw's
+ * first vertex has no particular alignment; only with CLRASTER_LANE_STORES, common.h). */
 
 /* Outcodes, window positions and every store of a full set of VERTEX_LANES lanes without
  * user clip planes, in lanes: the same values as the per-vertex loop of vertex_transform
