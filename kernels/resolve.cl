@@ -200,6 +200,34 @@ ALWAYS_INLINE void store_n8(__global float *p3, const double8 *x, const double8 
     STORE_F8(((float8)(b.s5, c.s5, a.s6, b.s6, c.s6, a.s7, b.s7, c.s7)), p3 + 16);
 }
 
+/* blend3 per lane: x, y, z = (b0·a + b1·b) + b2·c of the float triples at t + 3·ia, 3·ib,
+ * 3·ic (the lanes' three vertices) */
+#define BLEND8(x, y, z, t, ia, ib, ic)                                                      \
+    { double8 ax_, ay_, az_, bx_, by_, bz_, cx_, cy_, cz_;                                  \
+      GATHER3_ALL(ax_, ay_, az_, t, ia) GATHER3_ALL(bx_, by_, bz_, t, ib)                   \
+      GATHER3_ALL(cx_, cy_, cz_, t, ic)                                                     \
+      (x) = (b0 * ax_ + b1 * bx_) + b2 * cx_;                                               \
+      (y) = (b0 * ay_ + b1 * by_) + b2 * cy_;                                               \
+      (z) = (b0 * az_ + b1 * bz_) + b2 * cz_; }
+
+/* The scalar body's normal outputs per lane from the object-space normal (x, y, z): the
+ * world normal unit3(M⁻ᵀ n) (nm) rounded to float (round32) into `world` (if not 0), and
+ * its camera-frame one (V⁻ᵀ rows cam6) into `camera` (if not 0), 8 pixels from p3's */
+ALWAYS_INLINE void normals8(__global const double *nm, __global const double *cam6,
+                            double8 *x, double8 *y, double8 *z, __global float *world,
+                            __global float *camera)
+{
+    mat3_8(nm, x, y, z);
+    unit8(x, y, z);
+    *x = TO_D8(TO_F8(*x)); *y = TO_D8(TO_F8(*y)); *z = TO_D8(TO_F8(*z));   /* round32 */
+    if (world) store_n8(world, x, y, z);
+    if (camera) {
+        mat3_8(cam6, x, y, z);
+        unit8(x, y, z);
+        store_n8(camera, x, y, z);
+    }
+}
+
 /* Resolve pixels [p, p + 8) in lanes when all eight ids are in the last instance's range
  * [lo, hi) (so covered: lo >= 0); false, with nothing written, otherwise (the scalar path
  * takes them). `want` asks for a point or a normal. */
@@ -235,13 +263,8 @@ ALWAYS_INLINE bool resolve_lanes(
     }
     if (want & RS_MASK) STORE_C8((uchar8)(1), mask + p);
     if (want & RS_NEED_POINT) {
-        double8 ax, ay, az, bx, by, bz, cx, cy, cz;
-        GATHER3_ALL(ax, ay, az, positions, ia)
-        GATHER3_ALL(bx, by, bz, positions, ib)
-        GATHER3_ALL(cx, cy, cz, positions, ic)
-        double8 qx = (b0 * ax + b1 * bx) + b2 * cx;
-        double8 qy = (b0 * ay + b1 * by) + b2 * cy;
-        double8 qz = (b0 * az + b1 * bz) + b2 * cz;
+        double8 qx, qy, qz;
+        BLEND8(qx, qy, qz, positions, ia, ib, ic)
         __global const double *m = inst_model + 12 * inst;
         double8 wx = MAT_ROW(m, 0, qx, qy, qz), wy = MAT_ROW(m, 1, qx, qy, qz);
         double8 wz = MAT_ROW(m, 2, qx, qy, qz);
@@ -267,24 +290,12 @@ ALWAYS_INLINE bool resolve_lanes(
         __global const double *nm = inst_nrm + 9 * inst;
         if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
             double8 x = fx, y = fy, z = fz;
-            mat3_8(nm, &x, &y, &z);
-            unit8(&x, &y, &z);
-            x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));   /* round32 */
-            if (want & RS_NORMALS) store_n8(n_face + 3 * p, &x, &y, &z);
-            if (want & RS_CAM_NORMALS) {
-                mat3_8(cam + 6, &x, &y, &z);
-                unit8(&x, &y, &z);
-                store_n8(n_cam + 3 * p, &x, &y, &z);
-            }
+            normals8(nm, cam + 6, &x, &y, &z, (want & RS_NORMALS) ? n_face + 3 * p : 0,
+                     (want & RS_CAM_NORMALS) ? n_cam + 3 * p : 0);
         }
         if (want & (RS_SMOOTH | RS_CAM_SMOOTH)) {
-            double8 ax, ay, az, bx, by, bz, cx, cy, cz;
-            GATHER3_ALL(ax, ay, az, vnormals, ia)
-            GATHER3_ALL(bx, by, bz, vnormals, ib)
-            GATHER3_ALL(cx, cy, cz, vnormals, ic)
-            double8 x = (b0 * ax + b1 * bx) + b2 * cx;
-            double8 y = (b0 * ay + b1 * by) + b2 * cy;
-            double8 z = (b0 * az + b1 * bz) + b2 * cz;
+            double8 x, y, z;
+            BLEND8(x, y, z, vnormals, ia, ib, ic)
             /* vertex normals that cancel give no direction: the face's own there */
             double8 len;
             SQRT8_INTO(len, (x * x + y * y) + z * z);
@@ -292,15 +303,8 @@ ALWAYS_INLINE bool resolve_lanes(
             x = as_double8((as_long8(x) & strong) | (as_long8(fx) & ~strong));
             y = as_double8((as_long8(y) & strong) | (as_long8(fy) & ~strong));
             z = as_double8((as_long8(z) & strong) | (as_long8(fz) & ~strong));
-            mat3_8(nm, &x, &y, &z);
-            unit8(&x, &y, &z);
-            x = TO_D8(TO_F8(x)); y = TO_D8(TO_F8(y)); z = TO_D8(TO_F8(z));
-            if (want & RS_SMOOTH) store_n8(n_smooth + 3 * p, &x, &y, &z);
-            if (want & RS_CAM_SMOOTH) {
-                mat3_8(cam + 6, &x, &y, &z);
-                unit8(&x, &y, &z);
-                store_n8(n_cam_smooth + 3 * p, &x, &y, &z);
-            }
+            normals8(nm, cam + 6, &x, &y, &z, (want & RS_SMOOTH) ? n_smooth + 3 * p : 0,
+                     (want & RS_CAM_SMOOTH) ? n_cam_smooth + 3 * p : 0);
         }
     }
     return true;
