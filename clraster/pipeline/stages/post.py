@@ -9,7 +9,7 @@ has an OpenCL ``context``. The NumPy twins are `clraster.output.post.ssao_inputs
 blocking call. Inputs and results are the caller's arrays themselves where the device works
 in host memory (CL_MEM_USE_HOST_PTR on PoCL's CPU devices: no copies), copies elsewhere;
 intermediate buffers (SSAO's half-resolution positions, linear depths and factor, FXAA's
-luma) are `GrowBuffer`s kept from frame to frame.
+luma, edge-pixel list and its count) are `GrowBuffer`s kept from frame to frame.
 """
 
 from __future__ import annotations
