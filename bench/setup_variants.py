@@ -8,9 +8,11 @@ draws); then each variant is built from the working tree's source with one subst
 (timing only: a variant's results are wrong by design, and are never read) and launched
 ``--rounds`` times in turn with the same arguments; min and median kernel times (OpenCL
 profiling events) are printed. Variants: ``base`` (the kernel), ``indices`` (return once the
-work-item has its triangle), ``facing`` (after the facing determinant), ``box`` (after the
-pixel box), ``no_store`` (after make_piece, before the record is stored), ``no_values``
-(make_piece without the value planes). bench/README.md's log quotes a run.
+work-item has its lanes' vertex indices), ``facing`` (after the lanes' facing), ``lanes``
+(after the lanes' fates and stores, before the pieces), ``no_prefetch`` (without the
+prefetch of the draw's double clip positions), ``no_store`` (each piece made but not
+stored), ``no_values`` (make_piece without the value planes). bench/README.md's log
+quotes a run.
 """
 
 from __future__ import annotations
@@ -26,24 +28,20 @@ import clraster
 import clraster.pipeline.device as dev
 import clraster.pipeline.stages.setup as setup_stage
 from clraster.base.config import RasterConfig
-from clraster.base.layout import CLUSTER_MAX
+from clraster.base.layout import CLUSTER_MAX, SETUP_LANES
 
-#: variant → (text of kernels/setup.cl, the same text with an early exit added)
-_EXIT = "if (width > 0) { status[t] = st; tile1[t] = TILE1_NONE; return; }"
+#: variant → (text of kernels/setup.cl, the same text with an early exit added or a step
+#: taken out). The lanes' stores are skipped by the exits: a variant's outputs are never read.
+_EXIT = "    if (width > 0) return;\n"
 VARIANTS = {
-    "indices": ("    uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];\n",
-                "    if (width > 0) { status[t] = ST_NO_SAMPLE; tile1[t] = TILE1_NONE; return; }\n"
-                "    uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];\n"),
-    "facing": ("        st = facing(c0, c1, c2, draw_cull(cull, dflags));\n",
-               "        st = facing(c0, c1, c2, draw_cull(cull, dflags));\n"
-               "        " + _EXIT + "\n"),
-    "box": ("    if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;\n",
-            "    if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;\n"
-            "    if (width > 0) return ST_NO_SAMPLE;\n"),
-    "no_store": ("                            zs, zo, &pc, &sw);\n"
-                 "            if (st == ST_RASTER) {\n",
-                 "                            zs, zo, &pc, &sw);\n            " + _EXIT + "\n"
-                 "            if (st == ST_RASTER) {\n"),
+    "indices": ("#define OUTC(i) (int)outcode[i]\n", _EXIT + "#define OUTC(i) (int)outcode[i]\n"),
+    "facing": ("    int8 clipped = (", _EXIT + "    int8 clipped = ("),
+    "lanes": ("    /* the open lanes, one after the other */\n",
+              _EXIT + "    /* the open lanes, one after the other */\n"),
+    "no_prefetch": ("        PREFETCH(pf); PREFETCH(pf + 2); PREFETCH(pf + 4); PREFETCH(pf + 6);\n",
+                    ""),
+    "no_store": ("    if (st == ST_RASTER) {\n        pc.id = id;",
+                 "    if (width > 0) return;\n    if (st == ST_RASTER) {\n        pc.id = id;"),
     "no_values": ("    double iw0 = 1.0 / a.w, iw1",
                   "    if (hw > 0.0) { pc->pad = 0; return; }\n    double iw0 = 1.0 / a.w, iw1"),
 }
@@ -82,7 +80,8 @@ def main() -> None:
             np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
             np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),
             b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf, stage.flag.buf)
-    gsize, lsize = (max(geo.n_draws, 1) * CLUSTER_MAX,), (CLUSTER_MAX,)
+    lanes = CLUSTER_MAX // SETUP_LANES   # work-items per draw (kernels/setup.cl)
+    gsize, lsize = (max(geo.n_draws, 1) * lanes,), (lanes,)
     source = dev.kernel_source("setup")
     options = [*RasterConfig().build_options(), *dev.feature_options(r.context)]
     kernels = {}

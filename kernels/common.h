@@ -141,7 +141,8 @@
 /* Vectors at their element's alignment (a draw's first vertex, a pixel row at any column):
  * Clang's ext_vector_type typedefs, one unaligned vector load or store each. Where the
  * compiler lacks them (CLRASTER_NO_EXT_VECTOR_TYPE) the kernels use their fallbacks (the
- * same values); LOAD_I8 / LOAD_F8 fall back to OpenCL's vload8 (a call in PoCL). */
+ * same values); LOAD_I8 / LOAD_F8 and STORE_I8 / STORE_UC8 fall back to OpenCL's vload8 and
+ * vstore8 (calls in PoCL). */
 #ifndef CLRASTER_NO_EXT_VECTOR_TYPE
 typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
 typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));
@@ -151,9 +152,13 @@ typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
 typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
 #define LOAD_I8(p) (*(__global const int8u *)(p))
 #define LOAD_F8(p) (*(__global const float8u *)(p))
+#define STORE_I8(v, p) (*(__global int8u *)(p) = (v))
+#define STORE_UC8(v, p) (*(__global uchar8u *)(p) = (v))
 #else
 #define LOAD_I8(p) vload8(0, (p))
 #define LOAD_F8(p) vload8(0, (p))
+#define STORE_I8(v, p) vstore8((v), 0, (p))
+#define STORE_UC8(v, p) vstore8((v), 0, (p))
 #endif
 
 /* any lane of an int8 comparison mask set (-1: OpenCL's any() is a call in PoCL) */

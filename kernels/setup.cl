@@ -1,10 +1,10 @@
 /* Triangle setup: trivial reject, clipping, back-face / zero-area cull, fixed-point snap.
  *
- * setup_triangles (one work-item per drawn triangle) writes, for every unclipped survivor,
- * one Piece at the triangle's slot in the frame's triangle stream, and a status per
- * triangle; setup_count_clipped, for the triangles that need the clipper, the number of
- * pieces they make. The host scans those counts; setup_clipped then
- * re-runs the clipper for just those triangles and writes their pieces in order. Clipping is
+ * setup_triangles (SETUP_LANES triangles of a draw per work-item) writes, for every
+ * unclipped survivor, one Piece at the triangle's slot in the frame's triangle stream, and a
+ * status per triangle; setup_count_clipped, for the triangles that need the clipper, the
+ * number of pieces they make. The host scans those counts; setup_clipped then re-runs the
+ * clipper for just those triangles and writes their pieces in order. Clipping is
  * rare, so recomputing it beats storing up to 14 pieces per triangle for everyone.
  *
  * Clipping is Sutherland–Hodgman in homogeneous clip space against near, far and — only when
@@ -100,9 +100,8 @@ inline int draw_cull(int cull, int flags)
  * happens before clipping (Olano & Greer 1997). Deciding facing on the unsnapped positions
  * (not on the 1/256-snapped area, which can flip for sub-pixel triangles) is what lets the
  * cluster normal-cone test be conservative: it culls only clusters whose every triangle
- * faces away by a margin far above float32 rounding. `cull` is the draw's (draw_cull).
- * Returns ST_RASTER (keep),
- * ST_BACKFACE or ST_DEGENERATE (det exactly 0: edge-on).
+ * faces away by a margin far above float32 rounding. setup_triangles takes det == 0
+ * (edge-on) as ST_DEGENERATE, then the draw's cull mode (draw_cull) as ST_BACKFACE.
  *
  * det is computed in double from the float32 clip positions: a product of two floats is
  * exact in double and a triple product of finite floats can neither overflow nor underflow
@@ -111,16 +110,9 @@ inline int draw_cull(int cull, int flags)
  * and overflowed to NaN for a projection times 1e13. Rescaling each vertex by a power of
  * two in float32 instead was slower than the doubles (its bit operations defeat PoCL's
  * vectorizer). */
-inline int facing(float4 a, float4 b, float4 c, int cull)
-{
-    double4 da = convert_double4(a), db = convert_double4(b), dc = convert_double4(c);
-    double det = (da.x * (db.y * dc.w - db.w * dc.y) - da.y * (db.x * dc.w - db.w * dc.x))
-                 + da.w * (db.x * dc.y - db.y * dc.x);
-    if (det == 0.0) return ST_DEGENERATE;
-    if ((cull == CULL_BACK && det < 0.0) || (cull == CULL_FRONT && det > 0.0))
-        return ST_BACKFACE;
-    return ST_RASTER;
-}
+#define FACING_DET(ax, ay, aw, bx, by, bw, cx, cy, cw) \
+    (((ax) * ((by) * (cw) - (bw) * (cy)) - (ay) * ((bx) * (cw) - (bw) * (cx)))           \
+     + (aw) * ((bx) * (cy) - (by) * (cx)))
 
 /* Value planes of a piece (depth, screen-space weights, perspective ratios) from its
  * UNSNAPPED vertices a, b, c (clip space, double, in the piece's vertex order), while
@@ -188,7 +180,7 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
     /* y points down in window space: counter-clockwise in NDC is area2 < 0. Rasterize
-     * every piece with positive area; facing was decided before (facing()). */
+     * every piece with positive area; facing was decided before (FACING_DET). */
     *swapped = area2 < 0;
     if (area2 < 0) {
         int2 t = v1; v1 = v2; v2 = t;
@@ -385,6 +377,100 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 #define DEPTH_MODE(reversed) \
     double zs = (reversed) ? -0.5 : 0.5, zo = (reversed) ? 0.0 : 0.5
 
+/* ---- setup_triangles: SETUP_LANES triangles of one draw per work-item --------------------
+ *
+ * On a dense mesh few triangles become pieces (the dragon at 640 x 480: 47K of 694K, the
+ * rest back faces or boxes without a sample), and one work-item per triangle spent most of
+ * its time on branches that went either way at random. Here each work-item decides the fate
+ * of SETUP_LANES consecutive triangles of its draw in vector lanes, branch-free, in the
+ * scalar path's order (outcodes, facing, clipping, w, then make_piece's area, box and
+ * 2 x 2 test for triangles under SMALL_EXTENT sub-pixels wide and high, where every product
+ * fits in 32 bits); only the triangles still open after that (a sample found, or a larger
+ * box) go through the scalar make_piece (raster_piece), one after the other. Same statuses,
+ * records and tile words as the scalar path: a lane test is the scalar test on the same
+ * integers and doubles (FP_CONTRACT is off). */
+
+/* A lane's box is tested in lanes when the triangle spans fewer than this many sub-pixels
+ * in x and in y: its edge products stay under 2^21 (int), and its box holds at most 4 x 4
+ * pixel centres. */
+#define SMALL_EXTENT (4 * SUB_ONE)
+
+/* Lanes of index vector ix through the scalar expression E(i). */
+#define GATHER8(T, E, ix) ((T)(E((ix).s0), E((ix).s1), E((ix).s2), E((ix).s3),            \
+                               E((ix).s4), E((ix).s5), E((ix).s6), E((ix).s7)))
+/* a where lane mask m (-1/0) is set, else b; min and max of int8 variables. Bit operations,
+ * not ?: (Oclgrind computes ?: on int vector masks wrongly). */
+#define SEL8(m, a, b) (((a) & (m)) | ((b) & ~(m)))
+#define MIN8(a, b) SEL8((a) < (b), (a), (b))
+#define MAX8(a, b) SEL8((a) > (b), (a), (b))
+
+/* Edge (a -> b) of the lanes' pieces at their pixel centre (cx, cy), as set_edge (common.h)
+ * in int lanes: e (minus the top-left bias), sx and sy (one pixel right / down). Inputs are
+ * masked to the lanes mk whose values stay small (others compute 0s). */
+#define EDGE8(ax, ay, bx, by, mk, e, sx, sy) do {                                          \
+    int8 dx_ = ((bx) - (ax)) & (mk), dy_ = ((by) - (ay)) & (mk);                           \
+    int8 rx_ = (cx - (ax)) & (mk), ry_ = (cy - (ay)) & (mk);                               \
+    int8 tl_ = (dy_ < 0) | ((dy_ == 0) & (dx_ > 0));   /* -1: top or left, bias 0 */        \
+    e = (dx_ * ry_ - dy_ * rx_) - (1 + tl_);                                               \
+    sx = -dy_ * SUB_ONE;                                                                   \
+    sy = dx_ * SUB_ONE;                                                                    \
+} while (0)
+#define INSIDE8(k, j) ((e0 + (k) * sx0 + (j) * sy0 >= 0) & (e1 + (k) * sx1 + (j) * sy1 >= 0) \
+                       & (e2 + (k) * sx2 + (j) * sy2 >= 0))
+
+/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id, draw
+ * record dr) that passed the outcode, facing, clipping and w tests: make_piece, its record
+ * at slot t, its status and tile word. */
+ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id,
+                                __global const int2 *win,
+                                __global const double4 *clip64,
+                                __global const double *rnum, int reversed, int width,
+                                int height, double zs, double zo, int tiles_x,
+                                __global Piece *pieces, __global uchar *status,
+                                __global int *tile1)
+{
+    Piece pc __attribute__((aligned(32)));   /* copied out as 3 float8 */
+    int sw = 0, one = TILE1_NONE;
+    /* values from the double clip positions (vertex.cl): the float32 ones are rounded by
+     * ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the barycentrics of
+     * 1-pixel triangles off by 3e-5 */
+    ClipIn a = clip_in(clip64, rnum, i0);
+    ClipIn b = clip_in(clip64, rnum, i1);
+    ClipIn c = clip_in(clip64, rnum, i2);
+    int st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
+                        value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height, zs, zo,
+                        &pc, &sw);
+    if (st == ST_RASTER) {
+        pc.id = id;
+        pc.flags = sw ? PF_SWAPPED : 0;
+        /* 96 aligned bytes, as three float8 stores. Ordinary stores, not non-temporal
+         * ones: binning reads the records right after this stage and, with a large enough
+         * last-level cache, finds them there */
+        __global float8 *d8 = (__global float8 *)&pieces[t];
+        d8[0] = ((float8 *)&pc)[0];
+        d8[1] = ((float8 *)&pc)[1];
+        d8[2] = ((float8 *)&pc)[2];
+        /* the one tile of a piece whose pixel box lies in one tile (most pieces of a dense
+         * mesh), or the tiles of one over at most 2 x 2: binning counts them from this word
+         * alone (common.h TILE1_*), without the record of every piece over several tiles:
+         * a cache miss each when the slots' buffer is bigger than the cache. */
+        int bx0 = bb_x(pc.bb_min), by0 = bb_y(pc.bb_min);
+        int bx1 = bb_x(pc.bb_max), by1 = bb_y(pc.bb_max);
+        int tx0 = bx0 >> TILE_LOG2, ty0 = by0 >> TILE_LOG2;
+        int tx1 = bx1 >> TILE_LOG2, ty1 = by1 >> TILE_LOG2;
+        if (tx0 == tx1 && ty0 == ty1) {
+            one = ty0 * tiles_x + tx0;
+        } else if (tx1 - tx0 <= 1 && ty1 - ty0 <= 1) {
+            uint mask = few_tile_mask(pc.x, pc.y, bx0, by0, bx1, by1, tx0, ty0, tx1, ty1);
+            one = TILE1_FEW - (int)(((uint)(ty0 * tiles_x + tx0) << 4) | mask);
+        } else {
+            one = TILE1_WALK;
+        }
+    }
+    status[t] = (uchar)st;
+    tile1[t] = one;
+}
+
 __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global const ushort *restrict outcode,
                               __global const int2 *restrict win, DRAW_ARGS, const int width,
@@ -395,88 +481,148 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               __global int *restrict any_clipped)
 {
     DEPTH_MODE(reversed);
-    int t, i0, i1, i2, id, dflags;
-    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id, &dflags))
-        return;
-    uint o0 = outcode[i0], o1 = outcode[i1], o2 = outcode[i2];
-    uint o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
+    /* work-group = draw (CLUSTER_MAX / SETUP_LANES work-items), as triangle_of */
+    uint d = get_group_id(0);
+    if (d >= n_draws) return;
+    Draw dr = draws[d];
+    int4 ci = clusters[dr.cluster];
+    int lt0 = SETUP_LANES * (int)get_local_id(0);
+    /* The draw's double clip positions, asked for ahead: the pieces (raster_piece) read
+     * them, a few scattered vertices per draw, after the lanes' work, and each of those
+     * reads was a miss the work-item waited for. Work-item k asks for the lines of local
+     * vertices 8k..8k+7 (work-items run in order within a group). */
+    if (lt0 < ci.w) {
+        __global const double4 *pf = clip64 + dr.vert_base + lt0;
+        PREFETCH(pf); PREFETCH(pf + 2); PREFETCH(pf + 4); PREFETCH(pf + 6);
+    }
+    if (lt0 >= ci.y) return;
+    int n = imin(ci.y - lt0, SETUP_LANES);   /* this work-item's triangles */
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
+    /* idle lanes (past the draw's last triangle) repeat its last triangle: every gather
+     * stays in the buffers; nothing of theirs is stored */
+    int8 lt = lt0 + SEL8(open, lane, (int8)(n - 1));
+    __global const uchar4 *tv = local_tris + ci.x;
+#define TV_X(i) (int)tv[i].x
+#define TV_Y(i) (int)tv[i].y
+#define TV_Z(i) (int)tv[i].z
+    int8 i0 = dr.vert_base + GATHER8(int8, TV_X, lt);
+    int8 i1 = dr.vert_base + GATHER8(int8, TV_Y, lt);
+    int8 i2 = dr.vert_base + GATHER8(int8, TV_Z, lt);
+#define OUTC(i) (int)outcode[i]
+    int8 o0 = GATHER8(int8, OUTC, i0), o1 = GATHER8(int8, OUTC, i1);
+    int8 o2 = GATHER8(int8, OUTC, i2);
+    int8 o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
     /* user clip planes: all three vertices outside one → rejected; any outside one of the
      * clipping planes (uclip bits; the others, a polygon window's, only reject) → clipped */
-    uint u_or = 0, u_and = 0;
+    int8 u_or = (int8)0, u_and = (int8)0;
     if (n_user > 0) {
-        uint u0 = ucode[i0], u1 = ucode[i1], u2 = ucode[i2];
+#define UC(i) (int)ucode[i]
+        int8 u0 = GATHER8(int8, UC, i0), u1 = GATHER8(int8, UC, i1);
+        int8 u2 = GATHER8(int8, UC, i2);
         u_or = u0 | u1 | u2;
         u_and = u0 & u1 & u2;
     }
-    int st, one = TILE1_NONE;   /* tile1 (common.h TILE1_*) */
-    if (o_or & OC_INVALID) {
-        st = ST_INVALID;
-    } else if ((o_and & OC_FRUSTUM) || u_and) {
-        st = ST_TRIVIAL_REJECT;
-    } else {
-        float4 c0 = clip[i0], c1 = clip[i1], c2 = clip[i2];
-        st = facing(c0, c1, c2, draw_cull(cull, dflags));
-        if (st != ST_RASTER) {
-        } else if ((o_or & OC_NEEDS_CLIP) || (u_or & uclip)) {
-            /* its pieces are counted by setup_count_clipped: the clipper's polygon arrays
-             * (2 × POLY_MAX vertices of 72+ bytes) inlined here made every work-item of
-             * this kernel pay for them */
-            st = ST_CLIPPED;
-            /* the host skips the clipper's count and scan when no triangle needs it */
-            atomic_or(any_clipped, 1);
-        } else if (o_or & OC_W_NONPOS) {
-            st = ST_DEGENERATE;   /* a vertex at the clip-space origin (w = 0) */
-        } else {
-            Piece pc __attribute__((aligned(32)));   /* copied out as 3 float8 */
-            int sw = 0;
-            /* values from the double clip positions (vertex.cl): the float32 ones are
-             * rounded by ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the
-             * barycentrics of 1-pixel triangles off by 3e-5 */
-            Draw dr = draws[get_group_id(0)];
-            ClipIn a = clip_in(clip64, rnum, i0);
-            ClipIn b = clip_in(clip64, rnum, i1);
-            ClipIn c = clip_in(clip64, rnum, i2);
-            st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
-                            value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height,
-                            zs, zo, &pc, &sw);
-            if (st == ST_RASTER) {
-                pc.id = id;
-                pc.flags = sw ? PF_SWAPPED : 0;
-                /* 96 aligned bytes, as three float8 stores. Ordinary stores, not
-                 * non-temporal ones: binning reads the records right after this stage
-                 * and, with a large enough last-level cache, finds them there */
-                __global float8 *d8 = (__global float8 *)&pieces[t];
-                d8[0] = ((float8 *)&pc)[0];
-                d8[1] = ((float8 *)&pc)[1];
-                d8[2] = ((float8 *)&pc)[2];
-                /* the one tile of a piece whose pixel box lies in one tile (most pieces of
-                 * a dense mesh), or the tiles of one over at most 2 x 2: binning counts
-                 * them from this word alone (common.h TILE1_*), without the record of
-                 * every piece over several tiles: a cache miss each when the slots'
-                 * buffer is bigger than the cache. */
-                int bx0 = bb_x(pc.bb_min), by0 = bb_y(pc.bb_min);
-                int bx1 = bb_x(pc.bb_max), by1 = bb_y(pc.bb_max);
-                int tx0 = bx0 >> TILE_LOG2, ty0 = by0 >> TILE_LOG2;
-                int tx1 = bx1 >> TILE_LOG2, ty1 = by1 >> TILE_LOG2;
-                if (tx0 == tx1 && ty0 == ty1) {
-                    one = ty0 * tiles_x + tx0;
-                } else if (tx1 - tx0 <= 1 && ty1 - ty0 <= 1) {
-                    uint mask = few_tile_mask(pc.x, pc.y, bx0, by0, bx1, by1, tx0, ty0,
-                                              tx1, ty1);
-                    one = TILE1_FEW - (int)(((uint)(ty0 * tiles_x + tx0) << 4) | mask);
-                } else {
-                    one = TILE1_WALK;
-                }
-            }
-        }
-    }
-    status[t] = (uchar)st;
-    /* clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
+    int8 st = (int8)ST_RASTER;
+/* lanes m (among the open ones) take status `code` and close */
+#define DECIDE(m, code) do {                                                               \
+    int8 m_ = (m) & open;                                                                  \
+    st = SEL8(m_, (int8)(code), st);                                                       \
+    open &= ~m_;                                                                           \
+} while (0)
+    DECIDE((o_or & OC_INVALID) != 0, ST_INVALID);
+    DECIDE(((o_and & OC_FRUSTUM) != 0) | (u_and != 0), ST_TRIVIAL_REJECT);
+    /* facing (FACING_DET) from the float32 clip positions in double lanes */
+#define CX(i) clip[i].x
+#define CY(i) clip[i].y
+#define CW(i) clip[i].w
+#define CLIP_D8(E, ix) CONVERT_VEC(GATHER8(float8, E, ix), double8)
+    double8 ax = CLIP_D8(CX, i0), ay = CLIP_D8(CY, i0), aw = CLIP_D8(CW, i0);
+    double8 bx = CLIP_D8(CX, i1), by = CLIP_D8(CY, i1), bw = CLIP_D8(CW, i1);
+    double8 cx_ = CLIP_D8(CX, i2), cy_ = CLIP_D8(CY, i2), cw_ = CLIP_D8(CW, i2);
+    double8 det = FACING_DET(ax, ay, aw, bx, by, bw, cx_, cy_, cw_);
+    DECIDE(MASK_INT8(det == 0.0), ST_DEGENERATE);
+    int dcull = draw_cull(cull, dr.flags);
+    if (dcull == CULL_BACK) DECIDE(MASK_INT8(det < 0.0), ST_BACKFACE);
+    if (dcull == CULL_FRONT) DECIDE(MASK_INT8(det > 0.0), ST_BACKFACE);
+    int8 clipped = (((o_or & OC_NEEDS_CLIP) != 0) | ((u_or & (int)uclip) != 0)) & open;
+    DECIDE(clipped, ST_CLIPPED);
+    /* the host skips the clipper's count and scan when no triangle needs it; its pieces
+     * are counted by setup_count_clipped (the clipper's polygon arrays inlined here made
+     * every work-item pay for them) */
+    if (any8(clipped)) atomic_or(any_clipped, 1);
+    DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
+    /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
+#define WX(i) win[i].x
+#define WY(i) win[i].y
+    int8 x0 = GATHER8(int8, WX, i0) & open, y0 = GATHER8(int8, WY, i0) & open;
+    int8 x1 = GATHER8(int8, WX, i1) & open, y1 = GATHER8(int8, WY, i1) & open;
+    int8 x2 = GATHER8(int8, WX, i2) & open, y2 = GATHER8(int8, WY, i2) & open;
+    int8 xmin = MIN8(x0, x1), xmax = MAX8(x0, x1), ymin = MIN8(y0, y1), ymax = MAX8(y0, y1);
+    xmin = MIN8(xmin, x2); xmax = MAX8(xmax, x2);
+    ymin = MIN8(ymin, y2); ymax = MAX8(ymax, y2);
+    int8 small = open & (xmax - xmin < SMALL_EXTENT) & (ymax - ymin < SMALL_EXTENT);
+    int8 area2 = ((x1 - x0) & small) * ((y2 - y0) & small)
+                 - ((y1 - y0) & small) * ((x2 - x0) & small);   /* edge_fn(v0, v1, v2) */
+    DECIDE(small & (area2 == 0), ST_DEGENERATE);
+    small &= open;
+    int8 px0 = MAX8((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
+    int8 px1 = MIN8((xmax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(width - 1));
+    int8 py0 = MAX8((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
+    int8 py1 = MIN8((ymax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(height - 1));
+    int8 boxed = (px0 <= px1) & (py0 <= py1);
+    DECIDE(small & ~boxed, ST_NO_SAMPLE);
+    int8 two_x = px1 > px0, two_y = py1 > py0;
+    int8 m22 = small & open & (px1 - px0 <= 1) & (py1 - py0 <= 1);
+    /* positive area: vertices 1 and 2 swapped where area2 < 0 (make_piece) */
+    int8 swap = area2 < 0;
+    int8 X1 = SEL8(swap, x2, x1), Y1 = SEL8(swap, y2, y1);
+    int8 X2 = SEL8(swap, x1, x2), Y2 = SEL8(swap, y1, y2);
+    int8 cx = (px0 << SUBPIXEL_BITS) + SUB_HALF, cy = (py0 << SUBPIXEL_BITS) + SUB_HALF;
+    int8 e0, e1, e2, sx0, sx1, sx2, sy0, sy1, sy2;
+    EDGE8(X1, Y1, X2, Y2, m22, e0, sx0, sy0);
+    EDGE8(X2, Y2, x0, y0, m22, e1, sx1, sy1);
+    EDGE8(x0, y0, X1, Y1, m22, e2, sx2, sy2);
+    int8 cover = INSIDE8(0, 0) | (two_x & INSIDE8(1, 0)) | (two_y & INSIDE8(0, 1))
+                 | (two_x & two_y & INSIDE8(1, 1));
+    DECIDE(m22 & (cover == 0), ST_NO_SAMPLE);
+    /* the decided lanes' status and tile word; the open ones are written by raster_piece.
+     * clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
      * and nothing reads it for others (the scan and setup_clipped look at status first;
-     * binning reads it for clipped slots only), which saves a 4-byte store per
-     * triangle. */
-    tile1[t] = st == ST_CLIPPED ? TILE1_WALK : one;
+     * binning reads it for clipped slots only), which saves a 4-byte store per triangle. */
+    int8 one = SEL8(st == ST_CLIPPED, (int8)TILE1_WALK, (int8)TILE1_NONE);
+    int t0 = dr.tri_base + lt0;
+    if (n == SETUP_LANES) {
+        STORE_UC8(CONVERT_VEC(st, uchar8), status + t0);
+        STORE_I8(one, tile1 + t0);
+    } else {
+#define STORE_LANE(k)                                                                      \
+    if ((k) < n) {                                                                         \
+        status[t0 + (k)] = (uchar)st.s##k;                                                 \
+        tile1[t0 + (k)] = one.s##k;                                                        \
+    }
+        STORE_LANE(0) STORE_LANE(1) STORE_LANE(2) STORE_LANE(3)
+        STORE_LANE(4) STORE_LANE(5) STORE_LANE(6)
+    }
+    /* the open lanes, one after the other, their record's lines asked for first (most
+     * slots of the records' buffer are never written in a frame of a dense mesh, and a
+     * store to a line not in the cache waited for it) */
+    int8 bits = open & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    uint left = (uint)(((bits.s0 | bits.s1) | (bits.s2 | bits.s3))
+                       | ((bits.s4 | bits.s5) | (bits.s6 | bits.s7)));
+    for (uint m = left; m; m &= m - 1) {
+        __global const char *rec = (__global const char *)&pieces[t0 + CTZ(m)];
+        PREFETCH(rec); PREFETCH(rec + 64);
+    }
+    while (left) {
+        int j = CTZ(left);
+        left &= left - 1;
+        int l = lt0 + j;
+        uchar4 q = tv[l];
+        raster_piece(t0 + j, dr.vert_base + q.x, dr.vert_base + q.y, dr.vert_base + q.z,
+                     dr.face_base + face_ids[ci.x + l], win, clip64, rnum, reversed,
+                     width, height, zs, zo, tiles_x, pieces, status, tile1);
+    }
 }
 
 /* The clipper on triangle (i0, i1, i2) of this work-item's draw (setup_count_clipped and

@@ -83,14 +83,15 @@ CULL_MODES = {"none": CULL_NONE, "back": CULL_BACK, "front": CULL_FRONT}
 
 # ---- Clusters and draws ------------------------------------------------------------------
 
-#: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The setup
-#: kernels run one work-item per (draw, local triangle): work-item g serves draw
-#: g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1); the vertex kernel one per
-#: VERTEX_LANES local vertices of a draw (kernels/vertex.cl: CLUSTER_MAX / VERTEX_LANES
-#: work-items per draw).
+#: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The
+#: clipper's kernels run one work-item per (draw, local triangle): work-item g serves draw
+#: g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1); setup_triangles one per SETUP_LANES
+#: local triangles and the vertex kernel one per VERTEX_LANES local vertices of a draw
+#: (kernels/setup.cl, kernels/vertex.cl: CLUSTER_MAX / LANES work-items per draw).
 CLUSTER_LOG2 = 7
 CLUSTER_MAX = 1 << CLUSTER_LOG2
 VERTEX_LANES = 8
+SETUP_LANES = 8
 DRAW_INSIDE = 1  #: draw flag: cluster inside the frustum by a margin, no clip tests needed
 #: Draw flag: the instance's transform mirrors (negative determinant). Its faces keep their
 #: outward side (glTF 2.0, trimesh's apply_transform): setup swaps the cull sense (and the
@@ -230,7 +231,8 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Clipping: user clip planes; vertices of a clipped triangle and of the clipper's polygon",
      ("USER_PLANES_MAX", "MAX_CLIP_VERTICES", "POLY_MAX")),
     ("Clusters (meshlets): at most CLUSTER_MAX triangles and vertices; draw flags",
-     ("CLUSTER_LOG2", "CLUSTER_MAX", "VERTEX_LANES", "DRAW_INSIDE", "DRAW_MIRRORED")),
+     ("CLUSTER_LOG2", "CLUSTER_MAX", "VERTEX_LANES", "SETUP_LANES", "DRAW_INSIDE",
+      "DRAW_MIRRORED")),
     ("Depth pyramid: levels per launch; Hi-Z test results and error model (pyramid.cl)",
      ("PYR_LOG2", "OCC_VISIBLE", "OCC_OCCLUDED", "OCC_VIEW_CULLED", "HIZ_EPS",
       "HIZ_DEPTH_SLACK", "HIZ_PIXEL_SLACK")),
