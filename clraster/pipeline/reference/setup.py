@@ -74,8 +74,8 @@ def facing(c: np.ndarray, cull: int, mirrored: np.ndarray | None = None) -> np.n
     """Facing of clip-space triangles c float32 (K, 3, 4) from det[x y w], as FACING_DET and
     setup_triangles in setup.cl: ST_RASTER (keep), ST_BACKFACE or ST_DEGENERATE (det == 0)
     per triangle. The determinant is taken in float64 (as the kernel does in double): exact
-    products, no under- or overflow at any scene scale. ``mirrored`` bool (K,): triangles of mirroring
-    instances (DRAW_MIRRORED), whose back and front swap (draw_cull in setup.cl)."""
+    products, no under- or overflow at any scene scale. ``mirrored`` bool (K,): triangles of
+    mirroring instances (DRAW_MIRRORED), whose back and front swap (draw_cull in setup.cl)."""
     c = c.astype(np.float64)
     a, b, d = c[:, 0], c[:, 1], c[:, 2]
     with np.errstate(all="ignore"):
