@@ -10,8 +10,9 @@ draws); then each variant is built from the working tree's source with one subst
 profiling events) are printed. Variants: ``base`` (the kernel), ``indices`` (return once the
 work-item has its lanes' vertex indices), ``facing`` (after the lanes' facing), ``lanes``
 (after the lanes' fates and stores, before the pieces), ``no_prefetch`` (without the
-prefetch of the draw's double clip positions), ``no_store`` (each piece made but not
-stored), ``no_values`` (make_piece without the value planes). bench/README.md's log
+prefetch of the pieces' record lines), ``no_store`` (each piece made but not stored),
+``no_record`` (without the record's stores), ``no_values`` (make_piece without the value
+planes). bench/README.md's log
 quotes a run.
 """
 
@@ -36,12 +37,13 @@ _EXIT = "    if (width > 0) return;\n"
 VARIANTS = {
     "indices": ("#define OUTC(i) (int)outcode[i]\n", _EXIT + "#define OUTC(i) (int)outcode[i]\n"),
     "facing": ("    int8 clipped = (", _EXIT + "    int8 clipped = ("),
-    "lanes": ("    /* the open lanes, one after the other */\n",
-              _EXIT + "    /* the open lanes, one after the other */\n"),
-    "no_prefetch": ("        PREFETCH(pf); PREFETCH(pf + 2); PREFETCH(pf + 4); PREFETCH(pf + 6);\n",
+    "lanes": ("    /* the open lanes, one after the other,", _EXIT + "    /* the open lanes, one after the other,"),
+    "no_prefetch": ("        PREFETCH(rec); PREFETCH(rec + 64);\n",
                     ""),
     "no_store": ("    if (st == ST_RASTER) {\n        pc.id = id;",
                  "    if (width > 0) return;\n    if (st == ST_RASTER) {\n        pc.id = id;"),
+    "no_record": ("        d8[0] = ((float8 *)&pc)[0];\n        d8[1] = ((float8 *)&pc)[1];\n"
+                  "        d8[2] = ((float8 *)&pc)[2];\n", ""),
     "no_values": ("    double iw0 = 1.0 / a.w, iw1",
                   "    if (hw > 0.0) { pc->pad = 0; return; }\n    double iw0 = 1.0 / a.w, iw1"),
 }
@@ -75,7 +77,7 @@ def main() -> None:
     b = stage.buffers
     args = (verts.clip.buf, verts.outcode.buf, verts.win.buf, geo.draws.buf,
             np.uint32(geo.n_draws), geo.clusters.buf, geo.local_tris.buf, geo.face_ids.buf,
-            geo.positions.buf, verts.clip64.buf, verts.rnum.buf, geo.uplanes.buf,
+            geo.positions.buf, geo.mvps64.buf, geo.zrows.buf, geo.uplanes.buf,
             np.int32(geo.n_user), np.uint32(geo.uclip), verts.ucode.buf,
             np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
             np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),

@@ -31,8 +31,7 @@
  * end. */
 typedef struct { double4 p; double r, b0, b1, b2; int orig; } ClipVert;
 
-/* A vertex in double from object space (the vertex stage's clip64 and rnum): clip position
- * p, and r, the depth numerator its value planes use instead of p.z: p.z itself for
+/* A vertex in double from object space (CLIP_IN): clip position p, and r, the depth numerator its value planes use instead of p.z: p.z itself for
  * ordinary depth; for reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row,
  * formed in float64 on the host) times the position, so r = w − z keeps its relative
  * precision far away, where it is a small difference of two large values. */
@@ -70,13 +69,26 @@ inline double4 onto_plane(int p, double4 v, double kx, double ky)
     return v;
 }
 
-/* The vertex stage's double clip position and depth numerator of vertex-stream vertex i
- * (vertex.cl): computed once per vertex there rather than once per triangle corner here
- * (each vertex is a corner of about six triangles). The numerator is p.z unless the frame
- * is reversed-Z (the kernel argument `reversed`, in scope wherever this is used), and only
- * then written by the vertex stage. A macro, not a function returning the struct: inlining
- * that (an sret pointer, noalias) emitted an intrinsic Oclgrind cannot run. */
-#define clip_in(clip64, rnum, i) ((ClipIn){(clip64)[i], reversed ? (rnum)[i] : (clip64)[i].z})
+/* The double clip position and depth numerator (ClipIn) of pool vertex pv of instance inst,
+ * into `out`: the instance's float64 matrix (FrameDraws.mvps64: VP · model before it is
+ * rounded to float32 for coverage, so the value planes do not inherit that rounding, ~1e-7
+ * relative, which put barycentrics of 1-px triangles off by up to 2.6e-5) times the pool
+ * position, and for reversed-Z frames (the kernel argument `reversed`) the depth row
+ * (FrameDraws.zrows, w row − z row formed in float64) times it; else r = p.z. The same sums
+ * as the twin's object_clip (reference/setup.py). Made here for the corners of the
+ * triangles that become pieces or meet the clipper — a few per draw on a dense mesh — not
+ * for every vertex by the vertex stage, whose stores of 40 bytes a vertex nothing else read
+ * (kernels pos, mvps64, zrows and reversed in scope). A macro, not a function returning
+ * the struct: inlining that (an sret pointer, noalias) emitted an intrinsic Oclgrind
+ * cannot run. */
+#define CLIP_IN(out, pv, inst) do {                                                         \
+    double x_ = (double)pos[3 * (pv)], y_ = (double)pos[3 * (pv) + 1];                       \
+    double z_ = (double)pos[3 * (pv) + 2];                                                  \
+    __global const double *m_ = mvps64 + 16 * (inst);                                      \
+    (out).p = (double4)(MAT_ROW(m_, 0, x_, y_, z_), MAT_ROW(m_, 1, x_, y_, z_),           \
+                        MAT_ROW(m_, 2, x_, y_, z_), MAT_ROW(m_, 3, x_, y_, z_));          \
+    (out).r = reversed ? MAT_ROW(zrows + 4 * (inst), 0, x_, y_, z_) : (out).p.z;           \
+} while (0)
 
 /* The clip position with z replaced by the depth numerator: what value_planes reads. */
 inline double4 value_vertex(double4 p, double r)
@@ -350,8 +362,8 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const Draw *restrict draws, const uint n_draws,                               \
     __global const int4 *restrict clusters, __global const uchar4 *restrict local_tris,    \
     __global const int *restrict face_ids, __global const float *restrict pos,             \
-    __global const double4 *restrict clip64,                                               \
-    __global const double *restrict rnum, __global const double *restrict uplanes,        \
+    __global const double *restrict mvps64,                                                \
+    __global const double *restrict zrows, __global const double *restrict uplanes,       \
     const int n_user, const uint uclip, __global const uchar *restrict ucode
 
 /* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
@@ -421,22 +433,23 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 /* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id, draw
  * record dr) that passed the outcode, facing, clipping and w tests: make_piece, its record
  * at slot t, its status and tile word. */
-ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id,
-                                __global const int2 *win,
-                                __global const double4 *clip64,
-                                __global const double *rnum, int reversed, int width,
+ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool, int inst,
+                                __global const int2 *win, __global const float *pos,
+                                __global const double *mvps64,
+                                __global const double *zrows, int reversed, int width,
                                 int height, double zs, double zo, int tiles_x,
                                 __global Piece *pieces, __global uchar *status,
                                 __global int *tile1)
 {
     Piece pc __attribute__((aligned(32)));   /* copied out as 3 float8 */
     int sw = 0, one = TILE1_NONE;
-    /* values from the double clip positions (vertex.cl): the float32 ones are rounded by
+    /* values from the double clip positions (CLIP_IN): the float32 ones are rounded by
      * ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the barycentrics of
      * 1-pixel triangles off by 3e-5 */
-    ClipIn a = clip_in(clip64, rnum, i0);
-    ClipIn b = clip_in(clip64, rnum, i1);
-    ClipIn c = clip_in(clip64, rnum, i2);
+    ClipIn a, b, c;
+    CLIP_IN(a, vpool + i0, inst);
+    CLIP_IN(b, vpool + i1, inst);
+    CLIP_IN(c, vpool + i2, inst);
     int st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
                         value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height, zs, zo,
                         &pc, &sw);
@@ -487,14 +500,6 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     Draw dr = draws[d];
     int4 ci = clusters[dr.cluster];
     int lt0 = SETUP_LANES * (int)get_local_id(0);
-    /* The draw's double clip positions, asked for ahead: the pieces (raster_piece) read
-     * them, a few scattered vertices per draw, after the lanes' work, and each of those
-     * reads was a miss the work-item waited for. Work-item k asks for the lines of local
-     * vertices 8k..8k+7 (work-items run in order within a group). */
-    if (lt0 < ci.w) {
-        __global const double4 *pf = clip64 + dr.vert_base + lt0;
-        PREFETCH(pf); PREFETCH(pf + 2); PREFETCH(pf + 4); PREFETCH(pf + 6);
-    }
     if (lt0 >= ci.y) return;
     int n = imin(ci.y - lt0, SETUP_LANES);   /* this work-item's triangles */
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
@@ -620,7 +625,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         int l = lt0 + j;
         uchar4 q = tv[l];
         raster_piece(t0 + j, dr.vert_base + q.x, dr.vert_base + q.y, dr.vert_base + q.z,
-                     dr.face_base + face_ids[ci.x + l], win, clip64, rnum, reversed,
+                     dr.face_base + face_ids[ci.x + l], ci.z - dr.vert_base, dr.instance,
+                     win, pos, mvps64, zrows, reversed,
                      width, height, zs, zo, tiles_x, pieces, status, tile1);
     }
 }
@@ -634,10 +640,14 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     uint o_or_ = outcode[i0] | outcode[i1] | outcode[i2];                                 \
     uint u_or_ = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;      \
     double ud_[3 * USER_PLANES_MAX];                                                      \
-    user_dists(pos, clusters, uplanes, n_user, u_or_, draws[get_group_id(0)],             \
-               i0, i1, i2, ud_);                                                          \
-    count = clip_and_emit(clip[i0], clip[i1], clip[i2], clip_in(clip64, rnum, i0),        \
-                  clip_in(clip64, rnum, i1), clip_in(clip64, rnum, i2),                   \
+    Draw dr_ = draws[get_group_id(0)];                                                    \
+    user_dists(pos, clusters, uplanes, n_user, u_or_, dr_, i0, i1, i2, ud_);              \
+    int vp_ = clusters[dr_.cluster].z - dr_.vert_base;   /* pool vertex of stream vertex 0 */ \
+    ClipIn d0_, d1_, d2_;                                                                 \
+    CLIP_IN(d0_, vp_ + i0, dr_.instance);                                                 \
+    CLIP_IN(d1_, vp_ + i1, dr_.instance);                                                 \
+    CLIP_IN(d2_, vp_ + i2, dr_.instance);                                                 \
+    count = clip_and_emit(clip[i0], clip[i1], clip[i2], d0_, d1_, d2_,                    \
                   o_or_ & OC_NEEDS_CLIP, u_or_, ud_, kx, ky, width, height, zs, zo, id,   \
                   (write), (out), (out_bary), (base));                                    \
 } while (0)

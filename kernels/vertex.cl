@@ -15,7 +15,7 @@
 #include "common.h"
 
 /* Lanes per work-item: VERTEX_LANES vertices of one cluster go through the transforms as
- * float8 / double8 vectors (the same operations per lane as scalar code, so the same bits);
+ * float8 vectors (the same operations per lane as scalar code, so the same bits);
  * a full set of lanes without user clip planes also gets its outcodes, rounding and
  * stores in lanes (store_lanes), the rest per vertex. PoCL does not vectorize this kernel
  * across work-items itself (ARCHITECTURE.md, "Writing kernels for PoCL's CPU device"), so
@@ -25,17 +25,8 @@
  * (clraster/pipeline/stages/vertex.py); VERTEX_LANES (8, clraster/base/layout.py) must match
  * the vector types below. */
 typedef float8 fvec;
-typedef double8 dvec;
-#ifdef __clang__
-/* store_lanes takes double8 arguments and is always inlined, so no call passes them in
- * registers: clang's -Wpsabi warning ("AVX vector argument ... changes the ABI", on CPUs
- * its target lacks AVX-512 for) is about a call ABI that never exists here, and a build
- * log that is not empty reaches users as a pyopencl CompilerWarning. */
-#pragma clang diagnostic ignored "-Wpsabi"
-#endif
 /* one value per lane in private memory, aligned for the vector loads and stores above */
 typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
-typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 
 /* The stores of a full set of lanes use common.h's element-aligned vector types (a draw's
  * first vertex has no particular alignment; only with CLRASTER_LANE_STORES, common.h). */
@@ -43,7 +34,7 @@ typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 /* Outcodes, window positions and every store of a full set of VERTEX_LANES lanes without
  * user clip planes, in lanes: the same values as the per-vertex loop of vertex_transform
  * (the same compares; roundeven is rint in the default rounding mode), written as whole
- * vectors, the float4 and double4 positions interleaved from the lanes by shuffles. The
+ * vectors, the float4 positions interleaved from the lanes by shuffles. The
  * per-vertex loop (eight rounds of scalar compares, rounding and five stores from the
  * lanes spilled to private arrays) was most of the kernel. Only with CLRASTER_LANE_STORES
  * (common.h: the compiler has the Clang builtins; never under CLRASTER_PORTABLE, as on
@@ -68,11 +59,9 @@ typedef double dlanes[VERTEX_LANES] __attribute__((aligned(64)));
 #define LANE_BIT(test, bit) ((test) ? (int8)(bit) : (int8)0)
 
 ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec ys,
-                               dvec dx, dvec dy, dvec dz, dvec dw, dvec r, int flags,
-                               float kx, float ky, int reversed,
+                               int flags, float kx, float ky,
                                __global float4 *clip, __global ushort *outcode,
-                               __global int2 *win, __global uchar *ucode,
-                               __global double4 *clip64, __global double *rnum)
+                               __global int2 *win, __global uchar *ucode)
 {
     const int8 exp_mask = (int8)0x7f800000;
     int8 finite = ((as_int8(cx) & exp_mask) != exp_mask)
@@ -100,8 +89,6 @@ ALWAYS_INLINE void store_lanes(fvec cx, fvec cy, fvec cz, fvec cw, fvec xs, fvec
     w8[0] = ZIP_LO(wx, wy);
     w8[1] = ZIP_HI(wx, wy);
     *(__global uchar8u *)ucode = (uchar8)0;
-    STORE_XYZW8((__global double8u *)clip64, dx, dy, dz, dw);
-    if (reversed) *(__global double8u *)rnum = r;
 }
 #endif
 
@@ -114,11 +101,7 @@ __kernel void vertex_transform(__global const float *restrict pos,
                                __global ushort *restrict outcode,
                                __global int2 *restrict win,
                                __global const double *restrict uplanes, const int n_user,
-                               __global uchar *restrict ucode,
-                               __global const double *restrict mvps64,
-                               __global const double *restrict zrows, const int reversed,
-                               __global double4 *restrict clip64,
-                               __global double *restrict rnum)
+                               __global uchar *restrict ucode)
 {
     /* work-groups of CLUSTER_MAX / VERTEX_LANES: the group is the draw, so everything read
      * per draw (record, cluster, matrix) is uniform over the group */
@@ -154,33 +137,17 @@ __kernel void vertex_transform(__global const float *restrict pos,
     fvec iw = 1.0f / cw;
     float hw = 0.5f * (float)width, hh = 0.5f * (float)height;
     fvec xs = WIN_X_SUB(cx, iw, hw), ys = WIN_Y_SUB(cy, iw, hh);
-    /* The double clip position setup's value planes and clipper use, from the instance's
-     * float64 matrix (FrameDraws.mvps64: VP · model before it is rounded to float32 for
-     * coverage, so the value planes do not inherit that rounding, ~1e-7 relative, which
-     * put barycentrics of 1-px triangles off by up to 2.6e-5), and its depth numerator r
-     * (setup.cl ClipIn): z, or with `reversed` the depth row (FrameDraws.zrows, w row −
-     * z row formed in float64) times the position. The twin: reference/setup.py
-     * object_clip, the same sums. */
-    dvec xd = CONVERT_VEC(x, double8), yd = CONVERT_VEC(y, double8);
-    dvec zd = CONVERT_VEC(z, double8);
-    __global const double *m64 = mvps64 + 16 * dr.instance;
-    dvec dx = MAT_ROW(m64, 0, xd, yd, zd), dy = MAT_ROW(m64, 1, xd, yd, zd);
-    dvec dz = MAT_ROW(m64, 2, xd, yd, zd), dw = MAT_ROW(m64, 3, xd, yd, zd);
-    dvec r = reversed ? MAT_ROW(zrows + 4 * dr.instance, 0, xd, yd, zd) : dz;
     uint i0 = (uint)dr.vert_base + (uint)lv0;
 #ifdef CLRASTER_LANE_STORES
     if (n == VERTEX_LANES && n_user == 0) {
-        store_lanes(cx, cy, cz, cw, xs, ys, dx, dy, dz, dw, r, dr.flags, kx, ky, reversed,
-                    clip + i0, outcode + i0, win + i0, ucode + i0, clip64 + i0, rnum + i0);
+        store_lanes(cx, cy, cz, cw, xs, ys, dr.flags, kx, ky, clip + i0, outcode + i0,
+                    win + i0, ucode + i0);
         return;
     }
 #endif
     flanes acx, acy, acz, acw, axs, ays;
-    dlanes adx, ady, adz, adw, ar;
     *(fvec *)acx = cx; *(fvec *)acy = cy; *(fvec *)acz = cz; *(fvec *)acw = cw;
     *(fvec *)axs = xs; *(fvec *)ays = ys;
-    *(dvec *)adx = dx; *(dvec *)ady = dy; *(dvec *)adz = dz; *(dvec *)adw = dw;
-    *(dvec *)ar = r;
     for (int l = 0; l < n; ++l) {
         uint i = i0 + l;
         float4 c = (float4)(acx[l], acy[l], acz[l], acw[l]);
@@ -214,7 +181,5 @@ __kernel void vertex_transform(__global const float *restrict pos,
         outcode[i] = (ushort)o;
         win[i] = v;
         ucode[i] = (uchar)uc;
-        clip64[i] = (double4)(adx[l], ady[l], adz[l], adw[l]);
-        if (reversed) rnum[i] = ar[l];   /* else r = z: setup.cl clip_in reads clip64 */
     }
 }

@@ -85,7 +85,7 @@ class StageChain:
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
-        least one triangle), vertex stream 67 bytes × 3·M vertices (a draw has at most 3
+        least one triangle), vertex stream 27 bytes × 3·M vertices (a draw has at most 3
         vertices per triangle), setup 109·M (96-byte record, status, clip count and
         offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
         pieces than E is split like one with too many entries), bin entries 96·E and the
@@ -95,7 +95,7 @@ class StageChain:
         g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,
                       self.binning.buffers)
         return {g.draws: DRAW_DTYPE.itemsize * m, v.clip: 16 * 3 * m, v.outcode: 2 * 3 * m,
-                v.ucode: 3 * m, v.clip64: 32 * 3 * m, v.rnum: 8 * 3 * m,
+                v.ucode: 3 * m,
                 v.win: WINXY_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
                 s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,

@@ -90,11 +90,12 @@ class SetupStage:
         n_draws, m = geo.n_draws, geo.n_tris
         clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
         kx, ky = params.kx, params.ky
-        # the pool too (user clip plane distances from object space, common.h user_dist) and
-        # the vertex stage's double positions (value planes and the clipper's inputs)
+        # the pool too (user clip plane distances from object space, common.h user_dist)
+        # and the float64 matrices and depth rows (the double positions of the value planes
+        # and the clipper's inputs, kernels/setup.cl CLIP_IN)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
-                     geo.face_ids.buf, geo.positions.buf, verts.clip64.buf,
-                     verts.rnum.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
+                     geo.face_ids.buf, geo.positions.buf, geo.mvps64.buf,
+                     geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
                      verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)
         # one work-group per draw (kernels/setup.cl triangle_of), SETUP_LANES triangles a

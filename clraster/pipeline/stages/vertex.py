@@ -25,18 +25,14 @@ class ClipBuffers:
     (config.OC_*: 6 frustum bits, 4 guard-band bits, invalid, w <= 0).
     win: WINXY_DTYPE (N,) snapped window x, y of the vertices that need no clipping.
     ucode: uint8 (N,) user clip plane bits (bit k: outside user plane k; 0 without planes).
-    clip64: float64 (N, 4) clip positions from the float64 matrices and rnum: float64 (N,)
-    depth numerators (kernels/vertex.cl): setup's value planes and clipper; rnum only for
-    reversed-Z frames (otherwise the numerator is clip64's z and rnum is not written).
-    n_verts: N of the last run.
+    n_verts: N of the last run. (The double clip positions setup's value planes and clipper
+    take are made by setup itself, for the corners it needs: kernels/setup.cl CLIP_IN.)
     """
 
     clip: GrowBuffer
     outcode: GrowBuffer
     win: GrowBuffer
     ucode: GrowBuffer
-    clip64: GrowBuffer
-    rnum: GrowBuffer
     n_verts: int = 0
 
 
@@ -45,7 +41,7 @@ class VertexStage:
         self.kernel = kernel(program(ctx, "vertex", config.build_options()), "vertex_transform")
         # one work-group per draw (kernels/vertex.cl): a device that cannot is refused here
         local_size(self.kernel, ctx.devices[0], CLUSTER_MAX // VERTEX_LANES, exact=True)
-        self.buffers = ClipBuffers(*(GrowBuffer(ctx) for _ in range(6)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = ClipBuffers(*(GrowBuffer(ctx) for _ in range(4)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
 
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams
             ) -> tuple[ClipBuffers, list[cl.Event]]:
@@ -60,10 +56,6 @@ class VertexStage:
                          np.float32(params.ky), np.int32(params.width), np.int32(params.height),
                          b.clip.ensure(16 * n_verts), b.outcode.ensure(2 * n_verts),
                          b.win.ensure(WINXY_DTYPE.itemsize * n_verts), geo.uplanes.buf,
-                         np.int32(geo.n_user),
-                         b.ucode.ensure(n_verts), geo.mvps64.buf, geo.zrows.buf,
-                         np.int32(params.reversed_z), b.clip64.ensure(32 * n_verts),
-                         # written only for reversed-Z (else setup reads r = z from clip64)
-                         b.rnum.ensure(8 * n_verts if params.reversed_z else 8))
+                         np.int32(geo.n_user), b.ucode.ensure(n_verts))
         b.n_verts = n_verts
         return b, [ev]
