@@ -37,7 +37,8 @@ _EXIT = "    if (width > 0) return;\n"
 VARIANTS = {
     "indices": ("#define OUTC(i) (int)outcode[i]\n", _EXIT + "#define OUTC(i) (int)outcode[i]\n"),
     "facing": ("    int8 clipped = (", _EXIT + "    int8 clipped = ("),
-    "lanes": ("    /* the open lanes, one after the other,", _EXIT + "    /* the open lanes, one after the other,"),
+    "lanes": ("    /* the open lanes, one after the other,",
+              _EXIT + "    /* the open lanes, one after the other,"),
     "no_prefetch": ("        PREFETCH(rec); PREFETCH(rec + 64);\n",
                     ""),
     "no_store": ("    if (st == ST_RASTER) {\n        pc.id = id;",
