@@ -90,7 +90,7 @@ class Renderer:
                        kept to make the next frames' arrays without page faults
                        (`clraster.arraypool`: a frame's arrays are its own as long as
                        anything refers to them)
-      + per pass       ≤ 346·M + 228·E bytes (802 MiB at the defaults; draws, vertex stream,
+      + per pass       ≤ 226·M + 228·E bytes (682 MiB at the defaults; draws, vertex stream,
                        setup records, clipped pieces, bin entries; `StageChain.budget_bounds`
                        computes them, tests/test_budget_text.py checks these figures)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
