@@ -29,16 +29,14 @@ import clraster
 import clraster.pipeline.device as dev
 import clraster.pipeline.stages.setup as setup_stage
 from clraster.base.config import RasterConfig
-from clraster.base.layout import CLUSTER_MAX, SETUP_LANES
 
 #: variant → (text of kernels/setup.cl, the same text with an early exit added or a step
 #: taken out). The lanes' stores are skipped by the exits: a variant's outputs are never read.
-_EXIT = "    if (width > 0) return;\n"
+_EXIT = "    if (width > 0) return 0u;\n"   # in batch_fates
 VARIANTS = {
     "indices": ("#define OUTC(i) (int)outcode[i]\n", _EXIT + "#define OUTC(i) (int)outcode[i]\n"),
     "facing": ("    int8 clipped = (", _EXIT + "    int8 clipped = ("),
-    "lanes": ("    /* the open lanes, one after the other,",
-              _EXIT + "    /* the open lanes, one after the other,"),
+    "lanes": ("    return left;\n", "    return width > 0 ? 0u : left;\n"),
     "no_prefetch": ("        PREFETCH(rec); PREFETCH(rec + 64);\n",
                     ""),
     "no_store": ("    if (st == ST_RASTER) {\n        pc.id = id;",
@@ -83,8 +81,7 @@ def main() -> None:
             np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
             np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),
             b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf, stage.flag.buf)
-    lanes = CLUSTER_MAX // SETUP_LANES   # work-items per draw (kernels/setup.cl)
-    gsize, lsize = (max(geo.n_draws, 1) * lanes,), (lanes,)
+    gsize, lsize = (max(geo.n_draws, 1),), (1,)   # a work-item per draw (kernels/setup.cl)
     source = dev.kernel_source("setup")
     options = [*RasterConfig().build_options(), *dev.feature_options(r.context)]
     kernels = {}

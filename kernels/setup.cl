@@ -389,23 +389,27 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 #define DEPTH_MODE(reversed) \
     double zs = (reversed) ? -0.5 : 0.5, zo = (reversed) ? 0.0 : 0.5
 
-/* ---- setup_triangles: SETUP_LANES triangles of one draw per work-item --------------------
+/* ---- setup_triangles: a draw per work-item, its triangles SETUP_LANES at a time ---------
  *
  * On a dense mesh few triangles become pieces (the dragon at 640 x 480: 47K of 694K, the
  * rest back faces or boxes without a sample), and one work-item per triangle spent most of
- * its time on branches that went either way at random. Here each work-item decides the fate
- * of SETUP_LANES consecutive triangles of its draw in vector lanes, branch-free, in the
- * scalar path's order (outcodes, facing, clipping, w, then make_piece's area, box and
- * 2 x 2 test for triangles under SMALL_EXTENT sub-pixels wide and high, where every product
- * fits in 32 bits); only the triangles still open after that (a sample found, or a larger
- * box) go through the scalar make_piece (raster_piece), one after the other. Same statuses,
- * records and tile words as the scalar path: a lane test is the scalar test on the same
- * integers and doubles (FP_CONTRACT is off). */
+ * its time on branches that went either way at random. Here a work-item takes a whole draw
+ * and decides the fates of SETUP_LANES consecutive triangles at a time (batch_fates) in
+ * vector lanes, branch-free, in the scalar path's order (outcodes, facing, clipping, w,
+ * then make_piece's area, box and 2 x 2 test for triangles under SMALL_EXTENT sub-pixels
+ * wide and high, where every product fits in 32 bits); only the triangles still open after
+ * that (a sample found, or a larger box) go through the scalar make_piece (raster_piece),
+ * one after the other, SETUP_LAG batches later. Same statuses, records and tile words as
+ * the scalar path: a lane test is the scalar test on the same integers and doubles
+ * (FP_CONTRACT is off). */
 
 /* A lane's box is tested in lanes when the triangle spans fewer than this many sub-pixels
  * in x and in y: its edge products stay under 2^21 (int), and its box holds at most 4 x 4
  * pixel centres. */
 #define SMALL_EXTENT (4 * SUB_ONE)
+/* raster_piece runs for a batch's open lanes this many batches after their fates, so that
+ * their records' lines have arrived (2 to 8 measured alike; 1 or 0 waited) */
+#define SETUP_LAG 4
 
 /* Lanes of index vector ix through the scalar expression E(i). */
 #define GATHER8(T, E, ix) ((T)(E((ix).s0), E((ix).s1), E((ix).s2), E((ix).s3),            \
@@ -484,30 +488,23 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
     tile1[t] = one;
 }
 
-__kernel void setup_triangles(__global const float4 *restrict clip,
-                              __global const ushort *restrict outcode,
-                              __global const int2 *restrict win, DRAW_ARGS, const int width,
-                              const int height, const int cull, const float kx, const float ky,
-                              const int reversed, __global Piece *restrict pieces,
-                              __global uchar *restrict status,
-                              const int tiles_x, __global int *restrict tile1,
-                              __global int *restrict any_clipped)
+/* The fates of local triangles lt0 .. lt0 + n - 1 (n <= SETUP_LANES) of draw dr (its
+ * cluster's triangles tv, pool vertices from pool0) in lanes: the decided ones' status and tile word stored; returns
+ * the lanes still open (bit j: triangle lt0 + j, for raster_piece), their records' lines
+ * asked for. */
+ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *tv,
+                               __global const ushort *outcode, __global const uchar *ucode,
+                               int n_user, uint uclip, __global const float4 *clip,
+                               __global const int2 *win, int width, int height, int cull,
+                               __global const Piece *pieces, __global uchar *status,
+                               __global int *tile1, __global int *any_clipped,
+                               __global const float *pos, int pool0)
 {
-    DEPTH_MODE(reversed);
-    /* work-group = draw (CLUSTER_MAX / SETUP_LANES work-items), as triangle_of */
-    uint d = get_group_id(0);
-    if (d >= n_draws) return;
-    Draw dr = draws[d];
-    int4 ci = clusters[dr.cluster];
-    int lt0 = SETUP_LANES * (int)get_local_id(0);
-    if (lt0 >= ci.y) return;
-    int n = imin(ci.y - lt0, SETUP_LANES);   /* this work-item's triangles */
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
     /* idle lanes (past the draw's last triangle) repeat its last triangle: every gather
      * stays in the buffers; nothing of theirs is stored */
     int8 lt = lt0 + SEL8(open, lane, (int8)(n - 1));
-    __global const uchar4 *tv = local_tris + ci.x;
 #define TV_X(i) (int)tv[i].x
 #define TV_Y(i) (int)tv[i].y
 #define TV_Z(i) (int)tv[i].z
@@ -609,25 +606,60 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         STORE_LANE(0) STORE_LANE(1) STORE_LANE(2) STORE_LANE(3)
         STORE_LANE(4) STORE_LANE(5) STORE_LANE(6)
     }
-    /* the open lanes, one after the other, their record's lines asked for first (most
+    /* the open lanes' record lines and corner positions (CLIP_IN), asked for now: most
      * slots of the records' buffer are never written in a frame of a dense mesh, and a
-     * store to a line not in the cache waited for it) */
+     * store to a line not in the cache waited for it (raster_piece runs SETUP_LAG batches
+     * later) */
     int8 bits = open & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
     uint left = (uint)(((bits.s0 | bits.s1) | (bits.s2 | bits.s3))
                        | ((bits.s4 | bits.s5) | (bits.s6 | bits.s7)));
     for (uint m = left; m; m &= m - 1) {
         __global const char *rec = (__global const char *)&pieces[t0 + CTZ(m)];
         PREFETCH(rec); PREFETCH(rec + 64);
+        uchar4 q = tv[lt0 + CTZ(m)];
+        __global const float *p0 = pos + 3 * pool0;
+        PREFETCH(p0 + 3 * q.x); PREFETCH(p0 + 3 * q.y); PREFETCH(p0 + 3 * q.z);
     }
-    while (left) {
-        int j = CTZ(left);
-        left &= left - 1;
-        int l = lt0 + j;
-        uchar4 q = tv[l];
-        raster_piece(t0 + j, dr.vert_base + q.x, dr.vert_base + q.y, dr.vert_base + q.z,
-                     dr.face_base + face_ids[ci.x + l], ci.z - dr.vert_base, dr.instance,
-                     win, pos, mvps64, zrows, reversed,
-                     width, height, zs, zo, tiles_x, pieces, status, tile1);
+    return left;
+}
+
+__kernel void setup_triangles(__global const float4 *restrict clip,
+                              __global const ushort *restrict outcode,
+                              __global const int2 *restrict win, DRAW_ARGS, const int width,
+                              const int height, const int cull, const float kx, const float ky,
+                              const int reversed, __global Piece *restrict pieces,
+                              __global uchar *restrict status,
+                              const int tiles_x, __global int *restrict tile1,
+                              __global int *restrict any_clipped)
+{
+    DEPTH_MODE(reversed);
+    /* one work-item per draw (work-groups of one): its triangles in batches of SETUP_LANES */
+    uint d = get_group_id(0);
+    if (d >= n_draws) return;
+    Draw dr = draws[d];
+    int4 ci = clusters[dr.cluster];
+    __global const uchar4 *tv = local_tris + ci.x;
+    int nb = (ci.y + SETUP_LANES - 1) / SETUP_LANES;
+    uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
+    /* batch h's fates, then the pieces of batch h - SETUP_LAG: their records' lines were
+     * asked for SETUP_LAG batches earlier */
+    for (int h = 0; h < nb + SETUP_LAG; ++h) {
+        if (h < nb) {
+            int lt0 = SETUP_LANES * h;
+            open[h] = batch_fates(lt0, imin(ci.y - lt0, SETUP_LANES), dr, tv, outcode, ucode,
+                                  n_user, uclip, clip, win, width, height, cull, pieces,
+                                  status, tile1, any_clipped, pos, ci.z);
+        }
+        if (h < SETUP_LAG) continue;
+        int lt0 = SETUP_LANES * (h - SETUP_LAG);
+        for (uint left = open[h - SETUP_LAG]; left; left &= left - 1) {
+            int l = lt0 + CTZ(left);
+            uchar4 q = tv[l];
+            raster_piece(dr.tri_base + l, dr.vert_base + q.x, dr.vert_base + q.y,
+                         dr.vert_base + q.z, dr.face_base + face_ids[ci.x + l],
+                         ci.z - dr.vert_base, dr.instance, win, pos, mvps64, zrows,
+                         reversed, width, height, zs, zo, tiles_x, pieces, status, tile1);
+        }
     }
 }
 

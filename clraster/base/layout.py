@@ -85,9 +85,10 @@ CULL_MODES = {"none": CULL_NONE, "back": CULL_BACK, "front": CULL_FRONT}
 
 #: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The
 #: clipper's kernels run one work-item per (draw, local triangle): work-item g serves draw
-#: g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1); setup_triangles one per SETUP_LANES
-#: local triangles and the vertex kernel one per VERTEX_LANES local vertices of a draw
-#: (kernels/setup.cl, kernels/vertex.cl: CLUSTER_MAX / LANES work-items per draw).
+#: g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1); setup_triangles one per draw, its
+#: triangles SETUP_LANES at a time, and the vertex kernel one per VERTEX_LANES local
+#: vertices of a draw (kernels/setup.cl, kernels/vertex.cl: CLUSTER_MAX / VERTEX_LANES
+#: work-items per draw).
 CLUSTER_LOG2 = 7
 CLUSTER_MAX = 1 << CLUSTER_LOG2
 VERTEX_LANES = 8

@@ -10,7 +10,7 @@ import numpy as np
 import pyopencl as cl
 
 from ...base.config import SCAN_CHUNKS, RasterConfig
-from ...base.layout import CLUSTER_MAX, PIECE_DTYPE, SETUP_LANES
+from ...base.layout import CLUSTER_MAX, PIECE_DTYPE
 from ..device import kernel, program, wait
 from ..features import local_size
 from ..params import BinBudgetExceeded, FrameParams
@@ -58,8 +58,9 @@ class SetupStage:
         self.k_setup = kernel(prg, "setup_triangles")
         self.k_clipped = kernel(prg, "setup_clipped")
         self.k_count = kernel(prg, "setup_count_clipped")
-        # one work-group per draw; setup_triangles takes SETUP_LANES triangles a work-item
-        local_size(self.k_setup, ctx.devices[0], CLUSTER_MAX // SETUP_LANES, exact=True)
+        # one work-group per draw (setup_triangles: one work-item, the draw's triangles
+        # SETUP_LANES at a time)
+        local_size(self.k_setup, ctx.devices[0], 1, exact=True)
         for k in (self.k_clipped, self.k_count):
             local_size(k, ctx.devices[0], CLUSTER_MAX, exact=True)
         self.k_partials = kernel(prg, "scan_partials")
@@ -98,13 +99,12 @@ class SetupStage:
                      geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
                      verts.ucode.buf)
         size = np.int32(params.width), np.int32(params.height)
-        # one work-group per draw (kernels/setup.cl triangle_of), SETUP_LANES triangles a
-        # work-item in setup_triangles
+        # one work-group per draw (kernels/setup.cl triangle_of); setup_triangles: one
+        # work-item per draw
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)
-        lanes = CLUSTER_MAX // SETUP_LANES
         flag = cast(cl.Buffer, self.flag.buf)   # zeroed by `prepare`
-        ev = [self.k_setup(queue, (max(n_draws, 1) * lanes,), (lanes,), clip, outcode, win,
+        ev = [self.k_setup(queue, (max(n_draws, 1),), (1,), clip, outcode, win,
                            *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
