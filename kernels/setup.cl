@@ -22,8 +22,8 @@
 /* The clipper works in double: interpolating float32 positions between far-apart vertices
  * (|w| ~ 1e5 around a near plane at 1e-3, or x ~ ±1e15 around a guard band of 2**19 px)
  * cancels away more than the plane's own scale, and whole triangles vanished. Its inputs
- * are clip positions recomputed in double from the object-space vertices and the float32
- * matrix (vertex.cl, once per vertex in the vertex stage): the vertex stage's float32 clip
+ * are clip positions recomputed in double from the object-space vertices and the float64
+ * matrix (CLIP_IN, per corner of a clipped triangle): the vertex stage's float32 clip
  * positions are rounded by ~4e-3 at |w| ~ 1e5, more than a near distance of 1e-3, and the
  * near-plane crossing landed at w <= 0. A polygon vertex that is one of the triangle's own
  * (orig >= 0) is emitted as the vertex stage's float32 position, so an edge shared with an
@@ -31,9 +31,10 @@
  * end. */
 typedef struct { double4 p; double r, b0, b1, b2; int orig; } ClipVert;
 
-/* A vertex in double from object space (CLIP_IN): clip position p, and r, the depth numerator its value planes use instead of p.z: p.z itself for
- * ordinary depth; for reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row,
- * formed in float64 on the host) times the position, so r = w − z keeps its relative
+/* A vertex in double from object space (CLIP_IN): clip position p, and r, the depth
+ * numerator its value planes use instead of p.z: p.z itself for ordinary depth; for
+ * reversed-Z the draw's depth row (FrameDraws.zrows: w row − z row, formed in float64 on
+ * the host) times the position, so r = w − z keeps its relative
  * precision far away, where it is a small difference of two large values. */
 typedef struct { double4 p; double r; } ClipIn;
 
@@ -489,9 +490,9 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
 }
 
 /* The fates of local triangles lt0 .. lt0 + n - 1 (n <= SETUP_LANES) of draw dr (its
- * cluster's triangles tv, pool vertices from pool0) in lanes: the decided ones' status and tile word stored; returns
- * the lanes still open (bit j: triangle lt0 + j, for raster_piece), their records' lines
- * asked for. */
+ * cluster's triangles tv, pool vertices from pool0) in lanes: the decided ones' status and
+ * tile word stored; returns the lanes still open (bit j: triangle lt0 + j, for
+ * raster_piece), their records' lines and corner positions asked for. */
 ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *tv,
                                __global const ushort *outcode, __global const uchar *ucode,
                                int n_user, uint uclip, __global const float4 *clip,
@@ -554,40 +555,45 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
      * every work-item pay for them) */
     if (any8(clipped)) atomic_or(any_clipped, 1);
     DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
-    /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
+    /* a mesh's back faces come in runs (a cluster's triangles are neighbours): a batch
+     * with no lane left open skips the rest */
+    if (any8(open)) {
+        /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
 #define WX(i) win[i].x
 #define WY(i) win[i].y
-    int8 x0 = GATHER8(int8, WX, i0) & open, y0 = GATHER8(int8, WY, i0) & open;
-    int8 x1 = GATHER8(int8, WX, i1) & open, y1 = GATHER8(int8, WY, i1) & open;
-    int8 x2 = GATHER8(int8, WX, i2) & open, y2 = GATHER8(int8, WY, i2) & open;
-    int8 xmin = MIN8(x0, x1), xmax = MAX8(x0, x1), ymin = MIN8(y0, y1), ymax = MAX8(y0, y1);
-    xmin = MIN8(xmin, x2); xmax = MAX8(xmax, x2);
-    ymin = MIN8(ymin, y2); ymax = MAX8(ymax, y2);
-    int8 small = open & (xmax - xmin < SMALL_EXTENT) & (ymax - ymin < SMALL_EXTENT);
-    int8 area2 = ((x1 - x0) & small) * ((y2 - y0) & small)
-                 - ((y1 - y0) & small) * ((x2 - x0) & small);   /* edge_fn(v0, v1, v2) */
-    DECIDE(small & (area2 == 0), ST_DEGENERATE);
-    small &= open;
-    int8 px0 = MAX8((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
-    int8 px1 = MIN8((xmax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(width - 1));
-    int8 py0 = MAX8((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
-    int8 py1 = MIN8((ymax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(height - 1));
-    int8 boxed = (px0 <= px1) & (py0 <= py1);
-    DECIDE(small & ~boxed, ST_NO_SAMPLE);
-    int8 two_x = px1 > px0, two_y = py1 > py0;
-    int8 m22 = small & open & (px1 - px0 <= 1) & (py1 - py0 <= 1);
-    /* positive area: vertices 1 and 2 swapped where area2 < 0 (make_piece) */
-    int8 swap = area2 < 0;
-    int8 X1 = SEL8(swap, x2, x1), Y1 = SEL8(swap, y2, y1);
-    int8 X2 = SEL8(swap, x1, x2), Y2 = SEL8(swap, y1, y2);
-    int8 cx = (px0 << SUBPIXEL_BITS) + SUB_HALF, cy = (py0 << SUBPIXEL_BITS) + SUB_HALF;
-    int8 e0, e1, e2, sx0, sx1, sx2, sy0, sy1, sy2;
-    EDGE8(X1, Y1, X2, Y2, m22, e0, sx0, sy0);
-    EDGE8(X2, Y2, x0, y0, m22, e1, sx1, sy1);
-    EDGE8(x0, y0, X1, Y1, m22, e2, sx2, sy2);
-    int8 cover = INSIDE8(0, 0) | (two_x & INSIDE8(1, 0)) | (two_y & INSIDE8(0, 1))
-                 | (two_x & two_y & INSIDE8(1, 1));
-    DECIDE(m22 & (cover == 0), ST_NO_SAMPLE);
+        int8 x0 = GATHER8(int8, WX, i0) & open, y0 = GATHER8(int8, WY, i0) & open;
+        int8 x1 = GATHER8(int8, WX, i1) & open, y1 = GATHER8(int8, WY, i1) & open;
+        int8 x2 = GATHER8(int8, WX, i2) & open, y2 = GATHER8(int8, WY, i2) & open;
+        int8 xmin = MIN8(x0, x1), xmax = MAX8(x0, x1);
+        int8 ymin = MIN8(y0, y1), ymax = MAX8(y0, y1);
+        xmin = MIN8(xmin, x2); xmax = MAX8(xmax, x2);
+        ymin = MIN8(ymin, y2); ymax = MAX8(ymax, y2);
+        int8 small = open & (xmax - xmin < SMALL_EXTENT) & (ymax - ymin < SMALL_EXTENT);
+        int8 area2 = ((x1 - x0) & small) * ((y2 - y0) & small)
+                     - ((y1 - y0) & small) * ((x2 - x0) & small);   /* edge_fn(v0, v1, v2) */
+        DECIDE(small & (area2 == 0), ST_DEGENERATE);
+        small &= open;
+        int8 px0 = MAX8((xmin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
+        int8 px1 = MIN8((xmax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(width - 1));
+        int8 py0 = MAX8((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, (int8)0);
+        int8 py1 = MIN8((ymax - SUB_HALF) >> SUBPIXEL_BITS, (int8)(height - 1));
+        int8 boxed = (px0 <= px1) & (py0 <= py1);
+        DECIDE(small & ~boxed, ST_NO_SAMPLE);
+        int8 two_x = px1 > px0, two_y = py1 > py0;
+        int8 m22 = small & open & (px1 - px0 <= 1) & (py1 - py0 <= 1);
+        /* positive area: vertices 1 and 2 swapped where area2 < 0 (make_piece) */
+        int8 swap = area2 < 0;
+        int8 X1 = SEL8(swap, x2, x1), Y1 = SEL8(swap, y2, y1);
+        int8 X2 = SEL8(swap, x1, x2), Y2 = SEL8(swap, y1, y2);
+        int8 cx = (px0 << SUBPIXEL_BITS) + SUB_HALF, cy = (py0 << SUBPIXEL_BITS) + SUB_HALF;
+        int8 e0, e1, e2, sx0, sx1, sx2, sy0, sy1, sy2;
+        EDGE8(X1, Y1, X2, Y2, m22, e0, sx0, sy0);
+        EDGE8(X2, Y2, x0, y0, m22, e1, sx1, sy1);
+        EDGE8(x0, y0, X1, Y1, m22, e2, sx2, sy2);
+        int8 cover = INSIDE8(0, 0) | (two_x & INSIDE8(1, 0)) | (two_y & INSIDE8(0, 1))
+                     | (two_x & two_y & INSIDE8(1, 1));
+        DECIDE(m22 & (cover == 0), ST_NO_SAMPLE);
+    }
     /* the decided lanes' status and tile word; the open ones are written by raster_piece.
      * clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
      * and nothing reads it for others (the scan and setup_clipped look at status first;
