@@ -188,7 +188,8 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
  * it survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2
  * were exchanged to make the doubled area positive. */
 ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, double4 c2,
-                      int width, int height, double zs, double zo, Piece *pc, int *swapped)
+                      int width, int height, double zs, double zo, int known, Piece *pc,
+                      int *swapped)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
@@ -208,8 +209,8 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     int py0 = imax((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
     int py1 = imin((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
-    int cover = 0;   /* Piece.cover */
-    if (px1 - px0 <= 1 && py1 - py0 <= 1) {
+    int cover = known;   /* Piece.cover */
+    if (!known && px1 - px0 <= 1 && py1 - py0 <= 1) {
         /* A box of at most 2 x 2 pixel centres (most pieces of a dense mesh): test them
          * here, with the raster's edges (common.h piece_edges), and drop the piece if it
          * covers none: on a dense mesh most 1-centre boxes cover nothing, and were set
@@ -315,7 +316,7 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
                        win_xy(viewport_vertex(f1, hw, hh)),
                        win_xy(viewport_vertex(f2, hw, hh)), value_vertex(poly[0].p, poly[0].r),
                        value_vertex(poly[k].p, poly[k].r),
-                       value_vertex(poly[k + 1].p, poly[k + 1].r), width, height, zs, zo,
+                       value_vertex(poly[k + 1].p, poly[k + 1].r), width, height, zs, zo, 0,
                        &pc, &sw)
             != ST_RASTER)
             continue;
@@ -439,7 +440,7 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
  * record dr) that passed the outcode, facing, clipping and w tests: make_piece, its record
  * at slot t, its status and tile word. */
 ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool, int inst,
-                                __global const int2 *win, __global const float *pos,
+                                int known, __global const int2 *win, __global const float *pos,
                                 __global const double *mvps64,
                                 __global const double *zrows, int reversed, int width,
                                 int height, double zs, double zo, int tiles_x,
@@ -457,7 +458,7 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
     CLIP_IN(c, vpool + i2, inst);
     int st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
                         value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height, zs, zo,
-                        &pc, &sw);
+                        known, &pc, &sw);
     if (st == ST_RASTER) {
         pc.id = id;
         pc.flags = sw ? PF_SWAPPED : 0;
@@ -499,7 +500,7 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
                                __global const int2 *win, int width, int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
                                __global int *tile1, __global int *any_clipped,
-                               __global const float *pos, int pool0)
+                               __global const float *pos, int pool0, uchar *known)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
@@ -557,6 +558,7 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
     /* a mesh's back faces come in runs (a cluster's triangles are neighbours): a batch
      * with no lane left open skips the rest */
+    int8 kc = (int8)0;   /* the cover bits found here (COVER_KNOWN added), else 0 */
     if (any8(open)) {
         /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
 #define WX(i) win[i].x
@@ -590,10 +592,13 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
         EDGE8(X1, Y1, X2, Y2, m22, e0, sx0, sy0);
         EDGE8(X2, Y2, x0, y0, m22, e1, sx1, sy1);
         EDGE8(x0, y0, X1, Y1, m22, e2, sx2, sy2);
-        int8 cover = INSIDE8(0, 0) | (two_x & INSIDE8(1, 0)) | (two_y & INSIDE8(0, 1))
-                     | (two_x & two_y & INSIDE8(1, 1));
+        /* Piece.cover's bits: centre (k, j) at bit k + 2j (make_piece) */
+        int8 cover = (INSIDE8(0, 0) & 1) | (two_x & INSIDE8(1, 0) & 2)
+                     | (two_y & INSIDE8(0, 1) & 4) | (two_x & two_y & INSIDE8(1, 1) & 8);
         DECIDE(m22 & (cover == 0), ST_NO_SAMPLE);
+        kc = (cover | COVER_KNOWN) & m22 & open;
     }
+    *(uchar8 *)(known + lt0) = CONVERT_VEC(kc, uchar8);
     /* the decided lanes' status and tile word; the open ones are written by raster_piece.
      * clip_count is not written here: setup_count_clipped writes it for ST_CLIPPED slots,
      * and nothing reads it for others (the scan and setup_clipped look at status first;
@@ -647,6 +652,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     __global const uchar4 *tv = local_tris + ci.x;
     int nb = (ci.y + SETUP_LANES - 1) / SETUP_LANES;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
+    uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
     /* batch h's fates, then the pieces of batch h - SETUP_LAG: their records' lines were
      * asked for SETUP_LAG batches earlier */
     for (int h = 0; h < nb + SETUP_LAG; ++h) {
@@ -654,7 +660,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
             int lt0 = SETUP_LANES * h;
             open[h] = batch_fates(lt0, imin(ci.y - lt0, SETUP_LANES), dr, tv, outcode, ucode,
                                   n_user, uclip, clip, win, width, height, cull, pieces,
-                                  status, tile1, any_clipped, pos, ci.z);
+                                  status, tile1, any_clipped, pos, ci.z, known);
         }
         if (h < SETUP_LAG) continue;
         int lt0 = SETUP_LANES * (h - SETUP_LAG);
@@ -663,7 +669,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
             uchar4 q = tv[l];
             raster_piece(dr.tri_base + l, dr.vert_base + q.x, dr.vert_base + q.y,
                          dr.vert_base + q.z, dr.face_base + face_ids[ci.x + l],
-                         ci.z - dr.vert_base, dr.instance, win, pos, mvps64, zrows,
+                         ci.z - dr.vert_base, dr.instance, known[l], win, pos, mvps64, zrows,
                          reversed, width, height, zs, zo, tiles_x, pieces, status, tile1);
         }
     }
