@@ -46,8 +46,10 @@
  * no clip tests needed.
  *
  * Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
- * and setup stages run one work-item per (draw, local vertex) and (draw, local triangle):
- * work-item g serves draw g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1).
+ * stage runs a work-group per draw (VERTEX_LANES local vertices a work-item), setup_triangles
+ * a work-item per draw (its triangles SETUP_LANES at a time), the clipper's kernels one
+ * work-item per (draw, local triangle): work-item g serves draw g >> CLUSTER_LOG2, local
+ * index g & (CLUSTER_MAX - 1).
  *
  * WinVert [WINVERT_DTYPE]: a vertex after the viewport transform (viewport_vertex below).
  * int2 [WINXY_DTYPE]: its 24.8 fixed-point x, y alone: the vertex stream's window positions

@@ -1,11 +1,12 @@
 /* Triangle setup: trivial reject, clipping, back-face / zero-area cull, fixed-point snap.
  *
- * setup_triangles (SETUP_LANES triangles of a draw per work-item) writes, for every
- * unclipped survivor, one Piece at the triangle's slot in the frame's triangle stream, and a
- * status per triangle; setup_count_clipped, for the triangles that need the clipper, the
- * number of pieces they make. The host scans those counts; setup_clipped then re-runs the
- * clipper for just those triangles and writes their pieces in order. Clipping is
- * rare, so recomputing it beats storing up to 14 pieces per triangle for everyone.
+ * setup_triangles (a work-item per draw, its triangles SETUP_LANES at a time) writes, for
+ * every unclipped survivor, one Piece at the triangle's slot in the frame's triangle
+ * stream, and a status per triangle; setup_count_clipped, for the triangles that need the
+ * clipper, the number of pieces they make. The host scans those counts; setup_clipped then
+ * re-runs the clipper for just those triangles and writes their pieces in order. Clipping
+ * is rare, so recomputing it beats storing up to 14 pieces per triangle for everyone. (On a
+ * GPU a work-item per draw would leave most of a warp idle; this is written for CPUs.)
  *
  * Clipping is Sutherland–Hodgman in homogeneous clip space against near, far and — only when
  * a vertex leaves the guard band — the x/y guard-band planes (config.guard_band_factors).
@@ -336,10 +337,10 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
     return count;
 }
 
-/* Which triangle this work-item sets up: local triangle get_local_id of draw get_group_id
- * (work-groups of CLUSTER_MAX; the draw is uniform over the group). Gives its slot in the
- * frame's triangle stream, its three vertices in the frame's vertex stream, its id and its
- * draw's flags. Returns 0 for idle work-items. */
+/* Which triangle this work-item of the clipper's kernels works on: local triangle
+ * get_local_id of draw get_group_id (work-groups of CLUSTER_MAX; the draw is uniform over
+ * the group). Gives its slot in the frame's triangle stream, its three vertices in the
+ * frame's vertex stream, its id and its draw's flags. Returns 0 for idle work-items. */
 inline int triangle_of(uint n_draws, __global const Draw *draws,
                        __global const int4 *clusters, __global const uchar4 *local_tris,
                        __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
@@ -409,6 +410,9 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
  * in x and in y: its edge products stay under 2^21 (int), and its box holds at most 4 x 4
  * pixel centres. */
 #define SMALL_EXTENT (4 * SUB_ONE)
+#if SETUP_LANES != 8
+#error "batch_fates is written for 8 lanes (int8, double8): SETUP_LANES must be 8"
+#endif
 /* raster_piece runs for a batch's open lanes this many batches after their fates, so that
  * their records' lines have arrived (2 to 8 measured alike; 1 or 0 waited) */
 #define SETUP_LAG 4
@@ -424,7 +428,8 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 
 /* Edge (a -> b) of the lanes' pieces at their pixel centre (cx, cy), as set_edge (common.h)
  * in int lanes: e (minus the top-left bias), sx and sy (one pixel right / down). Inputs are
- * masked to the lanes mk whose values stay small (others compute 0s). */
+ * masked to the lanes mk whose values stay small (the others get e = -1, sx = sy = 0,
+ * never read). */
 #define EDGE8(ax, ay, bx, by, mk, e, sx, sy) do {                                          \
     int8 dx_ = ((bx) - (ax)) & (mk), dy_ = ((by) - (ay)) & (mk);                           \
     int8 rx_ = (cx - (ax)) & (mk), ry_ = (cy - (ay)) & (mk);                               \
@@ -436,9 +441,10 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 #define INSIDE8(k, j) ((e0 + (k) * sx0 + (j) * sy0 >= 0) & (e1 + (k) * sx1 + (j) * sy1 >= 0) \
                        & (e2 + (k) * sx2 + (j) * sy2 >= 0))
 
-/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id, draw
- * record dr) that passed the outcode, facing, clipping and w tests: make_piece, its record
- * at slot t, its status and tile word. */
+/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id; the
+ * draw's pool vertex of stream vertex 0 `vpool`, its instance `inst`) that passed the
+ * outcode, facing, clipping and w tests: make_piece (with the cover bits `known` the lanes
+ * found, or 0), its record at slot t, its status and tile word. */
 ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool, int inst,
                                 int known, __global const int2 *win, __global const float *pos,
                                 __global const double *mvps64,
@@ -650,7 +656,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     Draw dr = draws[d];
     int4 ci = clusters[dr.cluster];
     __global const uchar4 *tv = local_tris + ci.x;
-    int nb = (ci.y + SETUP_LANES - 1) / SETUP_LANES;
+    int nt = imin(ci.y, CLUSTER_MAX);   /* (the host refuses larger clusters) */
+    int nb = (nt + SETUP_LANES - 1) / SETUP_LANES;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
     uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
     /* batch h's fates, then the pieces of batch h - SETUP_LAG: their records' lines were
@@ -658,7 +665,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     for (int h = 0; h < nb + SETUP_LAG; ++h) {
         if (h < nb) {
             int lt0 = SETUP_LANES * h;
-            open[h] = batch_fates(lt0, imin(ci.y - lt0, SETUP_LANES), dr, tv, outcode, ucode,
+            open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, outcode, ucode,
                                   n_user, uclip, clip, win, width, height, cull, pieces,
                                   status, tile1, any_clipped, pos, ci.z, known);
         }

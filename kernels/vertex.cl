@@ -35,7 +35,8 @@ typedef float flanes[VERTEX_LANES] __attribute__((aligned(32)));
  * user clip planes, in lanes: the same values as the per-vertex loop of vertex_transform
  * (the same compares; roundeven is rint in the default rounding mode), written as whole
  * vectors, the float4 positions interleaved from the lanes by shuffles. The
- * per-vertex loop (eight rounds of scalar compares, rounding and five stores from the
+ * per-vertex loop (eight rounds of scalar compares, rounding and five stores — four since
+ * the double positions went to setup — from the
  * lanes spilled to private arrays) was most of the kernel. Only with CLRASTER_LANE_STORES
  * (common.h: the compiler has the Clang builtins; never under CLRASTER_PORTABLE, as on
  * Oclgrind, which has no roundeven and whose vector masks differed before: see above);
