@@ -17,8 +17,9 @@ class FrameDraws:
     """This frame's draws. draws: DRAW_DTYPE (D,). n_verts / n_tris: sizes of the vertex and
     triangle streams. mvps: float32 (I, 16) row-major view-projection · model per instance
     (the vertex stage's: coverage). mvps64: the same float64 (I, 16) before rounding (the
-    double positions of setup's value planes and clipper, kernels/setup.cl CLIP_IN). zrows: float64 (I, 4) per instance its w row minus its z row (the
-    reversed-Z depth numerator w − z, setup.cl ClipIn).
+    double positions of setup's value planes and clipper, kernels/setup.cl CLIP_IN).
+    zrows: float64 (I, 4) per instance its w row minus its z row (the reversed-Z depth
+    numerator w − z, setup.cl ClipIn).
     uplanes: float64 (I, K, 4) the frame's K user clip planes moved to each instance's
     object space (world plane · model, so distances are evaluated from object-space
     positions: common.h user_dist); K = 0 without clip planes. uclip: bit k set when plane k
