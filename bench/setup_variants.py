@@ -12,8 +12,8 @@ work-item has its lanes' vertex indices), ``facing`` (after the lanes' facing), 
 (after the lanes' fates and stores, before the pieces), ``no_prefetch`` (without the
 prefetch of the pieces' record lines), ``no_store`` (each piece made but not stored),
 ``no_record`` (without the record's stores), ``no_values`` (make_piece without the value
-planes). bench/README.md's log
-quotes a run.
+planes). bench/README.md's log quotes a run. (A variant that drops a result lets LLVM drop
+what computed it too: ``no_record`` also loses the value planes.)
 """
 
 from __future__ import annotations

@@ -143,8 +143,8 @@
 /* Vectors at their element's alignment (a draw's first vertex, a pixel row at any column):
  * Clang's ext_vector_type typedefs, one unaligned vector load or store each. Where the
  * compiler lacks them (CLRASTER_NO_EXT_VECTOR_TYPE) the kernels use their fallbacks (the
- * same values); LOAD_I8 / LOAD_F8 and STORE_I8 / STORE_UC8 fall back to OpenCL's vload8 and
- * vstore8 (calls in PoCL). */
+ * same values); LOAD_I8 / LOAD_F8 / LOAD_UC8 and STORE_I8 / STORE_UC8 fall back to OpenCL's
+ * vload8 and vstore8 (calls in PoCL). */
 #ifndef CLRASTER_NO_EXT_VECTOR_TYPE
 typedef float float8u __attribute__((ext_vector_type(8), aligned(4)));
 typedef float float16u __attribute__((ext_vector_type(16), aligned(4)));
@@ -154,14 +154,28 @@ typedef ushort ushort8u __attribute__((ext_vector_type(8), aligned(2)));
 typedef uchar uchar8u __attribute__((ext_vector_type(8), aligned(1)));
 #define LOAD_I8(p) (*(__global const int8u *)(p))
 #define LOAD_F8(p) (*(__global const float8u *)(p))
+#define LOAD_UC8(p) (*(__global const uchar8u *)(p))
 #define STORE_I8(v, p) (*(__global int8u *)(p) = (v))
 #define STORE_UC8(v, p) (*(__global uchar8u *)(p) = (v))
 #else
 #define LOAD_I8(p) vload8(0, (p))
 #define LOAD_F8(p) vload8(0, (p))
+#define LOAD_UC8(p) vload8(0, (p))
 #define STORE_I8(v, p) vstore8((v), 0, (p))
 #define STORE_UC8(v, p) vstore8((v), 0, (p))
 #endif
+
+/* Are the 16 ids from ids[0] all the background (-1)? -1 is all ones: they all are iff
+ * their AND is (int8 halves, not int16: PoCL 3.0's cached binaries of programs passing
+ * 16-wide int vectors to its library lost their kernels). The resolve and shading kernels
+ * skip such runs with vector stores. */
+inline bool background16(__global const int *ids)
+{
+    int8 v = LOAD_I8(ids) & LOAD_I8(ids + 8);
+    int4 v4 = v.lo & v.hi;
+    int2 v2 = v4.lo & v4.hi;
+    return (v2.x & v2.y) == -1;
+}
 
 /* any lane of an int8 comparison mask set (-1: OpenCL's any() is a call in PoCL) */
 inline bool any8(int8 m)

@@ -33,6 +33,17 @@ static inline float8 sqrt8(float8 v)
 #else
 #define STORE8U(v, p) (*(__global float8u *)(p) = (v))
 #endif
+/* The first n of float8 v's lanes stored from p: all 8 at once where n >= 8, else
+ * through a private copy (a row's last, short lane group). */
+#define STORE8_ROW(v, p, n) do {                                                            \
+    if ((n) >= 8) {                                                                         \
+        STORE8U((v), (p));                                                                  \
+    } else {                                                                                \
+        float tmp_[8];                                                                      \
+        vstore8((v), 0, tmp_);                                                              \
+        for (int k_ = 0; k_ < (n); ++k_) (p)[k_] = tmp_[k_];                                \
+    }                                                                                       \
+} while (0)
 
 /* max / min as the twin's np.maximum / np.minimum for non-NaN lanes (fmax is a call) */
 static inline float8 max8(float8 a, float8 b) { return a >= b ? a : b; }
@@ -113,13 +124,7 @@ __kernel void ssao_prepare(__global const float *depth, __global float4 *pos,
     float8 qx = covered ? hx * z : inf, qy = covered ? hy * z : inf;
     float8 qz = covered ? hz * z : inf, qw = covered ? kr * hw : (float8)(0.0f);
     z = covered ? z : inf;
-    if (lx0 + LANES <= w2) {
-        STORE8U(z, zlow + orow + lx0);
-    } else {
-        float tmp[LANES];
-        vstore8(z, 0, tmp);
-        for (int k = 0; lx0 + k < w2; ++k) zlow[orow + lx0 + k] = tmp[k];
-    }
+    STORE8_ROW(z, zlow + orow + lx0, w2 - lx0);
 #define STORE_LANE(k)                                                                        \
     if (lx0 + k < w2) pos[orow + lx0 + k] = (float4)(qx.s##k, qy.s##k, qz.s##k, qw.s##k);
     STORE_LANE(0) STORE_LANE(1) STORE_LANE(2) STORE_LANE(3)
@@ -329,13 +334,7 @@ __kernel void ssao(__global const float4 *pos, __global const float *normals,
         a = a < 1.0f ? a : (float8)(1.0f);
         ao = covered ? a : ao;
     }
-    if (x0 + LANES <= w2) {
-        STORE8U(ao, out + row + x0);
-    } else {
-        float tmp[LANES];
-        vstore8(ao, 0, tmp);
-        for (int k = 0; x0 + k < w2; ++k) out[row + x0 + k] = tmp[k];
-    }
+    STORE8_ROW(ao, out + row + x0, w2 - x0);
 }
 
 /* ssao_upsample: full resolution, LANES pixels of a row per work-item, from the low-res
@@ -417,13 +416,7 @@ __kernel void ssao_upsample(__global const float *depth, __global const float *z
         res = covered ? v : res;
     }
 #undef SAMPLE_LANES
-    if (x0 + LANES <= width) {
-        STORE8U(res, out + row + x0);
-    } else {
-        float tmp[LANES];
-        vstore8(res, 0, tmp);
-        for (int k = 0; x0 + k < width; ++k) out[row + x0 + k] = tmp[k];
-    }
+    STORE8_ROW(res, out + row + x0, width - x0);
 }
 
 /* -- FXAA 3.11, quality preset 12 -----------------------------------------------------------
@@ -432,15 +425,6 @@ __kernel void ssao_upsample(__global const float *depth, __global const float *z
  * bilinear reads as the twin's `_bilinear`. Both kernels run LANES pixels per lane group in
  * float8 lanes. */
 
-/* Byte vectors at any alignment (common.h's probe, as LOAD_F8) */
-#ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-#define LOADB8(p) vload8(0, (p))
-#define STOREB8(v, p) vstore8((v), 0, (p))
-#else
-#define LOADB8(p) (*(__global const uchar8u *)(p))
-#define STOREB8(v, p) (*(__global uchar8u *)(p) = (v))
-#endif
-
 /* luma: one work-item per LANES pixels (n = H·W), the 24 interleaved bytes deinterleaved */
 __kernel void luma(__global const uchar *rgb, __global float *lum, const int n)
 {
@@ -448,7 +432,7 @@ __kernel void luma(__global const uchar *rgb, __global float *lum, const int n)
     if (i0 >= n) return;
     if (i0 + LANES <= n) {
         __global const uchar *p = rgb + 3 * (size_t)i0;
-        uchar8 v0 = LOADB8(p), v1 = LOADB8(p + 8), v2 = LOADB8(p + 16);
+        uchar8 v0 = LOAD_UC8(p), v1 = LOAD_UC8(p + 8), v2 = LOAD_UC8(p + 16);
         float8 r = CONVERT_VEC(((uchar8)(v0.s0, v0.s3, v0.s6, v1.s1, v1.s4, v1.s7, v2.s2,
                                          v2.s5)), float8);
         float8 g = CONVERT_VEC(((uchar8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3,
@@ -649,7 +633,7 @@ __kernel void fxaa_mark(__global const uchar *rgb, __global const float *lum,
     size_t o = 3 * (r + x0);
     int nb = 3 * (x1 - x0);
     if (nb == 3 * FXAA_SPAN) {
-        for (int k = 0; k < 3 * FXAA_SPAN; k += 8) STOREB8(LOADB8(rgb + o + k), out + o + k);
+        for (int k = 0; k < 3 * FXAA_SPAN; k += 8) STORE_UC8(LOAD_UC8(rgb + o + k), out + o + k);
     } else {
         for (int k = 0; k < nb; ++k) out[o + k] = rgb[o + k];
     }

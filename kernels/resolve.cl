@@ -341,11 +341,8 @@ __kernel void resolve_pixels(
     for (int p = p0; p < p1;) {
         if (p + 16 <= p1) {
             /* 16 background pixels (the common case away from the surface): one test of
-             * the ids (-1 is all ones: all are −1 iff their AND is) and vector stores */
-            int8 v = LOAD_I8(ids + p) & LOAD_I8(ids + p + 8);
-            int4 v4 = v.lo & v.hi;
-            int2 v2 = v4.lo & v4.hi;
-            if ((v2.x & v2.y) == -1) {
+             * the ids and vector stores */
+            if (background16(ids + p)) {
                 if (want & RS_MASK) FILL_BG(uchar, mask + p, 16, 0);
                 if (want & RS_LINEAR) FILL_BG(float, lin + p, 16, INFINITY);
                 if (want & RS_DISTANCE) FILL_BG(float, dist + p, 16, INFINITY);

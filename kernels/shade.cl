@@ -428,13 +428,7 @@ __kernel void shade_pixels(__global const int *ids, __global const float *bary, 
     bool lanes = !(flags & SH_SOURCES);
     for (int p = p0; p < p1;) {
         if (p + 16 <= p1) {
-            /* -1 is all ones: both halves are all −1 iff their AND is (int8, not int16:
-             * PoCL 3.0's cached binaries of programs passing 16-wide int vectors to its
-             * library lost their kernels) */
-            int8 v = LOAD_I8(ids + p) & LOAD_I8(ids + p + 8);
-            int4 v4 = v.lo & v.hi;
-            int2 v2 = v4.lo & v4.hi;
-            if ((v2.x & v2.y) == -1) {
+            if (background16(ids + p)) {
                 /* p is a multiple of 16 (p0 is, and so is every step) and out is 64-byte
                  * aligned (the host's page-aligned arrays): aligned vector stores */
                 if (channels == 3) {
