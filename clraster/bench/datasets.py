@@ -2,12 +2,13 @@
 second of a dataset job — metric depth, triangle ids and face normals of many views of one
 mesh — with clraster and with Open3D's ``RaycastingScene`` (Embree), side by side in one run.
 
-The job per view, as a user writes it: clraster renders (``cull`` back, then none) with
-``outputs=("ids", "linear_depth", "normals")`` (made on the device, in the resolve stage) and
-takes ``Frame.linear_depth(camera)``, ``Frame.triangle_id`` and ``Frame.normals(mesh)`` as
-host arrays; Open3D casts one ray per pixel (``create_rays_pinhole``, whose rays have z = 1
-in the camera frame, so ``t_hit`` is the linear depth) and returns ``t_hit``,
-``primitive_ids`` and ``primitive_normals`` as NumPy arrays. Both get the same K: Open3D puts
+The job, as a user writes it: clraster's many-view generator for training loops,
+``clraster.batch.iter_views(mesh, cameras, ("linear_depth", "ids", "normals"), cull=...)``
+(``cull`` back, then none), yields per view a dict of host arrays made on the device in the
+resolve stage (two views in flight: `RasterConfig.views_in_flight`); Open3D casts one ray
+per pixel (``create_rays_pinhole``, whose rays have z = 1 in the camera frame, so ``t_hit``
+is the linear depth) and returns ``t_hit``, ``primitive_ids`` and ``primitive_normals`` as
+NumPy arrays. Both get the same K: Open3D puts
 pixel (u, v)'s centre at (u + ½, v + ½), OpenCV (clraster's `Camera.from_intrinsics`) at
 (u, v), so Open3D's K is clraster's with cx, cy + ½, and the two agree on the id of almost
 every pixel (the first view's agreement is recorded).
@@ -52,10 +53,13 @@ DATASETS_CULLS = ("back", "none")
 SMALL_MESH_TRIANGLES = 100_000
 #: The job names of a row's rounds.
 OPEN3D = "open3d"
+#: What clraster's job makes per view (`clraster.batch.iter_views` output names).
+JOB_OUTPUTS = ("linear_depth", "ids", "normals")
 
 METHOD = ("Views per second of the dataset job (linear depth + triangle ids + face normals "
-          "per view, as host arrays): clraster renders with outputs=(\"ids\", "
-          "\"linear_depth\", \"normals\") (made on the device) for cull back and cull none; "
+          "per view, as host arrays): clraster's clraster.batch.iter_views(mesh, cameras, "
+          "(\"linear_depth\", \"ids\", \"normals\")) (made on the device, two views in "
+          "flight) for cull back and cull none; "
           "Open3D's RaycastingScene (Embree) casts one ray per pixel with the same K "
           "(pixel centres matched) and returns t_hit, primitive_ids, primitive_normals. "
           "Cameras on a Fibonacci sphere around the mesh, framing it. Each job warmed up on "
@@ -115,24 +119,26 @@ def near_far(mesh: Any, poses: list[np.ndarray]) -> tuple[float, float]:
 def clraster_job(mesh: Any, k: np.ndarray, poses: list[np.ndarray], width: int, height: int,
                  cull: str, near: float, far: float, renderer: Any = None
                  ) -> tuple[Callable[[], None], np.ndarray]:
-    """(run, ids): ``run()`` does the job for every pose with clraster; ``ids`` is the first
-    view's triangle ids (int32 (height, width), −1 background), rendered once here, which
-    also warms the renderer up. ``renderer``: a `clraster.Renderer` of this size to reuse."""
+    """(run, ids): ``run()`` does the job for every pose with clraster
+    (`clraster.batch.iter_views`); ``ids`` is the first view's triangle ids (int32
+    (height, width), −1 background), from the warm-up here: the first four views, so that
+    both renderers of the views in flight have drawn the mesh. ``renderer``: a
+    `clraster.Renderer` of this size to reuse."""
     from clraster import Camera, Renderer
+    from clraster.scale.batch import iter_views
 
     r = renderer if renderer is not None else Renderer(width, height)
     cams = [Camera.from_intrinsics(k, width, height, pose=p, near=near, far=far)
             for p in poses]
 
-    def one(cam: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        fr = r.render(mesh, cam, cull=cull, outputs=("ids", "linear_depth", "normals"))
-        return fr.linear_depth(cam), fr.triangle_id, fr.normals(mesh)
+    def views(cameras: list[Any]) -> list[dict[str, Any]]:
+        return list(iter_views(mesh, cameras, JOB_OUTPUTS, renderer=r, cull=cull))
 
-    first = np.array(one(cams[0])[1], np.int32)
+    first = np.array(views(cams[:4])[0]["ids"], np.int32)
 
     def run() -> None:
-        for cam in cams:
-            one(cam)
+        for _ in iter_views(mesh, cams, JOB_OUTPUTS, renderer=r, cull=cull):
+            pass
     return run, first
 
 

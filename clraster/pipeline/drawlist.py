@@ -10,6 +10,7 @@ these arrays; the NumPy twin reads the very same ones.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -349,11 +350,14 @@ class FramePlan:
 
 class PlanCache:
     """Keeps the scene (made from a bare Mesh when needed) and geometry pool of the last
-    target, so repeated frames of the same mesh or scene reuse them."""
+    target, so repeated frames of the same mesh or scene reuse them. Thread-safe: a
+    renderer and its `Renderer.view_partner` plan views at the same time from one cache
+    (what it hands out is only read)."""
 
     def __init__(self) -> None:
         self._key: tuple[Any, ...] | None = None
         self._value: tuple[Mesh | Scene, Scene, GeometryPool] | None = None
+        self._lock = threading.Lock()
 
     def scene_and_pool(self, target: Mesh | Scene) -> tuple[Scene, GeometryPool]:
         key: tuple[Any, ...]
@@ -364,11 +368,12 @@ class PlanCache:
         else:
             raise ValueError(f"expected a clraster.Mesh or clraster.Scene, got "
                              f"{type(target).__name__}")
-        if self._key != key or self._value is None or self._value[0] is not target:
-            scene = Scene.from_mesh(target) if isinstance(target, Mesh) else target
-            self._value = (target, scene, GeometryPool.build(scene))
-            self._key = key
-        return self._value[1], self._value[2]
+        with self._lock:
+            if self._key != key or self._value is None or self._value[0] is not target:
+                scene = Scene.from_mesh(target) if isinstance(target, Mesh) else target
+                self._value = (target, scene, GeometryPool.build(scene))
+                self._key = key
+            return self._value[1], self._value[2]
 
 
 def plan_frame(target: Mesh | Scene, camera: CameraLike, width: int, height: int, *,

@@ -19,6 +19,8 @@ from ..base.config import RasterConfig
 from ..output.frame import Frame
 from ..world.camera import Camera
 from ..world.inputs import Target, as_target
+from ..world.mesh import Mesh
+from ..world.scene import Scene
 from ..world.views import ViewError, frames
 from .device import check_process, choose_context, describe_choice, event_ms
 from .drawlist import GeometryPool, PlanCache
@@ -137,6 +139,7 @@ class Renderer:
         self._pyramid: Pyramid | None = None   # the last one `_hiz` built (reset per frame)
         # the resolve and shading stages, built on first use (shared with `resized` ones)
         self._outputs = _OutputStages(self.context, self.config)
+        self._partner: Renderer | None = None   # `view_partner`'s, made on first use
 
     def resized(self, width: int, height: int, *, share_history: bool = True) -> Renderer:
         """A renderer of ``width`` × ``height`` on this one's device state: its queue, stage
@@ -159,6 +162,30 @@ class Renderer:
         if share_history:
             r._history = self._history
         return r
+
+    def view_partner(self, target: Mesh | Scene, render_kwargs: dict[str, Any]
+                     ) -> Renderer | None:
+        """The renderer `clraster.views.frames` draws every other view of ``target`` with,
+        two views in flight (`RasterConfig.views_in_flight`), or None where that is off or
+        does not pay: occlusion culling on (each view's history must be the view before
+        it), or a target of more than ``config.batch_triangles`` triangles (drawn in
+        several passes: device-bound, and a second renderer would double the pass buffers
+        and the scene's geometry on the device).
+
+        The partner is this renderer's size, config and context, with its own queue,
+        stages and lock, and this renderer's plan cache (the scene's host geometry pool,
+        built once and only read by both); made on first use and kept with this renderer,
+        so that later batches find the scene uploaded. Its frames are exactly this
+        renderer's."""
+        if (self.config.views_in_flight < 2 or render_kwargs.get("occlusion")
+                or target.n_faces > self.config.batch_triangles):
+            return None
+        if self._partner is None:
+            p = Renderer(self.width, self.height, config=self.config, context=self.context)
+            p.device_description = self.device_description
+            p._plans = self._plans
+            self._partner = p
+        return self._partner
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
@@ -266,7 +293,8 @@ class Renderer:
                              f"one {type(cameras).__name__}; wrap it in a list")
 
         def gen() -> Iterator[Frame]:
-            for _, item in frames(self, target, cameras, render_kwargs):
+            for _, item in frames(self, target, cameras, render_kwargs,
+                                  self.view_partner(target, render_kwargs)):
                 if isinstance(item, ViewError):
                     raise item
                 yield item

@@ -667,7 +667,8 @@ def _iter_views(renderer: Renderer, geometry: Any, target: Any, cameras: Any,
             pending.append((i, c))
             yield c
 
-    for _, item in frames(renderer, geometry, cams(), kwargs):
+    for _, item in frames(renderer, geometry, cams(), kwargs,
+                          _partner(renderer, geometry, kwargs)):
         index, cam = pending.pop(0)
         if isinstance(item, ViewError):
             if errors == "raise":
@@ -675,6 +676,13 @@ def _iter_views(renderer: Renderer, geometry: Any, target: Any, cameras: Any,
             log.warning("%s", item)
             continue
         yield {"index": index, "camera": cam, **view_arrays(item, cam, target, outs)}
+
+
+def _partner(renderer: Any, geometry: Any, render_kwargs: dict[str, Any]) -> Any:
+    """``renderer``'s `Renderer.view_partner` for these views (two in flight), or None
+    (a renderer without one, such as the NumPy twin's, renders them one at a time)."""
+    make = getattr(renderer, "view_partner", None)
+    return make(geometry, render_kwargs) if make is not None else None
 
 
 def write_failures(path: Path, failures: Sequence[ViewFailure]) -> None:
@@ -813,8 +821,9 @@ def render_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
         else:
             todo.append((k, cam, key, old))
     checked = _checked_cameras([t[1] for t in todo], renderer.width, renderer.height)
-    for done, (k, item) in enumerate(frames(renderer, geometry, checked, render_kwargs),
-                                     start=skipped + 1):
+    views = frames(renderer, geometry, checked, render_kwargs,
+                   _partner(renderer, geometry, render_kwargs))
+    for done, (k, item) in enumerate(views, start=skipped + 1):
         _, _, key, old = todo[k]
         index = start + todo[k][0]
         if key is None or old != key:

@@ -53,6 +53,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import threading
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -407,29 +408,141 @@ def check_target(target: Any) -> None:
 
 
 def frames(renderer: ViewRenderer[F], target: Any,
-           cameras: Iterable[Any] | str | os.PathLike,
-           render_kwargs: dict) -> Iterator[tuple[int, F | ViewError]]:
+           cameras: Iterable[Any] | str | os.PathLike, render_kwargs: dict,
+           partner: ViewRenderer[F] | None = None) -> Iterator[tuple[int, F | ViewError]]:
     """(index, frame) per camera in order, or (index, `ViewError`) for a view that failed:
     a broken camera, or a camera `Renderer.render` refuses (ValueError: e.g. a matrix that
     overflows float32). Other exceptions propagate.
 
-    Each view is one `Renderer.render` call. Measured (bench/views.py): a plain loop
-    of render calls on the same target already keeps the per-scene work — the Scene made
-    from a Mesh, its clusters, BVH and geometry pool (`drawlist.PlanCache`), and the pool on
-    the device (`GeometryStage.upload_pool` skips the same pool) — so what repeats per view
-    is the view's own work: culling (~3 ms on the dragon) and the four device stages
-    (~60 ms), which keep the CPU busy; planning the next view on a second thread while the
-    device runs, or two renderers in turn, did not raise views/s on this 2-core machine.
+    Each view is one `Renderer.render` call. A plain loop of render calls on the same
+    target already keeps the per-scene work — the Scene made from a Mesh, its clusters, BVH
+    and geometry pool (`drawlist.PlanCache`), and the pool on the device
+    (`GeometryStage.upload_pool` skips the same pool) — so what repeats per view is the
+    view's own work: on the host culling and planning (~1.5 ms on the dragon), on the
+    device the stages (~9 ms at 640 × 480), one after the other.
+
+    ``partner``: a second renderer (`Renderer.view_partner`: same size, config and
+    device; None: views one at a time). Views then go to ``renderer`` and ``partner`` in
+    turn, each rendered in a thread of its own, two in flight, so that one view's host
+    work and the caller's work on the last frame run while the device draws the other;
+    frames still come out in camera order, each exactly what ``renderer.render`` makes.
+    The first view is drawn alone (what a first frame builds and caches is built once).
+    Closing the generator early waits for the view in flight and renders no more.
     """
-    for index, cam in iter_cameras(cameras, renderer.width, renderer.height):
-        if isinstance(cam, BrokenCamera):
-            yield index, cam.error
-            continue
+    views = iter_cameras(cameras, renderer.width, renderer.height)
+    if partner is None:
+        for index, cam in views:
+            yield index, _render_view(renderer, target, index, cam, render_kwargs)
+        return
+    yield from _InFlight((renderer, partner), target, views, render_kwargs).run()
+
+
+class _InFlight:
+    """`frames` with two renderers: a worker thread per renderer takes the next camera
+    (the list is read in order, under a lock), renders it and files the frame under its
+    place in the list; the caller's generator hands them out in that order. The workers
+    run ahead of the caller by at most `AHEAD` views in all (taken, not yet handed out),
+    so a worker need not wait for the caller to come back before its next view (handing
+    each view to a worker from the caller's thread gained a third of what this does:
+    bench/README.md, "Views in flight")."""
+
+    AHEAD = 3
+
+    def __init__(self, renderers: tuple[Any, Any], target: Any,
+                 views: Iterator[tuple[int, Any]], render_kwargs: dict) -> None:
+        self.renderers, self.target, self.views = renderers, target, views
+        self.kwargs = render_kwargs
+        self.lock = threading.Lock()   # guards views, taken, end, stop and done
+        self.ready = threading.Condition(self.lock)
+        self.taken = 0                 # views taken from the list so far
+        self.end: int | None = None    # the list's length, once read to its end
+        self.stop = False
+        # view n → (index, frame or ViewError), or (None, exception) to raise at n
+        self.done: dict[int, tuple[int | None, Any]] = {}
+        self.slots = threading.Semaphore(self.AHEAD)
+        self.first = threading.Event()   # view 0 is drawn alone: what it caches, once
+
+    def _take(self) -> tuple[int, int, Any] | None:
+        """(n, index, camera) of the next view, or None: the list ended or failed (its
+        error filed at the end), or the caller stopped."""
+        with self.lock:
+            if self.stop or self.end is not None:
+                return None
+            n = self.taken
+            try:
+                index, cam = next(self.views)
+            except StopIteration:
+                self.end = n
+            except BaseException as exc:   # a camera file that fails halfway: at n
+                self.end = n + 1
+                self.done[n] = (None, exc)
+            else:
+                self.taken = n + 1
+                return n, index, cam
+            self.ready.notify_all()
+            return None
+
+    def _work(self, renderer: Any) -> None:
+        if renderer is not self.renderers[0]:
+            self.first.wait()   # view 0 goes to the first renderer, alone
+        while True:
+            self.slots.acquire()
+            got = self._take()
+            if got is None:
+                return
+            n, index, cam = got
+            try:
+                if self.stop:
+                    return
+                out: tuple[int | None, Any] = (index, _render_view(
+                    renderer, self.target, index, cam, self.kwargs))
+            except BaseException as exc:   # raised in the caller, at view n
+                out = (None, exc)
+                with self.lock:   # no views after n are taken: the caller stops at n
+                    self.end = n + 1 if self.end is None else min(self.end, n + 1)
+            finally:
+                self.first.set()
+            with self.lock:
+                self.done[n] = out
+                self.ready.notify_all()
+
+    def run(self) -> Iterator[tuple[int, Any]]:
+        workers = [threading.Thread(target=self._work, args=(r,), daemon=True,
+                                    name="clraster-view") for r in self.renderers]
+        for t in workers:
+            t.start()
         try:
-            frame = renderer.render(target, cam, **render_kwargs)
-        except ValueError as exc:
-            err = ViewError(index, None, str(exc))
-            err.__cause__ = exc
-            yield index, err
-            continue
-        yield index, frame
+            n = 0
+            while True:
+                with self.lock:
+                    while n not in self.done and (self.end is None or n < self.end):
+                        self.ready.wait()
+                    if n not in self.done:
+                        return
+                    index, item = self.done.pop(n)
+                if index is None:
+                    raise item
+                self.slots.release()
+                yield index, item
+                n += 1
+        finally:
+            with self.lock:
+                self.stop = True
+            for _ in workers:   # wake workers waiting for a slot or for view 0
+                self.slots.release()
+            self.first.set()
+            for t in workers:
+                t.join()
+
+
+def _render_view(renderer: ViewRenderer[F], target: Any, index: int, cam: Any,
+                 render_kwargs: dict) -> F | ViewError:
+    """`frames`' view: the frame, or the `ViewError` of a broken or refused camera."""
+    if isinstance(cam, BrokenCamera):
+        return cam.error
+    try:
+        return renderer.render(target, cam, **render_kwargs)
+    except ValueError as exc:
+        err = ViewError(index, None, str(exc))
+        err.__cause__ = exc
+        return err
