@@ -10,10 +10,11 @@ draws); then each variant is built from the working tree's source with one subst
 profiling events) are printed. Variants: ``base`` (the kernel), ``indices`` (return once the
 work-item has its lanes' vertex indices), ``facing`` (after the lanes' facing), ``lanes``
 (after the lanes' fates and stores, before the pieces), ``no_prefetch`` (without the
-prefetch of the pieces' record lines), ``no_store`` (each piece made but not stored),
-``no_record`` (without the record's stores), ``no_values`` (make_piece without the value
-planes). bench/README.md's log quotes a run. (A variant that drops a result lets LLVM drop
-what computed it too: ``no_record`` also loses the value planes.)
+prefetch of the pieces' record lines), ``no_store`` (each piece's coverage made, nothing of
+it stored), ``no_record`` (value_planes8 without its stores of the records' last 64 bytes),
+``no_values`` (value_planes8 returns at once: no value planes). bench/README.md's log quotes
+a run. (A variant that drops a result lets LLVM drop what computed it too: ``no_record``
+also loses the value planes.)
 """
 
 from __future__ import annotations
@@ -39,12 +40,13 @@ VARIANTS = {
     "lanes": ("    return left;\n", "    return width > 0 ? 0u : left;\n"),
     "no_prefetch": ("        PREFETCH(rec); PREFETCH(rec + 64);\n",
                     ""),
-    "no_store": ("    if (st == ST_RASTER) {\n        pc.id = id;",
-                 "    if (width > 0) return;\n    if (st == ST_RASTER) {\n        pc.id = id;"),
-    "no_record": ("        d8[0] = ((float8 *)&pc)[0];\n        d8[1] = ((float8 *)&pc)[1];\n"
-                  "        d8[2] = ((float8 *)&pc)[2];\n", ""),
-    "no_values": ("    double iw0 = 1.0 / a.w, iw1",
-                  "    if (hw > 0.0) { pc->pad = 0; return; }\n    double iw0 = 1.0 / a.w, iw1"),
+    "no_store": ("    if (st == ST_RASTER) {\n        /* the record's first 32 bytes",
+                 "    if (width > 0) return;\n"
+                 "    if (st == ST_RASTER) {\n        /* the record's first 32 bytes"),
+    "no_record": ("        d8[1] = (float8)",
+                  "        if (n > 0) continue;\n        d8[1] = (float8)"),
+    "no_values": ("    int n = q->n;\n    for (int k = n;",
+                  "    q->n = 0; return;\n    int n = q->n;\n    for (int k = n;"),
 }
 
 

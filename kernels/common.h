@@ -140,6 +140,19 @@
 #else
 #define CONVERT_VEC(v, T) __builtin_convertvector(v, T)
 #endif
+/* 8 lanes converted to float or double (from double, float or int lanes): CONVERT_VEC, or
+ * lane by lane where that falls back to convert_T (the pip PoCL 3.0 built setup.cl with
+ * convert_float8(double8), a library call taking an 8-lane 64-bit vector, into a program
+ * without its kernels; see MASK_INT8). */
+#ifdef CLRASTER_NO_CONVERTVECTOR
+#define LANES8_AS(T, v) ((T##8)((T)(v).s0, (T)(v).s1, (T)(v).s2, (T)(v).s3, (T)(v).s4,     \
+                                (T)(v).s5, (T)(v).s6, (T)(v).s7))
+#define TO_FLOAT8(v) LANES8_AS(float, v)
+#define TO_DOUBLE8(v) LANES8_AS(double, v)
+#else
+#define TO_FLOAT8(v) __builtin_convertvector((v), float8)
+#define TO_DOUBLE8(v) __builtin_convertvector((v), double8)
+#endif
 /* Vectors at their element's alignment (a draw's first vertex, a pixel row at any column):
  * Clang's ext_vector_type typedefs, one unaligned vector load or store each. Where the
  * compiler lacks them (CLRASTER_NO_EXT_VECTOR_TYPE) the kernels use their fallbacks (the

@@ -184,13 +184,12 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
     pc->pad = 0;
 }
 
-/* Set up one triangle from its three snapped window positions (coverage: win_xy) and the
- * same three vertices in clip space, double (values: value_planes). Returns ST_RASTER when
- * it survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2
- * were exchanged to make the doubled area positive. */
-ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, double4 c2,
-                      int width, int height, double zs, double zo, int known, Piece *pc,
-                      int *swapped)
+/* make_piece's coverage part: the doubled area (ST_DEGENERATE at 0), vertices 1 and 2
+ * swapped where it is negative (*swapped, *area2 then positive), the pixel box
+ * (ST_NO_SAMPLE without a centre) and the 2 x 2 cover test; on ST_RASTER the piece's
+ * x, y, bb_min, bb_max and cover are set, and value_planes is what is left. */
+ALWAYS_INLINE int piece_cover(int2 v0, int2 v1, int2 v2, int width, int height, int known,
+                              Piece *pc, int *swapped, long *area2_out)
 {
     long area2 = edge_fn(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y);
     if (area2 == 0) return ST_DEGENERATE;
@@ -199,9 +198,9 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     *swapped = area2 < 0;
     if (area2 < 0) {
         int2 t = v1; v1 = v2; v2 = t;
-        double4 tc = c1; c1 = c2; c2 = tc;
         area2 = -area2;
     }
+    *area2_out = area2;
     int xmin = imin(imin(v0.x, v1.x), v2.x), xmax = imax(imax(v0.x, v1.x), v2.x);
     int ymin = imin(imin(v0.y, v1.y), v2.y), ymax = imax(imax(v0.y, v1.y), v2.y);
     /* pixel x is inside iff its centre 256x + 128 lies in [xmin, xmax] */
@@ -235,9 +234,28 @@ ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, 
     pc->y[0] = v0.y; pc->y[1] = v1.y; pc->y[2] = v2.y;
     pc->bb_min = px0 | (py0 << 16);
     pc->bb_max = px1 | (py1 << 16);
-    value_planes(c0, c1, c2, v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, area2,
-                 0.5 * (double)width, 0.5 * (double)height, px0, py0, zs, zo, pc);
     pc->cover = cover;
+    return ST_RASTER;
+}
+
+/* Set up one triangle from its three snapped window positions (coverage: win_xy) and the
+ * same three vertices in clip space, double (values: value_planes). Returns ST_RASTER when
+ * it survives, otherwise the reason it was dropped; *swapped says whether vertices 1 and 2
+ * were exchanged to make the doubled area positive. (setup_triangles does the same in two
+ * steps: piece_cover per piece, then value_planes8 for SETUP_LANES pieces at a time.) */
+ALWAYS_INLINE int make_piece(int2 v0, int2 v1, int2 v2, double4 c0, double4 c1, double4 c2,
+                      int width, int height, double zs, double zo, int known, Piece *pc,
+                      int *swapped)
+{
+    long area2;
+    int st = piece_cover(v0, v1, v2, width, height, known, pc, swapped, &area2);
+    if (st != ST_RASTER) return st;
+    if (*swapped) {
+        double4 tc = c1; c1 = c2; c2 = tc;
+    }
+    value_planes(c0, c1, c2, pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2],
+                 area2, 0.5 * (double)width, 0.5 * (double)height, bb_x(pc->bb_min),
+                 bb_y(pc->bb_min), zs, zo, pc);
     return ST_RASTER;
 }
 
@@ -441,40 +459,142 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
 #define INSIDE8(k, j) ((e0 + (k) * sx0 + (j) * sy0 >= 0) & (e1 + (k) * sx1 + (j) * sy1 >= 0) \
                        & (e2 + (k) * sx2 + (j) * sy2 >= 0))
 
-/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id; the
- * draw's pool vertex of stream vertex 0 `vpool`, its instance `inst`) that passed the
- * outcode, facing, clipping and w tests: make_piece (with the cover bits `known` the lanes
- * found, or 0), its record at slot t, its status and tile word. */
-ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool, int inst,
-                                int known, __global const int2 *win, __global const float *pos,
-                                __global const double *mvps64,
-                                __global const double *zrows, int reversed, int width,
-                                int height, double zs, double zo, int tiles_x,
-                                __global Piece *pieces, __global uchar *status,
-                                __global int *tile1)
+/* Pieces of one draw whose coverage is set up (piece_cover) and whose value planes wait
+ * to be made SETUP_LANES at a time in double lanes (value_planes8): per lane its record
+ * slot, its corners' pool vertices and snapped window positions in the piece's order (1
+ * and 2 swapped where the area was negative), its doubled area over 65536 (exact: the
+ * area of a piece in the guard band is far below 2^53), its box's first pixel, and the
+ * record's id, flags and cover words. value_planes8 does value_planes' double operations
+ * in the same order on each lane, so each record's bytes are those of make_piece. */
+typedef struct {
+    int slot[SETUP_LANES], pa[SETUP_LANES], pb[SETUP_LANES], pc[SETUP_LANES];
+    int x0[SETUP_LANES], y0[SETUP_LANES], x1[SETUP_LANES], y1[SETUP_LANES];
+    int x2[SETUP_LANES], y2[SETUP_LANES], px0[SETUP_LANES], py0[SETUP_LANES];
+    int id[SETUP_LANES], flags[SETUP_LANES], cover[SETUP_LANES];
+    double as[SETUP_LANES];
+    int n;   /* pieces waiting */
+} __attribute__((aligned(64))) ValueQueue;
+
+/* Per lane: a where the lane mask m (long8 -1/0) is set, else b (double8); min as mind */
+#define SELD8(m, a, b) as_double8((as_long8(a) & (m)) | (as_long8(b) & ~(m)))
+#define MIND8(a, b) SELD8((a) <= (b), (a), (b))
+#define POS_X(i) pos[3 * (i)]
+#define POS_Y(i) pos[3 * (i) + 1]
+#define POS_Z(i) pos[3 * (i) + 2]
+/* CLIP_IN for the pool vertices of index vector ix in lanes: clip x, y, w and the depth
+ * numerator r (kernels pos, reversed and the instance's rows m, zr in scope) */
+#define CLIP_IN8(x, y, w, r, ix) do {                                                      \
+    double8 px_ = TO_DOUBLE8(GATHER8(float8, POS_X, ix));                                  \
+    double8 py_ = TO_DOUBLE8(GATHER8(float8, POS_Y, ix));                                  \
+    double8 pz_ = TO_DOUBLE8(GATHER8(float8, POS_Z, ix));                                  \
+    x = MAT_ROW(m, 0, px_, py_, pz_);                                                      \
+    y = MAT_ROW(m, 1, px_, py_, pz_);                                                      \
+    w = MAT_ROW(m, 3, px_, py_, pz_);                                                      \
+    if (reversed) r = MAT_ROW(zr, 0, px_, py_, pz_);                                       \
+    else r = MAT_ROW(m, 2, px_, py_, pz_);                                                 \
+} while (0)
+#define LOAD_Q8(a) (*(int8 *)(a))
+
+/* The value planes of the q->n (1..SETUP_LANES) queued pieces of instance inst, in lanes,
+ * and the rest of their records (id, flags, values, cover, pad: the record's last 64
+ * bytes); the queue is emptied. */
+ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
+                                 __global const double *mvps64, __global const double *zrows,
+                                 int inst, int reversed, double hw, double hh, double zs,
+                                 double zo, __global Piece *pieces)
 {
-    Piece pc __attribute__((aligned(32)));   /* copied out as 3 float8 */
+    int n = q->n;
+    for (int k = n; k < SETUP_LANES; ++k) {   /* idle lanes read lane 0's corners */
+        q->pa[k] = q->pa[0]; q->pb[k] = q->pb[0]; q->pc[k] = q->pc[0];
+    }
+    __global const double *m = mvps64 + 16 * inst, *zr = zrows + 4 * inst;
+    double8 ax, ay, aw, ar, bx, by, bw, br, cx, cy, cw, cr;
+    CLIP_IN8(ax, ay, aw, ar, LOAD_Q8(q->pa));
+    CLIP_IN8(bx, by, bw, br, LOAD_Q8(q->pb));
+    CLIP_IN8(cx, cy, cw, cr, LOAD_Q8(q->pc));
+    /* value_planes, lane by lane */
+    double8 iw0 = 1.0 / aw, iw1 = 1.0 / bw, iw2 = 1.0 / cw;
+    double8 x0 = (ax * iw0 + 1.0) * hw, y0 = (1.0 - ay * iw0) * hh;
+    double8 x1 = (bx * iw1 + 1.0) * hw, y1 = (1.0 - by * iw1) * hh;
+    double8 x2 = (cx * iw2 + 1.0) * hw, y2 = (1.0 - cy * iw2) * hh;
+    double8 z0 = (ar * iw0) * zs + zo, z1 = (br * iw1) * zs + zo;
+    double8 z2 = (cr * iw2) * zs + zo;
+    double8 as = *(double8 *)q->as;
+    double8 area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0);
+    long8 keep = (area >= 0.5 * as) & (area <= 2.0 * as);   /* else the snapped corners */
+    const double s = 1.0 / 256.0;
+    x0 = SELD8(keep, x0, TO_DOUBLE8(LOAD_Q8(q->x0)) * s);
+    y0 = SELD8(keep, y0, TO_DOUBLE8(LOAD_Q8(q->y0)) * s);
+    x1 = SELD8(keep, x1, TO_DOUBLE8(LOAD_Q8(q->x1)) * s);
+    y1 = SELD8(keep, y1, TO_DOUBLE8(LOAD_Q8(q->y1)) * s);
+    x2 = SELD8(keep, x2, TO_DOUBLE8(LOAD_Q8(q->x2)) * s);
+    y2 = SELD8(keep, y2, TO_DOUBLE8(LOAD_Q8(q->y2)) * s);
+    area = SELD8(keep, area, as);
+    double8 inv = 1.0 / area;
+    double8 rx = TO_DOUBLE8(LOAD_Q8(q->px0)) + 0.5;
+    double8 ry = TO_DOUBLE8(LOAD_Q8(q->py0)) + 0.5;
+    double8 l1 = ((x0 - x2) * (ry - y2) - (y0 - y2) * (rx - x2)) * inv;
+    double8 l1x = -(y0 - y2) * inv, l1y = (x0 - x2) * inv;
+    double8 l2 = ((x1 - x0) * (ry - y0) - (y1 - y0) * (rx - x0)) * inv;
+    double8 l2x = -(y1 - y0) * inv, l2y = (x1 - x0) * inv;
+    double8 dz10 = z1 - z0, dz20 = z2 - z0;
+    /* the record's words 10..21 (z0 .. zlo), lane by lane */
+    float v[12][SETUP_LANES] __attribute__((aligned(32)));
+    *(float8 *)v[0] = TO_FLOAT8((z0 + l1 * dz10) + l2 * dz20);
+    *(float8 *)v[1] = TO_FLOAT8(l1x * dz10 + l2x * dz20);
+    *(float8 *)v[2] = TO_FLOAT8(l1y * dz10 + l2y * dz20);
+    *(float8 *)v[3] = TO_FLOAT8(l1);
+    *(float8 *)v[4] = TO_FLOAT8(l1x);
+    *(float8 *)v[5] = TO_FLOAT8(l1y);
+    *(float8 *)v[6] = TO_FLOAT8(l2);
+    *(float8 *)v[7] = TO_FLOAT8(l2x);
+    *(float8 *)v[8] = TO_FLOAT8(l2y);
+    *(float8 *)v[9] = TO_FLOAT8(aw / bw);
+    *(float8 *)v[10] = TO_FLOAT8(aw / cw);
+    *(float8 *)v[11] = TO_FLOAT8(MIND8(MIND8(z0, z1), z2));
+    for (int k = 0; k < n; ++k) {
+        __global float8 *d8 = (__global float8 *)&pieces[q->slot[k]];
+        d8[1] = (float8)(as_float(q->id[k]), as_float(q->flags[k]), v[0][k], v[1][k],
+                         v[2][k], v[3][k], v[4][k], v[5][k]);
+        d8[2] = (float8)(v[6][k], v[7][k], v[8][k], v[9][k], v[10][k], v[11][k],
+                         as_float(q->cover[k]), 0.0f);   /* pad 0 */
+    }
+    q->n = 0;
+}
+
+/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id; the
+ * draw's pool vertex of stream vertex 0 `vpool`) that passed the outcode, facing,
+ * clipping and w tests: piece_cover (with the cover bits `known` the lanes found), its
+ * status and tile word, and, for a piece, its record's first 32 bytes (x, y, box) now and
+ * the rest through the queue q (value_planes8 once SETUP_LANES are waiting; the caller
+ * empties it at the draw's end). */
+ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool,
+                                int known, __global const int2 *win, int width, int height,
+                                int tiles_x, __global Piece *pieces, __global uchar *status,
+                                __global int *tile1, ValueQueue *q)
+{
+    Piece pc;
     int sw = 0, one = TILE1_NONE;
-    /* values from the double clip positions (CLIP_IN): the float32 ones are rounded by
-     * ~1e-7 relative, ~3e-5 px at 320 px wide, which alone put the barycentrics of
-     * 1-pixel triangles off by 3e-5 */
-    ClipIn a, b, c;
-    CLIP_IN(a, vpool + i0, inst);
-    CLIP_IN(b, vpool + i1, inst);
-    CLIP_IN(c, vpool + i2, inst);
-    int st = make_piece(win[i0], win[i1], win[i2], value_vertex(a.p, a.r),
-                        value_vertex(b.p, b.r), value_vertex(c.p, c.r), width, height, zs, zo,
-                        known, &pc, &sw);
+    long area2;
+    int st = piece_cover(win[i0], win[i1], win[i2], width, height, known, &pc, &sw, &area2);
     if (st == ST_RASTER) {
-        pc.id = id;
-        pc.flags = sw ? PF_SWAPPED : 0;
-        /* 96 aligned bytes, as three float8 stores. Ordinary stores, not non-temporal
-         * ones: binning reads the records right after this stage and, with a large enough
-         * last-level cache, finds them there */
-        __global float8 *d8 = (__global float8 *)&pieces[t];
-        d8[0] = ((float8 *)&pc)[0];
-        d8[1] = ((float8 *)&pc)[1];
-        d8[2] = ((float8 *)&pc)[2];
+        /* the record's first 32 bytes; binning reads the records right after this stage
+         * and, with a large enough last-level cache, finds them there (ordinary stores) */
+        *(__global int8 *)&pieces[t] = (int8)(pc.x[0], pc.x[1], pc.x[2], pc.y[0], pc.y[1],
+                                              pc.y[2], pc.bb_min, pc.bb_max);
+        int k = q->n++;
+        q->slot[k] = t;
+        q->pa[k] = vpool + i0;
+        q->pb[k] = vpool + (sw ? i2 : i1);
+        q->pc[k] = vpool + (sw ? i1 : i2);
+        q->x0[k] = pc.x[0]; q->y0[k] = pc.y[0];
+        q->x1[k] = pc.x[1]; q->y1[k] = pc.y[1];
+        q->x2[k] = pc.x[2]; q->y2[k] = pc.y[2];
+        q->px0[k] = bb_x(pc.bb_min); q->py0[k] = bb_y(pc.bb_min);
+        q->as[k] = (double)area2 * (1.0 / 65536.0);
+        q->id[k] = id;
+        q->flags[k] = sw ? PF_SWAPPED : 0;
+        q->cover[k] = pc.cover;
         /* the one tile of a piece whose pixel box lies in one tile (most pieces of a dense
          * mesh), or the tiles of one over at most 2 x 2: binning counts them from this word
          * alone (common.h TILE1_*), without the record of every piece over several tiles:
@@ -660,6 +780,9 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     int nb = (nt + SETUP_LANES - 1) / SETUP_LANES;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
     uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
+    ValueQueue q;   /* pieces waiting for their value planes */
+    q.n = 0;
+    double hw = 0.5 * (double)width, hh = 0.5 * (double)height;
     /* batch h's fates, then the pieces of batch h - SETUP_LAG: their records' lines were
      * asked for SETUP_LAG batches earlier */
     for (int h = 0; h < nb + SETUP_LAG; ++h) {
@@ -673,13 +796,18 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         int lt0 = SETUP_LANES * (h - SETUP_LAG);
         for (uint left = open[h - SETUP_LAG]; left; left &= left - 1) {
             int l = lt0 + CTZ(left);
-            uchar4 q = tv[l];
-            raster_piece(dr.tri_base + l, dr.vert_base + q.x, dr.vert_base + q.y,
-                         dr.vert_base + q.z, dr.face_base + face_ids[ci.x + l],
-                         ci.z - dr.vert_base, dr.instance, known[l], win, pos, mvps64, zrows,
-                         reversed, width, height, zs, zo, tiles_x, pieces, status, tile1);
+            uchar4 v = tv[l];
+            raster_piece(dr.tri_base + l, dr.vert_base + v.x, dr.vert_base + v.y,
+                         dr.vert_base + v.z, dr.face_base + face_ids[ci.x + l],
+                         ci.z - dr.vert_base, known[l], win, width, height, tiles_x, pieces,
+                         status, tile1, &q);
+            if (q.n == SETUP_LANES)
+                value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo,
+                              pieces);
         }
     }
+    if (q.n > 0)
+        value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo, pieces);
 }
 
 /* The clipper on triangle (i0, i1, i2) of this work-item's draw (setup_count_clipped and
