@@ -68,8 +68,8 @@ inline double3 blend3(double b0, double b1, double b2, double3 a, double3 b, dou
                      (b0 * a.z + b1 * b.z) + b2 * c.z);
 }
 
-/* The face row of triangle `id` of instance `inst` (first id lo): its row in face_verts
- * and face_nrm. */
+/* The face row of triangle `id` of instance `inst` (first id lo): its row of face_rows
+ * (common.h FACE_V, FACE_N). */
 #define FACE_ROW(id) (mesh_fbase[inst_mesh[inst]] + ((id) - lo))
 
 /* Ask for the face rows of the covered pixels in [a, b) whose id is in the last instance's
@@ -80,8 +80,7 @@ inline double3 blend3(double b0, double b1, double b2, double3 a, double3 b, dou
  * (bench/README.md's log). */
 inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int hi, int inst,
                              int want, int vert, __global const int *inst_mesh,
-                             __global const int *mesh_fbase, __global const int *face_verts,
-                             __global const float *face_nrm,
+                             __global const int *mesh_fbase, __global const int *face_rows,
                              __global const float *positions, __global const float *vnormals)
 {
     for (int q = a; q < b; ++q) {
@@ -89,11 +88,10 @@ inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int 
         if (!(id >= lo && id < hi)) continue;
         int row = FACE_ROW(id);
         if (!vert) {
-            PREFETCH(face_verts + 3 * row);
-            if (want & RS_NEED_NORMAL) PREFETCH(face_nrm + 3 * row);
+            PREFETCH(face_rows + FACE_ROW_WORDS * row);   /* vertices and normal */
             continue;
         }
-        __global const int *fv = face_verts + 3 * row;
+        __global const int *fv = face_rows + FACE_ROW_WORDS * row;
         if (want & RS_NEED_POINT) {
             PREFETCH(positions + 3 * fv[0]);
             PREFETCH(positions + 3 * fv[1]);
@@ -234,7 +232,7 @@ ALWAYS_INLINE void normals8(__global const double *nm, __global const double *ca
 ALWAYS_INLINE bool resolve_lanes(
     __global const int *ids, __global const float *bary, int p, int want, int lo, int hi,
     int inst, __global const int *inst_mesh, __global const int *mesh_fbase,
-    __global const int *face_verts, __global const float *face_nrm,
+    __global const int *face_rows,
     __global const float *positions, __global const float *vnormals,
     __global const double *inst_model, __global const double *inst_nrm,
     __global const double *cam, __global uchar *mask, __global float *lin,
@@ -247,7 +245,7 @@ ALWAYS_INLINE bool resolve_lanes(
     int8 row = v + (int8)(mesh_fbase[inst_mesh[inst]] - lo);
     int8 ia, ib, ic;
 #define GATHER_FV(k)                                                                        \
-    { __global const int *f_ = face_verts + 3 * row.s##k;                                  \
+    { __global const int *f_ = face_rows + FACE_ROW_WORDS * row.s##k;                       \
       ia.s##k = f_[0]; ib.s##k = f_[1]; ic.s##k = f_[2]; }
     GATHER_FV(0) GATHER_FV(1) GATHER_FV(2) GATHER_FV(3)
     GATHER_FV(4) GATHER_FV(5) GATHER_FV(6) GATHER_FV(7)
@@ -286,7 +284,13 @@ ALWAYS_INLINE bool resolve_lanes(
     }
     if (want & RS_NEED_NORMAL) {
         double8 fx, fy, fz;
-        GATHER3_ALL(fx, fy, fz, face_nrm, row)
+#define GATHER_FN(k)                                                                        \
+    { fx.s##k = (double)FACE_N(face_rows, row.s##k, 0);                                     \
+      fy.s##k = (double)FACE_N(face_rows, row.s##k, 1);                                     \
+      fz.s##k = (double)FACE_N(face_rows, row.s##k, 2); }
+        GATHER_FN(0) GATHER_FN(1) GATHER_FN(2) GATHER_FN(3)
+        GATHER_FN(4) GATHER_FN(5) GATHER_FN(6) GATHER_FN(7)
+#undef GATHER_FN
         __global const double *nm = inst_nrm + 9 * inst;
         if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
             double8 x = fx, y = fy, z = fz;
@@ -317,9 +321,8 @@ __kernel void resolve_pixels(
     __global const int *inst_base,     /* (I,) first triangle id of each instance */
     int n_inst,
     __global const int *inst_mesh,     /* (I,) unique mesh of each instance */
-    __global const int *mesh_fbase,    /* (U,) first face_verts row of each unique mesh */
-    __global const int *face_verts,    /* (F, 3) pool vertex indices of each face */
-    __global const float *face_nrm,    /* (F, 3) unit object-space face normals */
+    __global const int *mesh_fbase,    /* (U,) first face row of each unique mesh */
+    __global const int *face_rows,     /* (F, FACE_ROW_WORDS) vertices and normal of each face */
     __global const float *positions,   /* (V, 3) pool positions */
     __global const float *vnormals,    /* (V, 3) pool vertex normals (smooth outputs) */
     __global const double *inst_model, /* (I, 12) [M3 | t] row-major: object → world */
@@ -358,10 +361,10 @@ __kernel void resolve_pixels(
         int e = imin(p + 16, p1);
         if (want & (RS_NEED_POINT | RS_NEED_NORMAL))
             resolve_prefetch(ids, p, e, lo, hi, inst, want, 0, inst_mesh, mesh_fbase,
-                             face_verts, face_nrm, positions, vnormals);
+                             face_rows, positions, vnormals);
         if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH))
             resolve_prefetch(ids, p, e, lo, hi, inst, want, 1, inst_mesh, mesh_fbase,
-                             face_verts, face_nrm, positions, vnormals);
+                             face_rows, positions, vnormals);
         for (int g = p; p < e; ++p) {
             /* at each group of 8 (from the chunk's start): all eight at once where they
              * are covered pixels of the last instance (resolve_lanes), else one by one */
@@ -369,7 +372,7 @@ __kernel void resolve_pixels(
                 g = imin(p + 8, e);
                 if (g == p + 8 && (want & (RS_NEED_POINT | RS_NEED_NORMAL))
                     && resolve_lanes(ids, bary, p, want, lo, hi, inst, inst_mesh, mesh_fbase,
-                                     face_verts, face_nrm, positions, vnormals, inst_model,
+                                     face_rows, positions, vnormals, inst_model,
                                      inst_nrm, cam, mask, lin, dist, pts, n_face, n_smooth,
                                      n_cam, n_cam_smooth)) {
                     p = g - 1;   /* (the loop's ++p moves on to the next group) */
@@ -407,8 +410,8 @@ __kernel void resolve_pixels(
                 hi = b < n_inst ? inst_base[b] : INT_MAX;
             }
             int row = mesh_fbase[inst_mesh[inst]] + (id - lo);
-            int ia = face_verts[3 * row], ib = face_verts[3 * row + 1];
-            int ic = face_verts[3 * row + 2];
+            int ia = FACE_V(face_rows, row, 0), ib = FACE_V(face_rows, row, 1);
+            int ic = FACE_V(face_rows, row, 2);
             double b0 = 0.0, b1 = 0.0, b2 = 0.0;
             if (want & (RS_NEED_POINT | RS_SMOOTH | RS_CAM_SMOOTH)) {
                 b0 = (double)bary[3 * p];
@@ -437,7 +440,9 @@ __kernel void resolve_pixels(
                 }
             }
             if (want & RS_NEED_NORMAL) {
-                double3 fn = load3(face_nrm, row);
+                double3 fn = (double3)((double)FACE_N(face_rows, row, 0),
+                                       (double)FACE_N(face_rows, row, 1),
+                                       (double)FACE_N(face_rows, row, 2));
                 __global const double *nm = inst_nrm + 9 * inst;
                 if (want & (RS_NORMALS | RS_CAM_NORMALS)) {
                     double3 w = round32(unit3(mat3(nm, fn)));

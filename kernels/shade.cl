@@ -45,13 +45,13 @@
 /* the scene's and the call's tables, the same for every kernel below */
 #define SHADE_ARGS                                                                            \
     __global const int *inst_bucket, int bshift, __global const int *inst_base, int n_inst,   \
-    __global const int *inst_row, __global const int *face_verts,                             \
-    __global const float *face_nrm, __global const float *vnormals,                           \
+    __global const int *inst_row, __global const int *face_rows,                              \
+    __global const float *vnormals,                                                           \
     __global const short *face_vn,                                                            \
     __global const float4 *inst_nrm, __global const float4 *inst_col,                         \
     __global const int *inst_src, __global const float4 *colours,                             \
     __global const float2 *uvs, __global const float4 *texels, float4 light, int flags
-#define SHADE_PASS inst_bucket, bshift, inst_base, n_inst, inst_row, face_verts, face_nrm,   \
+#define SHADE_PASS inst_bucket, bshift, inst_base, n_inst, inst_row, face_rows,              \
     vnormals, face_vn, inst_nrm, inst_col, inst_src, colours, uvs, texels, light, flags
 
 inline float3 load3f(__global const float *p, int k)
@@ -99,8 +99,8 @@ inline float3 sample_tex(__global const float4 *tex, int w, int h, float2 uv)
 
 /* The unquantized colour (0..1) of the covered pixel p with id `id`; *inst, *lo, *hi: the
  * last instance found and its id range [lo, hi), tried first. */
-__attribute__((always_inline)) inline float3 shade_one(int id, int p, __global const float *bary, int *inst, int *lo, int *hi,
-                        SHADE_ARGS)
+ALWAYS_INLINE float3 shade_one(int id, int p, __global const float *bary, int *inst, int *lo,
+                               int *hi, SHADE_ARGS)
 {
     if (!(id >= *lo && id < *hi)) {
         int i = inst_bucket[id >> bshift];
@@ -112,16 +112,17 @@ __attribute__((always_inline)) inline float3 shade_one(int id, int p, __global c
     }
     int i = *inst;
     int row = id + inst_row[i];
-    float3 n = load3f(face_nrm, row);
+    float3 n = (float3)(FACE_N(face_rows, row, 0), FACE_N(face_rows, row, 1),
+                        FACE_N(face_rows, row, 2));
     float b0 = 0.0f, b1 = 0.0f, b2 = 0.0f;
     int va = 0, vb = 0, vc = 0;
     if (flags & (SH_SMOOTH | SH_SOURCES)) {
         b0 = bary[3 * p];
         b1 = bary[3 * p + 1];
         b2 = bary[3 * p + 2];
-        va = face_verts[3 * row];
-        vb = face_verts[3 * row + 1];
-        vc = face_verts[3 * row + 2];
+        va = FACE_V(face_rows, row, 0);
+        vb = FACE_V(face_rows, row, 1);
+        vc = FACE_V(face_rows, row, 2);
     }
     if (flags & SH_SMOOTH) {
         float3 s = b0 * load3f(vnormals, va) + b1 * load3f(vnormals, vb)
@@ -177,9 +178,10 @@ inline void prefetch_rows(__global const int *ids, int a, int b, int lo, int hi,
             int row = id + off;
             /* what the lanes read (smooth: the face's row of vertex normals; no face
              * normal), or the per-pixel path (colour sources: the face's vertices) */
-            if (!(flags & SH_SMOOTH)) PREFETCH(face_nrm + 3 * row);
-            else if (!(flags & SH_SOURCES)) PREFETCH(face_vn + FACE_VN_ROW * row);
-            if (flags & SH_SOURCES) PREFETCH(face_verts + 3 * row);
+            if (!(flags & SH_SMOOTH) || (flags & SH_SOURCES))
+                PREFETCH(face_rows + FACE_ROW_WORDS * row);   /* normal, vertices */
+            else
+                PREFETCH(face_vn + FACE_VN_ROW * row);
         }
     }
 }
@@ -191,7 +193,7 @@ inline void prefetch_verts(__global const int *ids, int a, int b, int lo, int hi
     for (int q = a; q < b; ++q) {
         int id = ids[q];
         if (id >= lo && id < hi) {
-            __global const int *fv = face_verts + 3 * (id + off);
+            __global const int *fv = face_rows + FACE_ROW_WORDS * (id + off);
             PREFETCH(vnormals + 3 * fv[0]);
             PREFETCH(vnormals + 3 * fv[1]);
             PREFETCH(vnormals + 3 * fv[2]);
@@ -332,8 +334,8 @@ ALWAYS_INLINE bool shade_lanes(__global const int *ids, __global const float *ba
     }
     float8 nx, ny, nz;
 #define GATHER_FN(k)                                                                         \
-    { int r = 3 * row.s##k; nx.s##k = face_nrm[r]; ny.s##k = face_nrm[r + 1];                \
-      nz.s##k = face_nrm[r + 2]; }
+    { nx.s##k = FACE_N(face_rows, row.s##k, 0); ny.s##k = FACE_N(face_rows, row.s##k, 1);    \
+      nz.s##k = FACE_N(face_rows, row.s##k, 2); }
 #define GATHER_FNS                                                                           \
     GATHER_FN(0) GATHER_FN(1) GATHER_FN(2) GATHER_FN(3)                                      \
     GATHER_FN(4) GATHER_FN(5) GATHER_FN(6) GATHER_FN(7)

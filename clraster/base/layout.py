@@ -127,6 +127,12 @@ HIZ_EPS = np.float32(2.0**-18)  #: relative clip-space error bound, per unit of 
 HIZ_DEPTH_SLACK = np.float32(2.0**-18)  #: subtracted from the box's nearest window depth
 HIZ_PIXEL_SLACK = np.float32(0.0625)  #: window-space widening of the box's screen rectangle, px
 
+#: Words (int32) of a face's row in the resolve and shading kernels' face table
+#: (`clraster.pipeline.resolving.ResolveTables.face_rows`): its three pool vertices, its
+#: unit object-space normal (three float32, as their bits), two zeros. 32 bytes: a pixel's
+#: face vertices and normal come in one cache line, not one line of each of two tables.
+FACE_ROW_WORDS = 8
+
 #: Triangles per box of the exact occlusion query: box b is faces 12b .. 12b+11 (triangle id
 #: // 12 is the box; kernels/query.cl, reference/query.py box_geometry).
 BOX_TRIS = 12
@@ -238,6 +244,8 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
      ("PYR_LOG2", "OCC_VISIBLE", "OCC_OCCLUDED", "OCC_VIEW_CULLED", "HIZ_EPS",
       "HIZ_DEPTH_SLACK", "HIZ_PIXEL_SLACK")),
     ("Exact occlusion queries: triangles per box", ("BOX_TRIS",)),
+    ("Resolve and shading: words of a face row (pool vertices a b c, normal x y z as float "
+     "bits, 2 zeros)", ("FACE_ROW_WORDS",)),
     ("Line segment status; clear value of the lines' resolve buffers",
      ("LS_ACCEPTED", "LS_CLIPPED", "LS_INVALID", "LS_REJECTED", "LS_CLIPPED_AWAY",
       "LS_ACCEPTED_DEGENERATE", "LS_CLIPPED_DEGENERATE", "ZMIN_CLEAR", "IDMIN_CLEAR")),

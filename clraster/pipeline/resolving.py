@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from ..base.layout import FACE_ROW_WORDS
 from ..output.outputs import camera_axes
 from ..output.shade import vertex_normals
 from ..world.scene import Scene
@@ -161,6 +162,17 @@ class ResolveTables:
                 np.cumsum(sizes[:-1], out=got[1:])
             object.__setattr__(self, "_vbase", got)
         return got
+
+    def face_rows(self) -> np.ndarray:
+        """int32 (F, FACE_ROW_WORDS): per row of ``face_verts``, its three pool vertices, its unit
+        object-space normal (``face_normals``, float32 bits) and two zeros: the device's one
+        face table (kernels/common.h FACE_V / FACE_N), so a pixel's vertices and normal
+        are one cache line (two tables were a miss each). 32 bytes a face, made anew for
+        each upload, not kept here."""
+        out = np.zeros((self.face_verts.shape[0], FACE_ROW_WORDS), np.int32)
+        out[:, :3] = self.face_verts
+        out[:, 3:6] = np.ascontiguousarray(self.face_normals, np.float32).view(np.int32)
+        return out
 
     def face_vertex_normals(self, pool: GeometryPool) -> np.ndarray:
         """int16 (F, 16): per row of ``face_verts``, its three vertices' normals

@@ -42,8 +42,8 @@ class ResolveBuffers:
     """Scene → resolve boundary (shapes and dtypes: `clraster.pipeline.resolving`).
 
     Per scene (uploaded when the tables change): inst_base int32 (I,), inst_mesh int32
-    (I,), mesh_fbase int32 (U,), face_verts int32 (F, 3), face_nrm float32 (F, 3), inst_nrm
-    float64 (I, 9),
+    (I,), mesh_fbase int32 (U,), face_rows int32 (F, FACE_ROW_WORDS) (`ResolveTables.face_rows`:
+    each face's vertices and normal in one row), inst_nrm float64 (I, 9),
     vnormals float32 (V, 3) (on the first smooth output). Per frame: inst_model float64
     (I, 12), cam float64 (16,). The outputs are the caller's arrays (`ArrayPool`) under
     CL_MEM_USE_HOST_PTR buffers, as the raster's.
@@ -52,8 +52,7 @@ class ResolveBuffers:
     inst_base: GrowBuffer
     inst_mesh: GrowBuffer
     mesh_fbase: GrowBuffer
-    face_verts: GrowBuffer
-    face_nrm: GrowBuffer
+    face_rows: GrowBuffer
     inst_nrm: GrowBuffer
     vnormals: GrowBuffer
     inst_model: GrowBuffer
@@ -139,7 +138,7 @@ class ResolveStage:
         self.kernel = kernel(program(ctx, "resolve", opts), "resolve_pixels")
         self.ctx = ctx
         self._shared = shares_host_memory(ctx)
-        self.buffers = ResolveBuffers(*(GrowBuffer(ctx) for _ in range(7)),
+        self.buffers = ResolveBuffers(*(GrowBuffer(ctx) for _ in range(6)),
                                       *(GrowBuffer(ctx, host=True) for _ in range(2)))
         self._tables: ResolveTables | None = None
         self._smooth = False
@@ -154,8 +153,7 @@ class ResolveStage:
         if tables is not self._tables:
             for gb, arr in ((b.inst_base, tables.inst_base), (b.inst_mesh, tables.inst_mesh),
                             (b.mesh_fbase, tables.mesh_fbase),
-                            (b.face_verts, tables.face_verts),
-                            (b.face_nrm, tables.face_normals),
+                            (b.face_rows, tables.face_rows()),
                             (b.inst_nrm, tables.normal_mats)):
                 buf = gb.ensure(arr.nbytes, "resolve table")
                 if arr.nbytes:
@@ -219,8 +217,7 @@ class ResolveStage:
         ev = self.kernel(queue, (max(n_items, 1),), (1,), ids, bary if bary is not None else ids,
                          np.int32(npx), np.int32(RESOLVE_SPAN), np.int32(view.want),
                          b.inst_base.ensure(1), np.int32(tables.inst_base.size),
-                         b.inst_mesh.ensure(1), b.mesh_fbase.ensure(1), b.face_verts.ensure(1),
-                         b.face_nrm.ensure(1),
+                         b.inst_mesh.ensure(1), b.mesh_fbase.ensure(1), b.face_rows.ensure(1),
                          positions, vnormals, b.inst_model.ensure(1), b.inst_nrm.ensure(1),
                          b.cam.ensure(1), *args,
                          bins.summary.buf if bins is not None else ids,

@@ -111,8 +111,8 @@ class ShadeStage:
         b, sb = self.resolve.buffers, self.shade_buffers
         _, shift = tables.buckets()
         return (sb.bucket.ensure(1), np.int32(shift), sb.inst_base.ensure(1),
-                np.int32(tables.inst_base.size), sb.inst_row.ensure(1), b.face_verts.ensure(1),
-                b.face_nrm.ensure(1), b.vnormals.ensure(1), sb.face_vn.ensure(1),
+                np.int32(tables.inst_base.size), sb.inst_row.ensure(1), b.face_rows.ensure(1),
+                b.vnormals.ensure(1), sb.face_vn.ensure(1),
                 sb.inst_nrm.ensure(1))
 
     def _frame_buffer(self, arr: np.ndarray, dtype: type) -> tuple[cl.Buffer, np.ndarray]:
