@@ -282,7 +282,9 @@ class Renderer:
         Each frame is exactly what ``render(target, camera, **render_kwargs)`` returns in a
         loop on this renderer (with occlusion=True, each view's history is the view before
         it). The scene's clusters, BVH and geometry pool and its upload to the device are
-        kept across views; each frame has its own arrays. A broken camera raises
+        kept across views; each frame has its own arrays. Views are drawn two at a time by
+        this renderer and its `view_partner` where that pays (`RasterConfig.views_in_flight`;
+        the frames still come in camera order). A broken camera raises
         `clraster.views.ViewError` naming its index (and field) when the generator reaches
         it; `clraster.batch.render_views` instead fails that view and goes on.
         """
