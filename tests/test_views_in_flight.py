@@ -5,7 +5,13 @@ early or failing leaves no worker behind."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import textwrap
 import threading
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -60,10 +66,10 @@ def test_frames_equal_one_at_a_time_in_order(mesh, kw):
     expected = list(one_at_a_time().render_many(mesh, cams, **kw))
     r = Renderer(W, H)
     got = list(r.render_many(mesh, cams, **kw))
-    # both renderers drew views (whichever is free takes the next camera); the first
-    # view is drawn alone, by the renderer asked
+    # the first view is drawn alone, by the renderer asked; the others by it or its
+    # partner, whichever was free (test_partner_draws_while_the_other_is_busy)
     makers = [f.source() for f in got]
-    assert makers[0] is r and r._partner is not None and r._partner in makers
+    assert makers[0] is r and r._partner is not None and set(makers) <= {r, r._partner}
     assert len(got) == len(expected) == len(cams)
     for k, (a, b) in enumerate(zip(got, expected, strict=True)):
         np.testing.assert_array_equal(a.triangle_id, b.triangle_id, err_msg=f"view {k}")
@@ -82,6 +88,98 @@ def test_frames_equal_one_at_a_time_in_order(mesh, kw):
         np.testing.assert_array_equal(again[k].triangle_id, expected[k].triangle_id)
         np.testing.assert_array_equal(again[k].depth, expected[k].depth)
     assert not workers_alive()
+
+
+class SlowRenderer(Renderer):
+    """A renderer whose frames take 50 ms more (its partner is a plain Renderer)."""
+
+    def render(self, *args, **kwargs):
+        time.sleep(0.05)
+        return super().render(*args, **kwargs)
+
+
+def test_partner_draws_while_the_other_is_busy(mesh):
+    cams = path_cameras(6)
+    r = SlowRenderer(W, H)
+    got = list(r.render_many(mesh, cams))
+    makers = [f.source() for f in got]
+    assert makers[0] is r and makers.count(r._partner) >= 3
+    for k, f in enumerate(got):
+        assert_frames_equal(f, one_at_a_time().render(mesh, cams[k]), f"view {k}")
+
+
+def test_a_camera_generator_is_read_one_view_at_a_time(mesh):
+    """The next camera chosen from the last frame (a generator fed by the loop): no
+    read-ahead, no partner, no hang."""
+    cams = path_cameras(3)
+    wanted = [cams[0]]
+
+    def next_best_view():
+        for k in range(len(cams)):
+            yield wanted[k]   # an IndexError here would mean a camera read ahead
+
+    r = Renderer(W, H)
+    got = []
+    for k, f in enumerate(r.render_many(mesh, next_best_view())):
+        got.append(f)
+        if k + 1 < len(cams):
+            wanted.append(cams[k + 1])
+    assert len(got) == len(cams) and r._partner is None
+    for k, f in enumerate(got):
+        assert_frames_equal(f, one_at_a_time().render(mesh, cams[k]), f"view {k}")
+    outs = [v["index"] for v in iter_views(mesh, (c for c in cams), ("ids",),
+                                           renderer=Renderer(W, H))]
+    assert outs == list(range(len(cams)))
+
+
+class FailsInRender:
+    """A camera whose first projection (the camera list's check) works and whose next
+    ones (the render's) fail with an error that is not the view's fault."""
+
+    def __init__(self, cam):
+        self.cam, self.calls = cam, 0
+
+    def view_projection(self, width, height):
+        self.calls += 1
+        if self.calls > 1:
+            raise RuntimeError("boom in render")
+        return self.cam.view_projection(width, height)
+
+
+def test_an_error_in_render_lands_at_its_view(mesh):
+    cams: list = path_cameras(6)
+    cams[4] = FailsInRender(cams[4])
+    got = []
+    with pytest.raises(RuntimeError, match="boom in render"):
+        for f in Renderer(W, H).render_many(mesh, cams):
+            got.append(f)
+    assert len(got) == 4 and cams[4].calls > 1
+    for k in range(4):
+        assert_frames_equal(got[k], one_at_a_time().render(mesh, cams[k]), f"view {k}")
+    assert not workers_alive()
+
+
+def test_exit_with_a_generator_alive_is_clean(tmp_path):
+    """A script that leaves a half-read render_many behind exits normally: the workers
+    are stopped and joined before the interpreter goes (a worker inside OpenCL then
+    aborted the process)."""
+    script = tmp_path / "live.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from test_views import path_cameras
+        from clraster import Renderer
+        from clraster.world.examples import example_mesh
+        gen = Renderer(320, 240).render_many(example_mesh(), path_cameras(30))
+        next(gen), next(gen)
+        print("leaving", flush=True)
+    """))
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                              timeout=120, env=env)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert "leaving" in proc.stdout and "terminate called" not in proc.stderr
 
 
 def test_iter_views_arrays_equal(mesh):

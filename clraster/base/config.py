@@ -171,11 +171,12 @@ class RasterConfig:
             time, each by its own renderer on this device in a thread of its own, and
             handed out in order, so that one view's host work (culling, planning, the
             caller's own use of the last frame) runs while the device draws another. 1 or
-            2. Used only where it pays and costs little memory: a target that one pass
-            draws (at most ``batch_triangles`` triangles; the second renderer holds its own
-            copy of the scene's geometry on the device and its own pass buffers) and no
-            occlusion culling (whose history is the view drawn just before). Never changes
-            a frame. Default 2: +13–19% views/s on the dragon's 640 × 480 datasets job
+            2. Used only where it pays: camera lists or files (read ahead; other iterables
+            one camera per view), a target that one pass draws (at most
+            ``batch_triangles`` triangles: the second renderer holds its own pass buffers
+            and copy of the scene's geometry on the device, as much again as the first's),
+            and no occlusion culling (whose history is the view drawn just before). Never
+            changes a frame. Default 2: +13–19% views/s on the dragon's 640 × 480 datasets job
             (bench/README.md, "Views in flight").
     """
 
@@ -204,7 +205,7 @@ class RasterConfig:
             raise ValueError(f"occlusion_groups must be an integer in 0..2**20 (0: no "
                              f"groups), got {g!r}")
         v = self.views_in_flight
-        if isinstance(v, bool) or v not in (1, 2):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v not in (1, 2):
             raise ValueError(f"views_in_flight must be 1 or 2, got {v!r}")
 
     @property

@@ -21,7 +21,7 @@ from ..world.camera import Camera
 from ..world.inputs import Target, as_target
 from ..world.mesh import Mesh
 from ..world.scene import Scene
-from ..world.views import ViewError, frames
+from ..world.views import ViewError, cameras_in_hand, frames
 from .device import check_process, choose_context, describe_choice, event_ms
 from .drawlist import GeometryPool, PlanCache
 from .draws import FrameDraws
@@ -176,16 +176,19 @@ class Renderer:
         stages and lock, and this renderer's plan cache (the scene's host geometry pool,
         built once and only read by both); made on first use and kept with this renderer,
         so that later batches find the scene uploaded. Its frames are exactly this
-        renderer's."""
+        renderer's. It holds its own pass buffers and copy of the scene's geometry on the
+        device (a one-pass target's: within the pass budget of the class docstring)."""
         if (self.config.views_in_flight < 2 or render_kwargs.get("occlusion")
                 or target.n_faces > self.config.batch_triangles):
             return None
-        if self._partner is None:
-            p = Renderer(self.width, self.height, config=self.config, context=self.context)
-            p.device_description = self.device_description
-            p._plans = self._plans
-            self._partner = p
-        return self._partner
+        with self._lock:   # (threads sharing this renderer make one partner)
+            if self._partner is None:
+                p = Renderer(self.width, self.height, config=self.config,
+                             context=self.context)
+                p.device_description = self.device_description
+                p._plans = self._plans
+                self._partner = p
+            return self._partner
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,
@@ -295,8 +298,9 @@ class Renderer:
                              f"one {type(cameras).__name__}; wrap it in a list")
 
         def gen() -> Iterator[Frame]:
-            for _, item in frames(self, target, cameras, render_kwargs,
-                                  self.view_partner(target, render_kwargs)):
+            partner = (self.view_partner(target, render_kwargs)
+                       if cameras_in_hand(cameras) else None)
+            for _, item in frames(self, target, cameras, render_kwargs, partner):
                 if isinstance(item, ViewError):
                     raise item
                 yield item

@@ -90,7 +90,14 @@ from ..output.atomic import stale_temporary, write_atomic
 from ..output.outputs import FORMATS, check_depth_scale, check_writable, write_output
 from ..world.inputs import as_target
 from ..world.mesh import Mesh
-from ..world.views import BrokenCamera, ViewError, camera_from_entry, frames, iter_cameras
+from ..world.views import (
+    BrokenCamera,
+    ViewError,
+    camera_from_entry,
+    cameras_in_hand,
+    frames,
+    iter_cameras,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
@@ -619,8 +626,11 @@ def iter_views(target: Any, cameras: Iterable[Any] | str | os.PathLike,
     (`view_arrays`: the `clraster.Frame` methods, computed on the host), plus ``"index"``
     (the view's place in ``cameras``) and ``"camera"`` (the camera it was rendered with).
 
-    Lazy: a view is rendered when the next dict is asked for, and the arrays are the
-    caller's (never reused by the renderer). Example::
+    The arrays are the caller's (never reused by the renderer). From a list of cameras
+    or a camera file, up to three views are rendered ahead of the loop, two at a time
+    (`clraster.RasterConfig.views_in_flight`); from any other iterable (a generator that
+    picks the next camera from the last view, say) each camera is read and rendered when
+    the next dict is asked for. Example::
 
         for v in iter_views(mesh, cams, ("linear_depth", "normals", "mask"), size=(640, 480)):
             train_step(v["linear_depth"], v["normals"], v["mask"])
@@ -667,8 +677,9 @@ def _iter_views(renderer: Renderer, geometry: Any, target: Any, cameras: Any,
             pending.append((i, c))
             yield c
 
-    for _, item in frames(renderer, geometry, cams(), kwargs,
-                          _partner(renderer, geometry, kwargs)):
+    # read ahead (two views in flight) only from a list or file in hand
+    partner = _partner(renderer, geometry, kwargs) if cameras_in_hand(cameras) else None
+    for _, item in frames(renderer, geometry, cams(), kwargs, partner):
         index, cam = pending.pop(0)
         if isinstance(item, ViewError):
             if errors == "raise":

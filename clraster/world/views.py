@@ -50,10 +50,13 @@ any object with ``view_projection(width, height)`` (as `Renderer.render` accepts
 
 from __future__ import annotations
 
+import atexit
+import contextvars
 import json
 import math
 import os
 import threading
+import weakref
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -407,6 +410,14 @@ def check_target(target: Any) -> None:
     as_target(target)
 
 
+def cameras_in_hand(cameras: Any) -> bool:
+    """Whether a camera source may be read ahead of the views, from other threads: a list
+    or tuple, or a camera file (read into a list). Any other iterable is read one camera
+    per view, in the caller's thread: it may wait on the caller's loop (the next camera
+    chosen from the last frame), or belong to the thread that made it."""
+    return isinstance(cameras, (list, tuple, str, os.PathLike))
+
+
 def frames(renderer: ViewRenderer[F], target: Any,
            cameras: Iterable[Any] | str | os.PathLike, render_kwargs: dict,
            partner: ViewRenderer[F] | None = None) -> Iterator[tuple[int, F | ViewError]]:
@@ -422,12 +433,16 @@ def frames(renderer: ViewRenderer[F], target: Any,
     device the stages (~9 ms at 640 × 480), one after the other.
 
     ``partner``: a second renderer (`Renderer.view_partner`: same size, config and
-    device; None: views one at a time). Views then go to ``renderer`` and ``partner`` in
-    turn, each rendered in a thread of its own, two in flight, so that one view's host
-    work and the caller's work on the last frame run while the device draws the other;
-    frames still come out in camera order, each exactly what ``renderer.render`` makes.
-    The first view is drawn alone (what a first frame builds and caches is built once).
-    Closing the generator early waits for the view in flight and renders no more.
+    device; None: views one at a time), given only with a camera source in hand
+    (`cameras_in_hand`; ``cameras`` may then be a generator over it). Two worker threads,
+    one per renderer, each take the next camera (whichever is free) and render it, two
+    views in flight, so that one view's host work and the caller's work on the last frame
+    run while the device draws the other; the frames still come out in camera order, each
+    exactly what ``renderer.render`` makes. The first view is drawn alone (what a first
+    frame builds and caches is built once). Up to `_InFlight.AHEAD` views are read and
+    rendered ahead of the caller. Closing the generator waits for the views being drawn
+    and renders no more; an exception in the caller's wait (Ctrl-C) returns at once, the
+    workers finishing their view in the background (and before the interpreter exits).
     """
     views = iter_cameras(cameras, renderer.width, renderer.height)
     if partner is None:
@@ -437,6 +452,11 @@ def frames(renderer: ViewRenderer[F], target: Any,
     yield from _InFlight((renderer, partner), target, views, render_kwargs).run()
 
 
+#: `_InFlight` runs whose workers may still be alive, stopped and joined before the
+#: interpreter exits (`_stop_all_runs`)
+_LIVE_RUNS: weakref.WeakSet = weakref.WeakSet()
+
+
 class _InFlight:
     """`frames` with two renderers: a worker thread per renderer takes the next camera
     (the list is read in order, under a lock), renders it and files the frame under its
@@ -444,7 +464,8 @@ class _InFlight:
     run ahead of the caller by at most `AHEAD` views in all (taken, not yet handed out),
     so a worker need not wait for the caller to come back before its next view (handing
     each view to a worker from the caller's thread gained a third of what this does:
-    bench/README.md, "Views in flight")."""
+    bench/README.md, "Views in flight"). Each worker runs in a copy of the caller's
+    context (`contextvars`)."""
 
     AHEAD = 3
 
@@ -455,16 +476,18 @@ class _InFlight:
         self.lock = threading.Lock()   # guards views, taken, end, stop and done
         self.ready = threading.Condition(self.lock)
         self.taken = 0                 # views taken from the list so far
-        self.end: int | None = None    # the list's length, once read to its end
+        self.end: int | None = None    # no view from here on: the list's end, or a failure
         self.stop = False
         # view n → (index, frame or ViewError), or (None, exception) to raise at n
         self.done: dict[int, tuple[int | None, Any]] = {}
         self.slots = threading.Semaphore(self.AHEAD)
         self.first = threading.Event()   # view 0 is drawn alone: what it caches, once
+        self.workers: list[threading.Thread] = []
 
     def _take(self) -> tuple[int, int, Any] | None:
         """(n, index, camera) of the next view, or None: the list ended or failed (its
-        error filed at the end), or the caller stopped."""
+        error filed at the end), or the caller stopped. (The list is in hand, so reading
+        it under the lock never waits on anyone.)"""
         with self.lock:
             if self.stop or self.end is not None:
                 return None
@@ -473,7 +496,7 @@ class _InFlight:
                 index, cam = next(self.views)
             except StopIteration:
                 self.end = n
-            except BaseException as exc:   # a camera file that fails halfway: at n
+            except BaseException as exc:   # a broken entry's check failing otherwise: at n
                 self.end = n + 1
                 self.done[n] = (None, exc)
             else:
@@ -487,13 +510,11 @@ class _InFlight:
             self.first.wait()   # view 0 goes to the first renderer, alone
         while True:
             self.slots.acquire()
-            got = self._take()
+            got = None if self.stop else self._take()
             if got is None:
                 return
             n, index, cam = got
             try:
-                if self.stop:
-                    return
                 out: tuple[int | None, Any] = (index, _render_view(
                     renderer, self.target, index, cam, self.kwargs))
             except BaseException as exc:   # raised in the caller, at view n
@@ -506,12 +527,34 @@ class _InFlight:
                 self.done[n] = out
                 self.ready.notify_all()
 
+    def _stop(self, join: bool) -> None:
+        """No more views: wake the workers (waiting for a slot or for view 0); with
+        ``join``, wait until each has finished the view it is drawing. In a worker's own
+        thread (the generator collected there, maybe inside `_take`, under the lock),
+        neither the lock nor a join."""
+        mine = threading.current_thread() in self.workers
+        if mine:
+            self.stop = True
+        else:
+            with self.lock:
+                self.stop = True
+        for _ in self.workers:
+            self.slots.release()
+        self.first.set()
+        if join and not mine:
+            for t in self.workers:
+                t.join()
+
     def run(self) -> Iterator[tuple[int, Any]]:
-        workers = [threading.Thread(target=self._work, args=(r,), daemon=True,
-                                    name="clraster-view") for r in self.renderers]
-        for t in workers:
-            t.start()
+        interrupted = False
         try:
+            _LIVE_RUNS.add(self)
+            for r in self.renderers:
+                ctx = contextvars.copy_context()
+                t = threading.Thread(target=ctx.run, args=(self._work, r), daemon=True,
+                                     name="clraster-view")
+                self.workers.append(t)
+                t.start()
             n = 0
             while True:
                 with self.lock:
@@ -525,14 +568,28 @@ class _InFlight:
                 self.slots.release()
                 yield index, item
                 n += 1
+        except KeyboardInterrupt:
+            interrupted = True
+            raise
         finally:
-            with self.lock:
-                self.stop = True
-            for _ in workers:   # wake workers waiting for a slot or for view 0
-                self.slots.release()
-            self.first.set()
-            for t in workers:
-                t.join()
+            # the workers joined after the list's end, an error filed at a view or a close;
+            # after Ctrl-C in the caller's wait the generator returns at once, the workers
+            # finishing their view in the background (`_stop_all_runs` joins them at exit)
+            self._stop(join=not interrupted)
+            if not interrupted:
+                _LIVE_RUNS.discard(self)
+
+
+def _stop_all_runs() -> None:
+    """Before the interpreter exits: stop every run and join its workers, so that none is
+    inside an OpenCL call as the interpreter is torn down (a thread waking there then
+    aborts the process: `clraster.pipeline.device._drain_waiters`)."""
+    for run in list(_LIVE_RUNS):
+        run._stop(join=True)
+
+
+# threading's exit hooks run before atexit's (and before the device waiters are drained)
+getattr(threading, "_register_atexit", atexit.register)(_stop_all_runs)
 
 
 def _render_view(renderer: ViewRenderer[F], target: Any, index: int, cam: Any,
