@@ -276,8 +276,11 @@ def _view_axis(view: np.ndarray) -> np.ndarray:
     return fwd / np.linalg.norm(fwd)
 
 
-def camera_axes(camera: Any, width: int, height: int
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+#: `camera_axes`' result: view, projection, eye, view axis, orthographic
+CameraAxes = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]
+
+
+def camera_axes(camera: Any, width: int, height: int) -> CameraAxes:
     """(view float64 (4, 4), projection float64 (4, 4), eye float64 (3,), unit view axis
     float64 (3,), orthographic) of a `clraster.Camera`-like object (``view`` and
     ``projection(width, height)``): what the metric outputs are measured from, here and in

@@ -95,6 +95,7 @@ class FrameOptions:
     cull_planes: np.ndarray | None = None
     keep_bary: bool = True
     resolve: tuple[str, ...] = ()
+    axes: Any = None   # the camera's `camera_axes` where a resolve output needs them
 
     @classmethod
     def make(cls, width: int, height: int, camera: CameraLike, *, cull: Any = "back",
@@ -111,14 +112,14 @@ class FrameOptions:
         planes, mask, names = check_options(width, height, cull, clip_planes, window, outputs,
                                             flags)
         resolve = tuple(n for n in names if n in RESOLVE_OUTPUTS)
-        check_resolve_camera(resolve, camera, width, height)
+        axes = check_resolve_camera(resolve, camera, width, height)
         keep = "bary" in names
         cull_planes = None
         if window is not None:   # planes that cut the work outside the window's mask
             cull_planes = window_planes_for(window, camera, width, height, planes)
         return cls(cull, bool(frustum), bool(cones), bool(occlusion), bool(overdraw),
                    bool(fates), bool(reversed_z), keep or any(n in NEED_BARY for n in resolve),
-                   planes, mask, cull_planes, keep, resolve)
+                   planes, mask, cull_planes, keep, resolve, axes)
 
 
 def check_options(width: int, height: int, cull: Any, clip_planes: Any, window: Any,
@@ -247,7 +248,7 @@ def _resolve_inputs(backend: Backend[Out], plan: Any, camera: CameraLike, o: Fra
                     ) -> tuple[ResolveTables, ResolveView]:
     tables = resolve_tables(plan.pool, plan.scene)
     view = resolve_view(plan.pool, plan.scene, camera, backend.width, backend.height,
-                        o.resolve)
+                        o.resolve, o.axes)
     return tables, view
 
 

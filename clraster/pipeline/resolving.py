@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from ..base.layout import FACE_ROW_WORDS
-from ..output.outputs import camera_axes
+from ..output.outputs import CameraAxes, camera_axes
 from ..output.shade import vertex_normals
 from ..world.scene import Scene
 from .drawlist import GeometryPool
@@ -273,25 +273,28 @@ class ResolveView:
 
 
 def check_resolve_camera(names: tuple[str, ...], camera: Any, width: int, height: int
-                         ) -> None:
+                         ) -> CameraAxes | None:
     """ValueError now, before anything is drawn, when a resolve output asked for needs a
-    camera with ``view`` and ``projection`` (`camera_axes`) and ``camera`` has none."""
+    camera with ``view`` and ``projection`` (`camera_axes`) and ``camera`` has none; else
+    the camera's axes where an output needs them (for `resolve_view`), or None."""
     need = [n for n in names if n in NEED_CAMERA]
-    if need:
-        try:
-            camera_axes(camera, width, height)
-        except ValueError as exc:
-            raise ValueError(f"outputs {', '.join(need)}: {exc}") from None
+    if not need:
+        return None
+    try:
+        return camera_axes(camera, width, height)
+    except ValueError as exc:
+        raise ValueError(f"outputs {', '.join(need)}: {exc}") from None
 
 
 def resolve_view(pool: GeometryPool, scene: Scene, camera: Any, width: int, height: int,
-                 names: tuple[str, ...]) -> ResolveView:
-    """The `ResolveView` of ``camera`` for the resolve outputs ``names``."""
+                 names: tuple[str, ...], axes: CameraAxes | None = None) -> ResolveView:
+    """The `ResolveView` of ``camera`` for the resolve outputs ``names``; ``axes``: the
+    camera's `camera_axes` when already made (`check_resolve_camera`)."""
     model, _ = pool.models(scene.transforms())
     cam = np.zeros(16)
     view = proj = None
     if any(n in NEED_CAMERA for n in names):
-        view, proj, eye, fwd, ortho = camera_axes(camera, width, height)
+        view, proj, eye, fwd, ortho = axes or camera_axes(camera, width, height)
         cam[0:3], cam[3:6] = fwd, eye
         cam[6:15] = np.linalg.inv(view[:3, :3]).T.reshape(-1)
         cam[15] = 1.0 if ortho else 0.0
