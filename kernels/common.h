@@ -232,9 +232,10 @@ inline double mind(double a, double b) { return a <= b ? a : b; }
 
 /* Face r of the resolve and shading kernels' face table `rows` (FACE_ROW_WORDS words a
  * face, clraster.pipeline.resolving ResolveTables.face_rows): FACE_V its pool vertex k
- * (0..2), FACE_N component k of its unit object-space normal. */
-#define FACE_V(rows, r, k) ((rows)[FACE_ROW_WORDS * (r) + (k)])
-#define FACE_N(rows, r, k) as_float((rows)[FACE_ROW_WORDS * (r) + 3 + (k)])
+ * (0..2), FACE_N component k of its unit object-space normal (offsets in long: a table of
+ * over 2^28 faces). */
+#define FACE_V(rows, r, k) ((rows)[(long)FACE_ROW_WORDS * (r) + (k)])
+#define FACE_N(rows, r, k) as_float((rows)[(long)FACE_ROW_WORDS * (r) + 3 + (k)])
 
 /* Row r of M · [x y z 1]ᵀ for a row-major 4 × 4 matrix m (float or double), in the order
  * the NumPy twin sums (vertex.cl for triangles, lines.cl for line endpoints, user planes and

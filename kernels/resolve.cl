@@ -88,10 +88,10 @@ inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int 
         if (!(id >= lo && id < hi)) continue;
         int row = FACE_ROW(id);
         if (!vert) {
-            PREFETCH(face_rows + FACE_ROW_WORDS * row);   /* vertices and normal */
+            PREFETCH(face_rows + (long)FACE_ROW_WORDS * row);   /* vertices and normal */
             continue;
         }
-        __global const int *fv = face_rows + FACE_ROW_WORDS * row;
+        __global const int *fv = face_rows + (long)FACE_ROW_WORDS * row;
         if (want & RS_NEED_POINT) {
             PREFETCH(positions + 3 * fv[0]);
             PREFETCH(positions + 3 * fv[1]);
@@ -245,7 +245,7 @@ ALWAYS_INLINE bool resolve_lanes(
     int8 row = v + (int8)(mesh_fbase[inst_mesh[inst]] - lo);
     int8 ia, ib, ic;
 #define GATHER_FV(k)                                                                        \
-    { __global const int *f_ = face_rows + FACE_ROW_WORDS * row.s##k;                       \
+    { __global const int *f_ = face_rows + (long)FACE_ROW_WORDS * row.s##k;                 \
       ia.s##k = f_[0]; ib.s##k = f_[1]; ic.s##k = f_[2]; }
     GATHER_FV(0) GATHER_FV(1) GATHER_FV(2) GATHER_FV(3)
     GATHER_FV(4) GATHER_FV(5) GATHER_FV(6) GATHER_FV(7)

@@ -467,11 +467,11 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
  * record's id, flags and cover words. value_planes8 does value_planes' double operations
  * in the same order on each lane, so each record's bytes are those of make_piece. */
 typedef struct {
+    double as[SETUP_LANES];   /* first: read as one double8, 64-byte aligned */
     int slot[SETUP_LANES], pa[SETUP_LANES], pb[SETUP_LANES], pc[SETUP_LANES];
     int x0[SETUP_LANES], y0[SETUP_LANES], x1[SETUP_LANES], y1[SETUP_LANES];
     int x2[SETUP_LANES], y2[SETUP_LANES], px0[SETUP_LANES], py0[SETUP_LANES];
     int id[SETUP_LANES], flags[SETUP_LANES], cover[SETUP_LANES];
-    double as[SETUP_LANES];
     int n;   /* pieces waiting */
 } __attribute__((aligned(64))) ValueQueue;
 
@@ -504,8 +504,11 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
                                  double zo, __global Piece *pieces)
 {
     int n = q->n;
-    for (int k = n; k < SETUP_LANES; ++k) {   /* idle lanes read lane 0's corners */
+    for (int k = n; k < SETUP_LANES; ++k) {   /* idle lanes: lane 0's piece (never stored) */
         q->pa[k] = q->pa[0]; q->pb[k] = q->pb[0]; q->pc[k] = q->pc[0];
+        q->x0[k] = q->x0[0]; q->y0[k] = q->y0[0]; q->x1[k] = q->x1[0];
+        q->y1[k] = q->y1[0]; q->x2[k] = q->x2[0]; q->y2[k] = q->y2[0];
+        q->px0[k] = q->px0[0]; q->py0[k] = q->py0[0]; q->as[k] = q->as[0];
     }
     __global const double *m = mvps64 + 16 * inst, *zr = zrows + 4 * inst;
     double8 ax, ay, aw, ar, bx, by, bw, br, cx, cy, cw, cr;
@@ -552,12 +555,12 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
     *(float8 *)v[9] = TO_FLOAT8(aw / bw);
     *(float8 *)v[10] = TO_FLOAT8(aw / cw);
     *(float8 *)v[11] = TO_FLOAT8(MIND8(MIND8(z0, z1), z2));
-    for (int k = 0; k < n; ++k) {
-        __global float8 *d8 = (__global float8 *)&pieces[q->slot[k]];
-        d8[1] = (float8)(as_float(q->id[k]), as_float(q->flags[k]), v[0][k], v[1][k],
-                         v[2][k], v[3][k], v[4][k], v[5][k]);
-        d8[2] = (float8)(v[6][k], v[7][k], v[8][k], v[9][k], v[10][k], v[11][k],
-                         as_float(q->cover[k]), 0.0f);   /* pad 0 */
+    for (int k = 0; k < n; ++k) {   /* as int words: the bits, whatever they are */
+        __global int8 *d8 = (__global int8 *)&pieces[q->slot[k]];
+        d8[1] = (int8)(q->id[k], q->flags[k], as_int(v[0][k]), as_int(v[1][k]),
+                       as_int(v[2][k]), as_int(v[3][k]), as_int(v[4][k]), as_int(v[5][k]));
+        d8[2] = (int8)(as_int(v[6][k]), as_int(v[7][k]), as_int(v[8][k]), as_int(v[9][k]),
+                       as_int(v[10][k]), as_int(v[11][k]), q->cover[k], 0);   /* pad 0 */
     }
     q->n = 0;
 }

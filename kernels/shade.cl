@@ -179,7 +179,7 @@ inline void prefetch_rows(__global const int *ids, int a, int b, int lo, int hi,
             /* what the lanes read (smooth: the face's row of vertex normals; no face
              * normal), or the per-pixel path (colour sources: the face's vertices) */
             if (!(flags & SH_SMOOTH) || (flags & SH_SOURCES))
-                PREFETCH(face_rows + FACE_ROW_WORDS * row);   /* normal, vertices */
+                PREFETCH(face_rows + (long)FACE_ROW_WORDS * row);   /* normal, vertices */
             else
                 PREFETCH(face_vn + FACE_VN_ROW * row);
         }
@@ -193,7 +193,7 @@ inline void prefetch_verts(__global const int *ids, int a, int b, int lo, int hi
     for (int q = a; q < b; ++q) {
         int id = ids[q];
         if (id >= lo && id < hi) {
-            __global const int *fv = face_rows + FACE_ROW_WORDS * (id + off);
+            __global const int *fv = face_rows + (long)FACE_ROW_WORDS * (id + off);
             PREFETCH(vnormals + 3 * fv[0]);
             PREFETCH(vnormals + 3 * fv[1]);
             PREFETCH(vnormals + 3 * fv[2]);
