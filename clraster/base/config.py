@@ -176,8 +176,8 @@ class RasterConfig:
             ``batch_triangles`` triangles: the second renderer holds its own pass buffers
             and copy of the scene's geometry on the device, as much again as the first's),
             and no occlusion culling (whose history is the view drawn just before). Never
-            changes a frame. Default 2: +13–19% views/s on the dragon's 640 × 480 datasets job
-            (bench/README.md, "Views in flight").
+            changes a frame. Default 2: +10% views/s on the dragon's 640 × 480 datasets
+            job (bench/README.md, "Views in flight").
     """
 
     tile_log2: int = 4
