@@ -1,13 +1,15 @@
-"""Views per second of many views of one mesh: a plain loop of ``Renderer.render`` calls vs
-``Renderer.render_many``, measured in the same run.
+"""Views per second of many views of one mesh: a plain loop of ``Renderer.render`` calls,
+``Renderer.render_many`` one view at a time (``RasterConfig(views_in_flight=1)``) and
+``render_many`` with two views in flight (the default), measured in the same run.
 
     python bench/views.py ../shared/meshes/stanford_dragon_vrip.ply --views 1000 --size 640x480
 
 The cameras orbit the mesh (framing its bounding box, varying height). Each method uses its
-own Renderer, warmed up once on the first camera (kernel build, buffers, the mesh's clusters
-and geometry pool), so the timed part is the views only. The two are run ``--repeat`` times
-interleaved in ABBA order (loop, many, many, loop, ...), so machine noise and drift hit both
-alike; the medians are reported. The frames are checked equal (triangle ids) on the first camera.
+own Renderer, warmed up on the first cameras (kernel build, buffers, the mesh's clusters and
+geometry pool, the second renderer of the views in flight), so the timed part is the views
+only. The methods are run ``--repeat`` times, each round in another order (A B C, C B A,
+...), so machine noise and drift hit all alike; the medians are reported. The frames are
+checked equal (triangle ids) on the first cameras.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import time
 
 import numpy as np
 
-from clraster import Camera, Mesh, Renderer
+from clraster import Camera, Mesh, RasterConfig, Renderer
 
 
 def orbit(mesh: Mesh, n: int, width: int, height: int) -> list[Camera]:
@@ -45,34 +47,39 @@ def main(argv: list[str] | None = None) -> int:
     w, h = (int(v) for v in a.size.lower().split("x"))
     mesh = Mesh.load(a.mesh)
     cams = orbit(mesh, a.views, w, h)
-    r_loop, r_many = Renderer(w, h), Renderer(w, h)
-    f0 = r_loop.render(mesh, cams[0], cull=a.cull)
-    f1 = next(iter(r_many.render_many(mesh, cams[:1], cull=a.cull)))
-    assert np.array_equal(f0.triangle_id, f1.triangle_id)
+    r_loop, r_one = Renderer(w, h), Renderer(w, h, config=RasterConfig(views_in_flight=1))
+    r_two = Renderer(w, h)
+    ids = [r_loop.render(mesh, c, cull=a.cull).triangle_id for c in cams[:3]]
+    for r in (r_one, r_two):
+        for k, f in enumerate(r.render_many(mesh, cams[:3], cull=a.cull)):
+            assert np.array_equal(f.triangle_id, ids[k])
 
     def loop() -> None:
         for cam in cams:
             r_loop.render(mesh, cam, cull=a.cull)
 
-    def many() -> None:
-        for _ in r_many.render_many(mesh, cams, cull=a.cull):
+    def many(r: Renderer) -> None:
+        for _ in r.render_many(mesh, cams, cull=a.cull):
             pass
 
-    rates: dict[str, list[float]] = {"loop of render": [], "render_many": []}
+    methods = [("loop of render", loop), ("render_many, 1 in flight", lambda: many(r_one)),
+               ("render_many, 2 in flight", lambda: many(r_two))]
+    rates: dict[str, list[float]] = {name: [] for name, _ in methods}
     for rep in range(a.repeat):
-        # ABBA order: on a machine whose load drifts, the method run second in every pair
-        # would gain (18% on a first try with the same order throughout)
-        pair = [("loop of render", loop), ("render_many", many)]
-        for name, fn in pair if rep % 2 == 0 else pair[::-1]:
+        # each round in another order: on a machine whose load drifts, the method run last
+        # in every round would gain (18% on a first try with the same order throughout)
+        for name, fn in methods if rep % 2 == 0 else methods[::-1]:
             t0 = time.perf_counter()
             fn()
             rate = len(cams) / (time.perf_counter() - t0)
             rates[name].append(rate)
-            print(f"run {rep + 1}: {name:<15} {rate:7.2f} views/s", flush=True)
+            print(f"run {rep + 1}: {name:<26} {rate:7.2f} views/s", flush=True)
     med = {k: statistics.median(v) for k, v in rates.items()}
+    base = med["loop of render"]
     print(f"{a.views} views of {a.mesh} ({mesh.n_faces:,} triangles) at {w}x{h}, median of "
-          f"{a.repeat}: loop of render {med['loop of render']:.2f} views/s, render_many "
-          f"{med['render_many']:.2f} views/s ({med['render_many'] / med['loop of render']:.2f}x)")
+          f"{a.repeat}:")
+    for name, rate in med.items():
+        print(f"  {name:<26} {rate:7.2f} views/s ({rate / base:.2f}x the loop)")
     return 0
 
 
