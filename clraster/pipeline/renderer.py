@@ -105,7 +105,9 @@ class Renderer:
     A single draw (cluster) whose bin list alone exceeds E is still drawn, in a pass of its
     own; the buffers it grew are released after the frame, so memory returns to the bound.
     Frame buffers that cannot fit the device fail here, in the constructor, before
-    anything is allocated.
+    anything is allocated. Many views of a target drawn in one pass (`render_many`, the
+    batch paths) are drawn two at a time by default with a second renderer kept with this
+    one (`view_partner`): as much again of the per-pass, per-tile and per-scene memory.
 
     Threads may share a Renderer: its frames are serialized by a lock (one per
     Renderer; use one Renderer per thread for parallel frames). It works only in the process
