@@ -159,6 +159,28 @@ def test_an_error_in_render_lands_at_its_view(mesh):
     assert not workers_alive()
 
 
+def test_a_partner_out_of_memory_hands_its_views_back(mesh):
+    """The second renderer failing to allocate (MemoryError) costs nothing but speed: its
+    view is drawn by the first renderer, the rest one at a time, the partner let go."""
+    cams = path_cameras(6)
+    r = SlowRenderer(W, H)   # (busy: the partner surely takes a view)
+    partner = r.view_partner(mesh, {})
+    calls = []
+
+    def no_memory(*args, **kwargs):
+        calls.append(1)
+        raise MemoryError("a partner's buffer")
+
+    partner.render = no_memory
+    got = list(r.render_many(mesh, cams))
+    assert len(got) == len(cams) and calls
+    for k, f in enumerate(got):
+        assert f.source() is r
+        assert_frames_equal(f, one_at_a_time().render(mesh, cams[k]), f"view {k}")
+    assert r._partner is None and r.view_partner(mesh, {}) is None
+    assert not workers_alive()
+
+
 def test_exit_with_a_generator_alive_is_clean(tmp_path):
     """A script that leaves a half-read render_many behind exits normally: the workers
     are stopped and joined before the interpreter goes (a worker inside OpenCL then

@@ -142,6 +142,7 @@ class Renderer:
         # the resolve and shading stages, built on first use (shared with `resized` ones)
         self._outputs = _OutputStages(self.context, self.config)
         self._partner: Renderer | None = None   # `view_partner`'s, made on first use
+        self._partner_failed = False   # it ran out of memory once: views one at a time
 
     def resized(self, width: int, height: int, *, share_history: bool = True) -> Renderer:
         """A renderer of ``width`` × ``height`` on this one's device state: its queue, stage
@@ -181,7 +182,7 @@ class Renderer:
         renderer's. It holds its own pass buffers and copy of the scene's geometry on the
         device (a one-pass target's: within the pass budget of the class docstring)."""
         if (self.config.views_in_flight < 2 or render_kwargs.get("occlusion")
-                or target.n_faces > self.config.batch_triangles):
+                or target.n_faces > self.config.batch_triangles or self._partner_failed):
             return None
         with self._lock:   # (threads sharing this renderer make one partner)
             if self._partner is None:
@@ -191,6 +192,13 @@ class Renderer:
                 p._plans = self._plans
                 self._partner = p
             return self._partner
+
+    def drop_view_partner(self) -> None:
+        """Let go of the `view_partner` (its buffers go with it) and draw many views one
+        at a time from now on: `clraster.views.frames` calls this when the partner runs out
+        of memory, and renders that view with this renderer instead."""
+        with self._lock:
+            self._partner, self._partner_failed = None, True
 
     def render(self, target: Target, camera: CameraLike, *, cull: str = "back",
                frustum: bool = True, cones: bool = True, occlusion: bool = False,

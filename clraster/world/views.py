@@ -514,9 +514,23 @@ class _InFlight:
             if got is None:
                 return
             n, index, cam = got
+            alone = False
             try:
-                out: tuple[int | None, Any] = (index, _render_view(
-                    renderer, self.target, index, cam, self.kwargs))
+                try:
+                    out: tuple[int | None, Any] = (index, _render_view(
+                        renderer, self.target, index, cam, self.kwargs))
+                except Exception as exc:
+                    if renderer is self.renderers[0] or not _out_of_memory(exc):
+                        raise
+                    # the second renderer could not allocate its buffers: this view and the
+                    # rest go to the first one (its lock serializes the two), which lets go
+                    # of it (`drop_view_partner`)
+                    drop = getattr(self.renderers[0], "drop_view_partner", None)
+                    if drop is not None:
+                        drop()
+                    alone = True
+                    out = (index, _render_view(self.renderers[0], self.target, index, cam,
+                                               self.kwargs))
             except BaseException as exc:   # raised in the caller, at view n
                 out = (None, exc)
                 with self.lock:   # no views after n are taken: the caller stops at n
@@ -526,6 +540,8 @@ class _InFlight:
             with self.lock:
                 self.done[n] = out
                 self.ready.notify_all()
+            if alone:
+                return
 
     def _stop(self, join: bool) -> None:
         """No more views: wake the workers (waiting for a slot or for view 0); with
@@ -578,6 +594,13 @@ class _InFlight:
             self._stop(join=not interrupted)
             if not interrupted:
                 _LIVE_RUNS.discard(self)
+
+
+def _out_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` says memory ran out: Python's MemoryError (host memory, clraster's
+    per-buffer limit) or pyopencl's (a device allocation), told by name (this module does
+    not import OpenCL)."""
+    return isinstance(exc, MemoryError) or type(exc).__name__ == "MemoryError"
 
 
 def _stop_all_runs() -> None:
