@@ -495,6 +495,45 @@ typedef struct {
 } while (0)
 #define LOAD_Q8(a) (*(int8 *)(a))
 
+/* The 8 x 8 int matrix of vectors a[0..7] transposed into t[0..7] (t[k].sj = a[j].sk): by
+ * shuffles (unpack the pairs, then their 64-bit halves, then the 128-bit halves: 24 where
+ * lane-by-lane rows took ~130 moves); fallback: lane by lane. */
+#ifdef CLRASTER_NO_SHUFFLEVECTOR
+#define TRANSPOSE8_I(a, t)                                                                 \
+    for (int k_ = 0; k_ < 8; ++k_) {                                                       \
+        int e_[8];                                                                         \
+        for (int j_ = 0; j_ < 8; ++j_) e_[j_] = ((int *)&(a)[j_])[k_];                     \
+        (t)[k_] = (int8)(e_[0], e_[1], e_[2], e_[3], e_[4], e_[5], e_[6], e_[7]);          \
+    }
+#else
+#define TRANSPOSE8_I(a, t) {                                                               \
+    int8 u0_ = __builtin_shufflevector((a)[0], (a)[1], 0, 8, 1, 9, 4, 12, 5, 13);          \
+    int8 u1_ = __builtin_shufflevector((a)[0], (a)[1], 2, 10, 3, 11, 6, 14, 7, 15);        \
+    int8 u2_ = __builtin_shufflevector((a)[2], (a)[3], 0, 8, 1, 9, 4, 12, 5, 13);          \
+    int8 u3_ = __builtin_shufflevector((a)[2], (a)[3], 2, 10, 3, 11, 6, 14, 7, 15);        \
+    int8 u4_ = __builtin_shufflevector((a)[4], (a)[5], 0, 8, 1, 9, 4, 12, 5, 13);          \
+    int8 u5_ = __builtin_shufflevector((a)[4], (a)[5], 2, 10, 3, 11, 6, 14, 7, 15);        \
+    int8 u6_ = __builtin_shufflevector((a)[6], (a)[7], 0, 8, 1, 9, 4, 12, 5, 13);          \
+    int8 u7_ = __builtin_shufflevector((a)[6], (a)[7], 2, 10, 3, 11, 6, 14, 7, 15);        \
+    int8 v0_ = __builtin_shufflevector(u0_, u2_, 0, 1, 8, 9, 4, 5, 12, 13);                \
+    int8 v1_ = __builtin_shufflevector(u0_, u2_, 2, 3, 10, 11, 6, 7, 14, 15);              \
+    int8 v2_ = __builtin_shufflevector(u1_, u3_, 0, 1, 8, 9, 4, 5, 12, 13);                \
+    int8 v3_ = __builtin_shufflevector(u1_, u3_, 2, 3, 10, 11, 6, 7, 14, 15);              \
+    int8 v4_ = __builtin_shufflevector(u4_, u6_, 0, 1, 8, 9, 4, 5, 12, 13);                \
+    int8 v5_ = __builtin_shufflevector(u4_, u6_, 2, 3, 10, 11, 6, 7, 14, 15);              \
+    int8 v6_ = __builtin_shufflevector(u5_, u7_, 0, 1, 8, 9, 4, 5, 12, 13);                \
+    int8 v7_ = __builtin_shufflevector(u5_, u7_, 2, 3, 10, 11, 6, 7, 14, 15);              \
+    (t)[0] = __builtin_shufflevector(v0_, v4_, 0, 1, 2, 3, 8, 9, 10, 11);                  \
+    (t)[1] = __builtin_shufflevector(v1_, v5_, 0, 1, 2, 3, 8, 9, 10, 11);                  \
+    (t)[2] = __builtin_shufflevector(v2_, v6_, 0, 1, 2, 3, 8, 9, 10, 11);                  \
+    (t)[3] = __builtin_shufflevector(v3_, v7_, 0, 1, 2, 3, 8, 9, 10, 11);                  \
+    (t)[4] = __builtin_shufflevector(v0_, v4_, 4, 5, 6, 7, 12, 13, 14, 15);                \
+    (t)[5] = __builtin_shufflevector(v1_, v5_, 4, 5, 6, 7, 12, 13, 14, 15);                \
+    (t)[6] = __builtin_shufflevector(v2_, v6_, 4, 5, 6, 7, 12, 13, 14, 15);                \
+    (t)[7] = __builtin_shufflevector(v3_, v7_, 4, 5, 6, 7, 12, 13, 14, 15);                \
+}
+#endif
+
 /* The value planes of the q->n (1..SETUP_LANES) queued pieces of instance inst, in lanes,
  * and the rest of their records (id, flags, values, cover, pad: the record's last 64
  * bytes); the queue is emptied. */
@@ -542,25 +581,32 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
     double8 l2x = -(y1 - y0) * inv, l2y = (x1 - x0) * inv;
     double8 dz10 = z1 - z0, dz20 = z2 - z0;
     /* the record's words 10..21 (z0 .. zlo), lane by lane */
-    float v[12][SETUP_LANES] __attribute__((aligned(32)));
-    *(float8 *)v[0] = TO_FLOAT8((z0 + l1 * dz10) + l2 * dz20);
-    *(float8 *)v[1] = TO_FLOAT8(l1x * dz10 + l2x * dz20);
-    *(float8 *)v[2] = TO_FLOAT8(l1y * dz10 + l2y * dz20);
-    *(float8 *)v[3] = TO_FLOAT8(l1);
-    *(float8 *)v[4] = TO_FLOAT8(l1x);
-    *(float8 *)v[5] = TO_FLOAT8(l1y);
-    *(float8 *)v[6] = TO_FLOAT8(l2);
-    *(float8 *)v[7] = TO_FLOAT8(l2x);
-    *(float8 *)v[8] = TO_FLOAT8(l2y);
-    *(float8 *)v[9] = TO_FLOAT8(aw / bw);
-    *(float8 *)v[10] = TO_FLOAT8(aw / cw);
-    *(float8 *)v[11] = TO_FLOAT8(MIND8(MIND8(z0, z1), z2));
-    for (int k = 0; k < n; ++k) {   /* as int words: the bits, whatever they are */
+    int8 w[16];   /* words 8..23 of the records (id .. pad), a vector per word */
+    w[0] = LOAD_Q8(q->id);
+    w[1] = LOAD_Q8(q->flags);
+    w[2] = as_int8(TO_FLOAT8((z0 + l1 * dz10) + l2 * dz20));
+    w[3] = as_int8(TO_FLOAT8(l1x * dz10 + l2x * dz20));
+    w[4] = as_int8(TO_FLOAT8(l1y * dz10 + l2y * dz20));
+    w[5] = as_int8(TO_FLOAT8(l1));
+    w[6] = as_int8(TO_FLOAT8(l1x));
+    w[7] = as_int8(TO_FLOAT8(l1y));
+    w[8] = as_int8(TO_FLOAT8(l2));
+    w[9] = as_int8(TO_FLOAT8(l2x));
+    w[10] = as_int8(TO_FLOAT8(l2y));
+    w[11] = as_int8(TO_FLOAT8(aw / bw));
+    w[12] = as_int8(TO_FLOAT8(aw / cw));
+    w[13] = as_int8(TO_FLOAT8(MIND8(MIND8(z0, z1), z2)));
+    w[14] = LOAD_Q8(q->cover);
+    w[15] = (int8)0;   /* pad */
+    /* the records' last 64 bytes, a row per lane (as int words: the bits, whatever they
+     * are): two 8 x 8 transposes, then two stores per piece */
+    int8 r[16];
+    TRANSPOSE8_I(w, r)
+    TRANSPOSE8_I(w + 8, r + 8)
+    for (int k = 0; k < n; ++k) {
         __global int8 *d8 = (__global int8 *)&pieces[q->slot[k]];
-        d8[1] = (int8)(q->id[k], q->flags[k], as_int(v[0][k]), as_int(v[1][k]),
-                       as_int(v[2][k]), as_int(v[3][k]), as_int(v[4][k]), as_int(v[5][k]));
-        d8[2] = (int8)(as_int(v[6][k]), as_int(v[7][k]), as_int(v[8][k]), as_int(v[9][k]),
-                       as_int(v[10][k]), as_int(v[11][k]), q->cover[k], 0);   /* pad 0 */
+        d8[1] = r[k];
+        d8[2] = r[8 + k];
     }
     q->n = 0;
 }
