@@ -666,16 +666,18 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
 }
 
 /* The fates of local triangles lt0 .. lt0 + n - 1 (n <= SETUP_LANES) of draw dr (its
- * cluster's triangles tv, pool vertices from pool0) in lanes: the decided ones' status and
- * tile word stored; returns the lanes still open (bit j: triangle lt0 + j, for
- * raster_piece), their records' lines and corner positions asked for. */
+ * cluster's triangles tv, pool vertices from pool0; codes = 0: every outcode of the draw is
+ * 0) in lanes: the decided ones' status and tile word stored; returns the lanes still open
+ * (bit j: triangle lt0 + j, for raster_piece), their records' lines and corner positions
+ * asked for. */
 ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *tv,
                                __global const ushort *outcode, __global const uchar *ucode,
                                int n_user, uint uclip, __global const float4 *clip,
                                __global const int2 *win, int width, int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
                                __global int *tile1, __global int *any_clipped,
-                               __global const float *pos, int pool0, uchar *known)
+                               __global const float *pos, int pool0, uchar *known,
+                               int codes)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
@@ -689,9 +691,13 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     int8 i1 = dr.vert_base + GATHER8(int8, TV_Y, lt);
     int8 i2 = dr.vert_base + GATHER8(int8, TV_Z, lt);
 #define OUTC(i) (int)outcode[i]
-    int8 o0 = GATHER8(int8, OUTC, i0), o1 = GATHER8(int8, OUTC, i1);
-    int8 o2 = GATHER8(int8, OUTC, i2);
-    int8 o_or = o0 | o1 | o2, o_and = o0 & o1 & o2;
+    int8 o_or = (int8)0, o_and = (int8)0;   /* (all 0 where the draw's outcodes are) */
+    if (codes) {
+        int8 o0 = GATHER8(int8, OUTC, i0), o1 = GATHER8(int8, OUTC, i1);
+        int8 o2 = GATHER8(int8, OUTC, i2);
+        o_or = o0 | o1 | o2;
+        o_and = o0 & o1 & o2;
+    }
     /* user clip planes: all three vertices outside one → rejected; any outside one of the
      * clipping planes (uclip bits; the others, a polygon window's, only reject) → clipped */
     int8 u_or = (int8)0, u_and = (int8)0;
@@ -827,6 +833,12 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     __global const uchar4 *tv = local_tris + ci.x;
     int nt = imin(ci.y, CLUSTER_MAX);   /* (the host refuses larger clusters) */
     int nb = (nt + SETUP_LANES - 1) / SETUP_LANES;
+    /* whether any vertex of the draw has an outcode bit: most draws of a framed mesh have
+     * none (inside the frustum by a margin: vertex.cl sets only OC_INVALID there), and their
+     * batches then skip the outcodes' gathers (one pass over the draw's contiguous codes) */
+    uint any_code = 0;
+    for (int v = 0; v < imin(ci.w, CLUSTER_MAX); ++v) any_code |= outcode[dr.vert_base + v];
+    int codes = any_code != 0;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
     uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
     ValueQueue q;   /* pieces waiting for their value planes */
@@ -839,7 +851,7 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
             int lt0 = SETUP_LANES * h;
             open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, outcode, ucode,
                                   n_user, uclip, clip, win, width, height, cull, pieces,
-                                  status, tile1, any_clipped, pos, ci.z, known);
+                                  status, tile1, any_clipped, pos, ci.z, known, codes);
         }
         if (h < SETUP_LAG) continue;
         int lt0 = SETUP_LANES * (h - SETUP_LAG);
