@@ -140,10 +140,11 @@
 #else
 #define CONVERT_VEC(v, T) __builtin_convertvector(v, T)
 #endif
-/* 8 lanes converted to float or double (from double, float or int lanes): CONVERT_VEC, or
- * lane by lane where that falls back to convert_T (the pip PoCL 3.0 built setup.cl with
- * convert_float8(double8), a library call taking an 8-lane 64-bit vector, into a program
- * without its kernels; see MASK_INT8). */
+/* 8 lanes converted to float or double (from double, float or int lanes; setup's and the
+ * resolve's lanes): clang's builtin, or lane by lane where that falls back (the pip PoCL
+ * 3.0 built setup.cl with convert_float8(double8), a library call taking an 8-lane 64-bit
+ * vector, and resolve.cl with convert_double8 / convert_float8, into programs without
+ * their kernels; see MASK_INT8). */
 #ifdef CLRASTER_NO_CONVERTVECTOR
 #define LANES8_AS(T, v) ((T##8)((T)(v).s0, (T)(v).s1, (T)(v).s2, (T)(v).s3, (T)(v).s4,     \
                                 (T)(v).s5, (T)(v).s6, (T)(v).s7))

@@ -122,25 +122,17 @@ inline void resolve_prefetch(__global const int *ids, int a, int b, int lo, int 
  * 3.0 cached programs with select on 8-lane 64-bit vectors without their kernels; Oclgrind
  * 21.10 computes ?: and ! on integer vector masks wrong). */
 #ifdef CLRASTER_NO_EXT_VECTOR_TYPE
-/* (lane by lane: PoCL 3.0 cached the program built with convert_double8, convert_float8
- * and vstore8 here without its kernels) */
-#define LANES8(f, v) f((v).s0), f((v).s1), f((v).s2), f((v).s3), f((v).s4), f((v).s5),       \
-                     f((v).s6), f((v).s7)
-#define AS_DOUBLE(x) ((double)(x))
-#define AS_FLOAT(x) ((float)(x))
+/* (lane by lane: PoCL 3.0 cached the program built with vstore8 here without its kernels;
+ * the conversions are common.h's TO_DOUBLE8 / TO_FLOAT8) */
 #define STORE_F8(v, p)                                                                      \
     { float8 s_ = (v); __global float *d_ = (p);                                           \
       d_[0] = s_.s0; d_[1] = s_.s1; d_[2] = s_.s2; d_[3] = s_.s3;                           \
       d_[4] = s_.s4; d_[5] = s_.s5; d_[6] = s_.s6; d_[7] = s_.s7; }
 #define STORE_C8(v, p)                                                                      \
     for (int c_ = 0; c_ < 8; ++c_) (p)[c_] = (v).s0
-#define TO_D8(v) ((double8)(LANES8(AS_DOUBLE, v)))
-#define TO_F8(v) ((float8)(LANES8(AS_FLOAT, v)))
 #else
 #define STORE_F8(v, p) (*(__global float8u *)(p) = (v))
 #define STORE_C8(v, p) (*(__global uchar8u *)(p) = (v))
-#define TO_D8(v) __builtin_convertvector((v), double8)
-#define TO_F8(v) __builtin_convertvector((v), float8)
 #endif
 
 /* lane k of x, y, z (double8) from the float triple at t + 3 · idx.sk */
@@ -192,7 +184,7 @@ ALWAYS_INLINE void mat3_8(__global const double *m, double8 *x, double8 *y, doub
 ALWAYS_INLINE void store_n8(__global float *p3, const double8 *x, const double8 *y,
                             const double8 *z)
 {
-    float8 a = TO_F8(*x), b = TO_F8(*y), c = TO_F8(*z);
+    float8 a = TO_FLOAT8(*x), b = TO_FLOAT8(*y), c = TO_FLOAT8(*z);
     STORE_F8(((float8)(a.s0, b.s0, c.s0, a.s1, b.s1, c.s1, a.s2, b.s2)), p3);
     STORE_F8(((float8)(c.s2, a.s3, b.s3, c.s3, a.s4, b.s4, c.s4, a.s5)), p3 + 8);
     STORE_F8(((float8)(b.s5, c.s5, a.s6, b.s6, c.s6, a.s7, b.s7, c.s7)), p3 + 16);
@@ -217,7 +209,9 @@ ALWAYS_INLINE void normals8(__global const double *nm, __global const double *ca
 {
     mat3_8(nm, x, y, z);
     unit8(x, y, z);
-    *x = TO_D8(TO_F8(*x)); *y = TO_D8(TO_F8(*y)); *z = TO_D8(TO_F8(*z));   /* round32 */
+    /* round32 */
+    *x = TO_DOUBLE8(TO_FLOAT8(*x)); *y = TO_DOUBLE8(TO_FLOAT8(*y));
+    *z = TO_DOUBLE8(TO_FLOAT8(*z));
     if (world) store_n8(world, x, y, z);
     if (camera) {
         mat3_8(cam6, x, y, z);
@@ -255,9 +249,9 @@ ALWAYS_INLINE bool resolve_lanes(
         /* 24 consecutive floats: three loads, deinterleaved */
         float8 x0 = LOAD_F8(bary + 3 * p), x1 = LOAD_F8(bary + 3 * p + 8);
         float8 x2 = LOAD_F8(bary + 3 * p + 16);
-        b0 = TO_D8(((float8)(x0.s036, x1.s147, x2.s25)));
-        b1 = TO_D8(((float8)(x0.s147, x1.s25, x2.s036)));
-        b2 = TO_D8(((float8)(x0.s25, x1.s036, x2.s147)));
+        b0 = TO_DOUBLE8(((float8)(x0.s036, x1.s147, x2.s25)));
+        b1 = TO_DOUBLE8(((float8)(x0.s147, x1.s25, x2.s036)));
+        b2 = TO_DOUBLE8(((float8)(x0.s25, x1.s036, x2.s147)));
     }
     if (want & RS_MASK) STORE_C8((uchar8)(1), mask + p);
     if (want & RS_NEED_POINT) {
@@ -268,11 +262,11 @@ ALWAYS_INLINE bool resolve_lanes(
         double8 wz = MAT_ROW(m, 2, qx, qy, qz);
         double8 ox = wx - cam[3], oy = wy - cam[4], oz = wz - cam[5];
         double8 along = (cam[0] * ox + cam[1] * oy) + cam[2] * oz;
-        if (want & RS_LINEAR) STORE_F8(TO_F8(along), lin + p);
+        if (want & RS_LINEAR) STORE_F8(TO_FLOAT8(along), lin + p);
         if (want & RS_DISTANCE) {
             double8 d = along;
             if (cam[15] == 0.0) SQRT8_INTO(d, (ox * ox + oy * oy) + oz * oz);
-            STORE_F8(TO_F8(d), dist + p);
+            STORE_F8(TO_FLOAT8(d), dist + p);
         }
         if (want & RS_POINTS) {
             __global double *o = pts + 3 * p;

@@ -419,10 +419,11 @@ inline void user_dists(__global const float *pos, __global const int4 *clusters,
  * vector lanes, branch-free, in the scalar path's order (outcodes, facing, clipping, w,
  * then make_piece's area, box and 2 x 2 test for triangles under SMALL_EXTENT sub-pixels
  * wide and high, where every product fits in 32 bits); only the triangles still open after
- * that (a sample found, or a larger box) go through the scalar make_piece (raster_piece),
- * one after the other, SETUP_LAG batches later. Same statuses, records and tile words as
- * the scalar path: a lane test is the scalar test on the same integers and doubles
- * (FP_CONTRACT is off). */
+ * that (a sample found, or a larger box) go on, SETUP_LAG batches later: make_piece's
+ * coverage one after the other (raster_piece: piece_cover), then their value planes
+ * SETUP_LANES pieces at a time in double lanes (value_planes8). Same statuses, records and
+ * tile words as the scalar make_piece: a lane test is the scalar test on the same integers
+ * and doubles (FP_CONTRACT is off). */
 
 /* A lane's box is tested in lanes when the triangle spans fewer than this many sub-pixels
  * in x and in y: its edge products stay under 2^21 (int), and its box holds at most 4 x 4
@@ -721,7 +722,7 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
 #define CX(i) clip[i].x
 #define CY(i) clip[i].y
 #define CW(i) clip[i].w
-#define CLIP_D8(E, ix) CONVERT_VEC(GATHER8(float8, E, ix), double8)
+#define CLIP_D8(E, ix) TO_DOUBLE8(GATHER8(float8, E, ix))
     double8 ax = CLIP_D8(CX, i0), ay = CLIP_D8(CY, i0), aw = CLIP_D8(CW, i0);
     double8 bx = CLIP_D8(CX, i1), by = CLIP_D8(CY, i1), bw = CLIP_D8(CW, i1);
     double8 cx_ = CLIP_D8(CX, i2), cy_ = CLIP_D8(CY, i2), cw_ = CLIP_D8(CW, i2);
