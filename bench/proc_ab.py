@@ -16,7 +16,8 @@ to other jobs on a shared machine) and the median device time per stage; B/A rat
 medians; and whether the last frames' ids agree. A revision may be a git revision,
 WORKTREE (the checkout) or a folder holding a tree. Scenes: spot, bunny, armadillo, lucy,
 dragon202k, dragon (framed as the harness does), empty (spot behind the camera), plant1m,
-plant5m, plant10m (first person, occlusion culling; ":off" no object culling).
+plant5m, plant10m (first person, occlusion culling; ":off" no object culling), and the
+harness's fill scenes quad, quad@away (its empty frame), spot@close, bunny@close.
 ``--evict MB``: before each timed frame the worker reads and writes an MB-megabyte array,
 so the frame starts with cold caches and TLBs, as in the benchmark harness (where a NumPy
 twin frame and an llvmpipe frame run between two clraster frames).
@@ -63,6 +64,12 @@ def scene(name):
         elif name == "empty":   # spot behind the camera: nothing in view
             t = Mesh.load(M + "spot.ply")
             cam = Camera.look_at(eye=(0, 0, 10), target=(0, 0, 20), up=(0, 1, 0))
+        elif name in ("quad", "quad@away") or name.endswith("@close"):
+            # the harness's fill scenes (clraster.bench.spec)
+            from clraster.bench.spec import close_camera, quad_mesh
+            base = name.split("@")[0]
+            t = quad_mesh() if base == "quad" else Mesh.load(M + FILES[base])
+            cam = close_camera(*t.bounds(), W, H, away=name.endswith("@away"))
         else:
             t = Mesh.load(M + FILES[name])
             cam = Camera.framing(*t.bounds(), aspect=W / H)

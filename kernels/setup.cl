@@ -677,8 +677,8 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
                                __global const int2 *win, int width, int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
                                __global int *tile1, __global int *any_clipped,
-                               __global const float *pos, int pool0, uchar *known,
-                               int codes)
+                               __global int *clip_count, __global const float *pos,
+                               int pool0, uchar *known, int codes)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
@@ -736,7 +736,17 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     /* the host skips the clipper's count and scan when no triangle needs it; its pieces
      * are counted by setup_count_clipped (the clipper's polygon arrays inlined here made
      * every work-item pay for them) */
-    if (any8(clipped)) atomic_or(any_clipped, 1);
+    if (any8(clipped)) {
+        atomic_or(any_clipped, 1);
+        /* no pieces until setup_count_clipped counts them: a pass the host enqueued
+         * binning for without that count (every draw DRAW_INSIDE or DRAW_NO_CLIP, which
+         * the host's margins make this branch never see) bins none of this triangle, and
+         * the host raises on the flag, rather than binning from unwritten counts */
+        int c_[8] __attribute__((aligned(32)));
+        *(int8 *)c_ = clipped;
+        for (int j = 0; j < n; ++j)
+            if (c_[j]) clip_count[dr.tri_base + lt0 + j] = 0;
+    }
     DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
     /* a mesh's back faces come in runs (a cluster's triangles are neighbours): a batch
      * with no lane left open skips the rest */
@@ -823,7 +833,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
                               const int reversed, __global Piece *restrict pieces,
                               __global uchar *restrict status,
                               const int tiles_x, __global int *restrict tile1,
-                              __global int *restrict any_clipped)
+                              __global int *restrict any_clipped,
+                              __global int *restrict clip_count)
 {
     DEPTH_MODE(reversed);
     /* one work-item per draw (work-groups of one): its triangles in batches of SETUP_LANES */
@@ -852,7 +863,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
             int lt0 = SETUP_LANES * h;
             open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, outcode, ucode,
                                   n_user, uclip, clip, win, width, height, cull, pieces,
-                                  status, tile1, any_clipped, pos, ci.z, known, codes);
+                                  status, tile1, any_clipped, clip_count, pos, ci.z, known,
+                                  codes);
         }
         if (h < SETUP_LAG) continue;
         int lt0 = SETUP_LANES * (h - SETUP_LAG);

@@ -8,17 +8,21 @@ does not wait for setup's clipped flag at all (`GeometryBuffers.may_clip`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pyopencl as cl
 import pytest
 from conftest import MatrixCamera, assert_frames_equal
 from random_scenes import Lens, random_soup, random_view, to_world
 
-from clraster import Camera, Mesh, RasterConfig, Renderer
+from clraster import Camera, Mesh, RasterConfig, Renderer, Scene
 from clraster.pipeline import device
 from clraster.pipeline.stages import _buffers
 from clraster.pipeline.stages._buffers import GrowBuffer
 from clraster.world.generators import plant, plant_inside_camera
+
+MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 
 
 def _context(shared: bool) -> cl.Context:
@@ -185,6 +189,106 @@ def test_setup_waits_for_the_clip_flag_exactly_when_a_triangle_can_be_clipped():
     assert may and n > 0
     may, n = clipped(framed, clip_planes=[(1.0, 0.0, 0.0, 0.1)])   # keeps x >= -0.1
     assert may and n > 0
+
+
+def _close_views(rng: np.random.Generator, mesh: Mesh, n: int) -> list[Camera]:
+    """Cameras near the mesh, looking at random points of its box, with near planes from
+    1e-3 to 0.3 and wide to narrow lenses: some see it cross the image's edges only, some
+    cut it with the near plane, some put vertices beyond the guard band."""
+    lo, hi = (np.asarray(b, np.float64) for b in mesh.bounds())
+    cams = []
+    for _ in range(n):
+        eye = rng.uniform(lo - 0.6, hi + 0.6)
+        target = rng.uniform(lo, hi)
+        if np.linalg.norm(target - eye) < 1e-3:
+            continue
+        cams.append(Camera.look_at(eye=tuple(eye), target=tuple(target),
+                                   fov_y=float(rng.uniform(20.0, 120.0)),
+                                   near=float(10 ** rng.uniform(-3, np.log10(0.3))),
+                                   far=20.0))
+    return cams
+
+
+def test_draws_marked_clip_free_have_no_vertex_to_clip():
+    """`ViewCull.clip_free` (DRAW_NO_CLIP) is conservative: over close views of two meshes,
+    no vertex of a draw it marks has a clip bit (near, far, guard band) in the twin's
+    float32 vertex stage, which the kernel matches bit for bit; and it marks draws in
+    views where other draws do need clipping (so the test tells the two apart)."""
+    from clraster.base.config import guard_band_factors
+    from clraster.base.layout import DRAW_INSIDE, DRAW_NO_CLIP, OC_NEEDS_CLIP
+    from clraster.pipeline.drawlist import PlanCache, plan_frame
+    from clraster.pipeline.reference.vertex import draw_vertices, transform
+
+    rng = np.random.default_rng(7)
+    w, h = 64, 48
+    kx, ky = guard_band_factors(w, h)
+    marked = needed = mixed = 0
+    grids = Scene()   # several instances: the per-instance planes of the pairs' test
+    for k, (tx, rz) in enumerate(((0.0, 0.0), (2.5, 0.7), (-2.2, -1.1))):
+        m = np.eye(4)
+        c, sn = np.cos(rz), np.sin(rz)
+        m[:2, :2] = [[c, -sn], [sn, c]]
+        m[:3, 3] = (tx, 0.3 * k, -0.5 * k)
+        grids.add(_wavy_grid(21), m)
+    for mesh in (_wavy_grid(41), Mesh.load(MESHES / "spot.ply"), grids):
+        cache = PlanCache()
+        for cam in _close_views(rng, mesh, 60):
+            plan = plan_frame(mesh, cam, w, h, cull="none", frustum=True, cones=False,
+                              cache=cache)
+            fd = plan.frame
+            if not fd.draws.size:
+                continue
+            pv, inst, _ = draw_vertices(plan.pool, fd)
+            _, codes, _ = transform(plan.pool.positions[pv], fd.mvps[inst], kx, ky, w, h,
+                                    np.zeros(pv.size, bool))
+            owner = np.repeat(np.arange(fd.draws.size),
+                              plan.pool.clusters[fd.draws["cluster"], 3])
+            clip = np.zeros(fd.draws.size, bool)
+            np.logical_or.at(clip, owner, (codes & OC_NEEDS_CLIP) != 0)
+            flags = fd.draws["flags"]
+            free = (flags & DRAW_NO_CLIP) != 0
+            assert not (free & clip).any(), "a draw marked clip-free has a vertex to clip"
+            assert not (free & ((flags & DRAW_INSIDE) != 0)).any()
+            marked += int(free.sum())
+            needed += int(clip.sum())
+            mixed += bool(free.any() and clip.any())
+    assert marked > 100 and needed > 20 and mixed > 3, (marked, needed, mixed)
+
+
+def test_frames_without_the_clip_test_are_the_same(monkeypatch):
+    """The same close views drawn with the host's clip test (passes that skip setup's
+    wait) and without it (`CLIP_TEST_DRAWS` 0: every pass with a draw not INSIDE waits):
+    identical frames and counts; and the test lets some of them skip the wait."""
+    from clraster.pipeline import drawlist
+
+    rng = np.random.default_rng(11)
+    w, h = 96, 64
+    mesh = _wavy_grid(41)
+    r = Renderer(w, h)
+    skipped = 0
+    for cam in _close_views(rng, mesh, 25):
+        monkeypatch.setattr(drawlist, "CLIP_TEST_DRAWS", 4096)
+        a = r.render(mesh, cam, cull="none")
+        skipped += not r.chain.geometry.buffers.may_clip
+        monkeypatch.setattr(drawlist, "CLIP_TEST_DRAWS", 0)
+        b = r.render(mesh, cam, cull="none")
+        assert_frames_equal(a, b, bary_atol=0.0)
+    assert skipped >= 3
+
+
+def test_a_clip_free_mark_that_was_wrong_is_an_error(monkeypatch):
+    """Should the host's clip test ever mark a draw that setup then has to clip, the frame
+    would lack those triangles: the renderer raises instead of returning it."""
+    from clraster.culling.cull import ViewCull
+
+    mesh = _wavy_grid()
+    r = Renderer(200, 150)
+    near_cut = Camera.look_at(eye=(0.0, 0.0, 0.1), target=(0.3, 0.2, -1.0), up=(0, 1, 0),
+                              fov_y=70.0, near=0.2, far=10.0)
+    monkeypatch.setattr(ViewCull, "clip_free",
+                        lambda self, inst, cl, kx, ky: np.ones(np.shape(inst), bool))
+    with pytest.raises(RuntimeError, match="need no clipping"):
+        r.render(mesh, near_cut, cull="none")
 
 
 def test_pool_positions_must_be_in_cluster_order():

@@ -35,7 +35,8 @@ import numpy as np
 from .layout import CLUSTER_MAX
 
 __all__ = [
-    "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS", "DENSE_INSTANCES", "DENSE_PAIRS",
+    "CLIP_TEST_DRAWS", "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS",
+    "DENSE_INSTANCES", "DENSE_PAIRS",
     "FLAT_CLUSTERS", "FLAT_MAX_PAIRS", "GUARD_BAND_PIXELS", "HIZ_TEST_LOCAL",
     "KERNEL_TUNABLES", "LINES_LOCAL", "MAX_IMAGE_SIZE", "MIN_CHUNK_TRIANGLES",
     "OCCLUSION_FIRST_CLUSTERS", "QUERY_SPAN", "SCAN_CHUNKS", "SEG_TILES", "THREAD_PAIRS",
@@ -105,6 +106,11 @@ DENSE_INSTANCES = 1 << 15
 #: Below this many (instance, cluster) pairs to look at, the culling paths run one after the
 #: other in the calling thread; above, on helper threads. Pairs; 0: always threads.
 THREAD_PAIRS = 32768
+#: A frame's draws that are not INSIDE the frustum are tested for clipping on the host
+#: (`clraster.culling.cull.ViewCull.clip_free`: DRAW_NO_CLIP) while there are at most this
+#: many of them; a pass whose draws all need no clipping skips the wait for setup's clip
+#: count. Above it the test costs more than the wait saves. Draws; 0: never tested.
+CLIP_TEST_DRAWS = 4096
 
 # ---- Occlusion culling (pipeline/twophase.py) ----------------------------------------------
 

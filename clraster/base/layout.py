@@ -98,6 +98,10 @@ DRAW_INSIDE = 1  #: draw flag: cluster inside the frustum by a margin, no clip t
 #: outward side (glTF 2.0, trimesh's apply_transform): setup swaps the cull sense (and the
 #: meaning of "front") for such draws, since their screen winding is reversed.
 DRAW_MIRRORED = 2
+#: Draw flag: no triangle of the cluster can need clipping (inside the near and far planes
+#: and the guard band by a margin: `clraster.culling.cull.ViewCull.clip_free`). Read by
+#: the host only (`GeometryStage.upload_frame`: setup's clip count is not waited for).
+DRAW_NO_CLIP = 4
 
 # ---- Depth pyramid and occlusion ---------------------------------------------------------
 
@@ -159,7 +163,7 @@ IDMIN_CLEAR = np.uint32(0xFFFFFFFF)
 #: One drawn (instance, cluster) pair (C ``Draw``). cluster: global cluster index in the
 #: geometry pool; vert_base / tri_base: first vertex / triangle slot of the draw in this
 #: frame's streams; face_base: triangle id of the instance's face 0; flags: DRAW_INSIDE,
-#: DRAW_MIRRORED.
+#: DRAW_MIRRORED, DRAW_NO_CLIP.
 DRAW_DTYPE = np.dtype([("cluster", np.int32), ("instance", np.int32), ("vert_base", np.int32),
                        ("tri_base", np.int32), ("face_base", np.int32), ("flags", np.int32),
                        ("pad", np.int32, 2)])
@@ -239,7 +243,7 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
      ("USER_PLANES_MAX", "MAX_CLIP_VERTICES", "POLY_MAX")),
     ("Clusters (meshlets): at most CLUSTER_MAX triangles and vertices; draw flags",
      ("CLUSTER_LOG2", "CLUSTER_MAX", "VERTEX_LANES", "SETUP_LANES", "DRAW_INSIDE",
-      "DRAW_MIRRORED")),
+      "DRAW_MIRRORED", "DRAW_NO_CLIP")),
     ("Depth pyramid: levels per launch; Hi-Z test results and error model (pyramid.cl)",
      ("PYR_LOG2", "OCC_VISIBLE", "OCC_OCCLUDED", "OCC_VIEW_CULLED", "HIZ_EPS",
       "HIZ_DEPTH_SLACK", "HIZ_PIXEL_SLACK")),

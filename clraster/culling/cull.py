@@ -225,6 +225,7 @@ class _SceneCull:
         self.inst_root = (np.ascontiguousarray(np.hstack([root.node_min[:1], root.node_max[:1],
                                                           root.node_mag[:1]]).T)
                           if ids.size == 1 else None)
+        self._root_corners: tuple[np.ndarray, np.ndarray] | None = None
         #: `_cone_view`'s per-scene part, per (cull, cone_margin): (side, sin_m, cullable)
         self.cone_setup: dict[tuple[str, float], tuple[np.ndarray, np.ndarray, bool]] = {}
         # Unique meshes: cluster tables concatenated (global cluster g = mesh_base + c).
@@ -281,6 +282,19 @@ class _SceneCull:
         self.groups = [(meshes[v[0]], np.array(v, np.int64)) for v in groups.values()]
         self._umesh = umesh
         self._pair_tables: _PairTables | None = None
+
+    def root_corners(self) -> tuple[np.ndarray, np.ndarray]:
+        """One bounded instance (`inst_root` set): its world box's eight corners as
+        homogeneous rows float64 (8, 4), and its margin magnitudes [mag, 1] float64 (4,);
+        made once per scene."""
+        if self._root_corners is None:
+            assert self.inst_root is not None
+            lo, hi, mag = self.inst_root[0:3, 0], self.inst_root[3:6, 0], self.inst_root[6:9, 0]
+            pick = (np.arange(8)[:, None] >> np.arange(3)) & 1   # corner k: bit j picks hi
+            corners = np.where(pick == 1, hi, lo)
+            self._root_corners = (np.hstack([corners, np.ones((8, 1))]),
+                                  np.append(mag, 1.0))
+        return self._root_corners
 
     def pair_tables(self) -> _PairTables:
         """`ViewCull.pairs`' tables, made on first use."""
@@ -891,6 +905,23 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     clip_planes=clip_planes).all()
 
 
+_CLIP_ROWS_MEMO: dict[tuple[float, float], np.ndarray] = {}
+
+
+def _clip_rows(kx: float, ky: float) -> np.ndarray:
+    """`ViewCull.clip_free`'s planes as combinations (6, 4) of the view-projection's x, y,
+    z, w rows: near w + z, far w − z, then x + kx·w, kx·w − x, y + ky·w, ky·w − y (the
+    guard band, `clraster.base.config.guard_band_factors`); kept per (kx, ky)."""
+    rows = _CLIP_ROWS_MEMO.get((kx, ky))
+    if rows is None:
+        rows = np.array([[0, 0, 1, 1], [0, 0, -1, 1], [1, 0, 0, kx], [-1, 0, 0, kx],
+                         [0, 1, 0, ky], [0, -1, 0, ky]], np.float64)
+        if len(_CLIP_ROWS_MEMO) > 64:   # (renderers of many sizes)
+            _CLIP_ROWS_MEMO.clear()
+        _CLIP_ROWS_MEMO[(kx, ky)] = rows
+    return rows
+
+
 class ViewCull:
     """One view's object culling of a scene, in steps: the instances are classified when
     it is made; then `all` gives the draw list of every (instance, cluster) pair
@@ -909,6 +940,8 @@ class ViewCull:
                               cone_margin)
         self.prep = prep = _prepare(scene, max_triangles, max_vertices)
         t_prep = time.perf_counter()
+        self.vp = vp
+        self.margin = inside_margin
         self.keep_cone_culled = keep_cone_culled
         raw, rmag = raw_planes(vp)
         self.view = _ViewPlanes.make(prep, raw, rmag, frustum, clip_planes, inside_margin,
@@ -978,6 +1011,50 @@ class ViewCull:
                         timings_ms={"clusters": (t1 - t0) * 1e3, "cones": (t2 - t1) * 1e3,
                                     "total": (t2 - t0) * 1e3},
                         cone_culled=pairs.cone_culled())
+
+    def clip_free(self, inst: np.ndarray, cl: np.ndarray, kx: float, ky: float) -> np.ndarray:
+        """bool (P,): the pairs (``inst``, ``cl``: int (P,) each) none of whose triangles can
+        need setup's clipper. Setup clips a triangle when a vertex lies behind the near or
+        beyond the far plane or leaves the x/y guard band (the planes ±kx·w, ±ky·w of
+        `clraster.base.config.guard_band_factors`; user clip planes aside): a pair is
+        clip-free when its object-space cluster box is inside those six planes by the
+        inside margin, in its instance's object space, as `pairs` tests the frustum. The
+        plane values are linear, so the box's extremes bound every vertex; the margin
+        covers the vertex stage's float32 evaluation (:mod:`clraster.culling.frustum`'s
+        module docstring: the guard-band rows' magnitudes are ``|r0| + kx·|r3|``). Boxes
+        with NaN/Inf are never clip-free."""
+        inst, cl = np.asarray(inst, np.int64), np.asarray(cl, np.int64)
+        if not inst.size:
+            return np.zeros(0, bool)
+        prep, vp = self.prep, self.vp
+        # plane rows (6, 4) and their magnitude rows (plane values and margins scale alike:
+        # no normalizing needed)
+        rows = _clip_rows(kx, ky)
+        raw, mag = rows @ vp, np.abs(rows) @ np.abs(vp)
+        if prep.inst_ids.size == 1 and (inst == prep.inst_ids[0]).all():
+            # one bounded instance (a bare Mesh): its world box first, the box and
+            # magnitudes `_classify_instances` tests (`inst_root`), by its eight corners:
+            # most close-ups have it wholly inside
+            corners, cmag = prep.root_corners()
+            if ((corners @ raw.T).min(axis=0) >= (mag @ cmag) * self.margin).all():
+                return np.ones(inst.size, bool)
+        g = prep.mesh_base[prep.inst_umesh[inst]] + cl
+        tables = prep.pair_tables()
+        if inst[0] == inst[-1] and (inst == inst[0]).all():
+            # one instance (a mesh): its planes against every box at once, (6, 4) @ (4, N)
+            # products (the margin dwarfs their rounding; `_pair_extremes` costs ~4x here)
+            i = int(inst[0])
+            p, sc = raw @ prep.m[i], mag @ prep.abs_m[i]
+            c, e, bm = (np.take(a, g, axis=1) for a in (tables.centre, tables.half,
+                                                        tables.mag))
+            dmin = (p[:, :3] @ c + p[:, 3:]) - np.abs(p[:, :3]) @ e
+            mterm = sc[:, :3] @ bm + sc[:, 3:]
+        else:
+            uniq, row = np.unique(inst, return_inverse=True)
+            dmin, _, mterm = _pair_extremes(np.matmul(raw, prep.m[uniq]),
+                                            np.matmul(mag, prep.abs_m[uniq]),
+                                            row.reshape(-1), g, prep)
+        return (dmin >= mterm * self.margin).all(axis=0) & tables.bounded[g]
 
     def all(self) -> DrawList:
         """The draw list of every (instance, cluster) pair of the scene."""

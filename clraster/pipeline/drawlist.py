@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from ..base.checks import CameraLike, view_projection
-from ..base.layout import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE, DRAW_MIRRORED
+from ..base.config import CLIP_TEST_DRAWS, guard_band_factors
+from ..base.layout import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE, DRAW_MIRRORED, DRAW_NO_CLIP
 from ..culling.clusters import clusters_of
 from ..culling.cull import ViewCull
 from ..world.mesh import Mesh
@@ -232,12 +233,14 @@ def instance_matrices(pool: GeometryPool, scene, view_proj: np.ndarray,
 
 
 def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndarray,
-                 cluster: np.ndarray, inside: np.ndarray) -> FrameDraws:
+                 cluster: np.ndarray, inside: np.ndarray,
+                 no_clip: np.ndarray | None = None) -> FrameDraws:
     """``frame`` (`instance_matrices`) with the draws (instance, mesh-local cluster,
     inside) (D,) each, in that order, as `Draw` records: their places in the frame's
     vertex and triangle streams follow the order. Draws of instances whose transform has a
     negative determinant get DRAW_MIRRORED: their faces keep their outward side (the Scene
-    rule, as glTF)."""
+    rule, as glTF). ``no_clip``: bool (D,) or None (none), the draws that get DRAW_NO_CLIP
+    (`ViewCull.clip_free`)."""
     inst = np.asarray(instance, np.int64)
     d = np.zeros(inst.size, DRAW_DTYPE)
     n_verts = n_tris = 0
@@ -256,6 +259,8 @@ def draw_records(pool: GeometryPool, scene, frame: FrameDraws, instance: np.ndar
         d["face_base"] = np.asarray(scene.face_base, np.int64)[inst]
         d["flags"] = (np.where(np.asarray(inside, bool), DRAW_INSIDE, 0)
                       | np.where(mirrored[inst], DRAW_MIRRORED, 0))
+        if no_clip is not None:
+            d["flags"] |= np.where(no_clip, DRAW_NO_CLIP, 0).astype(d["flags"].dtype)
         # the cumulative sums' last entries are the sums (exact integers)
         n_verts, n_tris = int(end_v[-1]), int(end_t[-1])
     if n_verts >= 2**31 or n_tris >= 2**31:
@@ -297,11 +302,18 @@ class FramePlan:
     plant's first-person view took ~1.8 ms)."""
 
     def __init__(self, scene: Scene, pool: GeometryPool, culler: ViewCull,
-                 matrices: FrameDraws, view_proj: np.ndarray) -> None:
+                 matrices: FrameDraws, view_proj: np.ndarray,
+                 size: tuple[int, int] | None = None) -> None:
         self.scene = scene
         self.pool = pool
         self.culler = culler
         self.view_proj = view_proj
+        #: the guard-band factors of the image (width, height) the plan is for; None: no
+        #: size known, no draw is marked DRAW_NO_CLIP
+        self.guard_band: tuple[float, float] | None = None
+        if size is not None:
+            kx, ky = guard_band_factors(*size)
+            self.guard_band = float(kx), float(ky)
         #: `instance_matrices` of this view (no draws)
         self.matrices = matrices
         self._draw_list: DrawList | None = None
@@ -340,12 +352,24 @@ class FramePlan:
         """The draws of ``dl`` (a draw list of this view), or those where ``mask`` (bool
         (D,)) is set, in the list's order, laid out on their own (their places in the
         vertex and triangle streams follow from the subset), without laying out the
-        rest."""
-        if mask is None:
-            return draw_records(self.pool, self.scene, self.matrices, dl.instance,
-                                dl.cluster, dl.inside)
-        return draw_records(self.pool, self.scene, self.matrices, dl.instance[mask],
-                            dl.cluster[mask], dl.inside[mask])
+        rest.
+
+        Draws that are not INSIDE the frustum get DRAW_NO_CLIP when `ViewCull.clip_free`
+        says none of their triangles can be clipped (a mesh crossing the image's edges,
+        seen from close by), tested while there are at most `CLIP_TEST_DRAWS` of them: a
+        pass whose draws all have one of the two flags enqueues binning behind setup
+        without waiting for setup's clip count (`clraster.pipeline.stages.setup`)."""
+        inst, cl, ins = dl.instance, dl.cluster, dl.inside
+        if mask is not None:
+            inst, cl, ins = inst[mask], cl[mask], ins[mask]
+        no_clip = None
+        out = np.flatnonzero(~ins)
+        # (user planes that clip make setup wait regardless: GeometryStage.upload_frame)
+        if (self.guard_band is not None and 0 < out.size <= CLIP_TEST_DRAWS
+                and not (self.matrices.n_user and self.matrices.uclip)):
+            no_clip = np.zeros(ins.shape, bool)
+            no_clip[out] = self.culler.clip_free(inst[out], cl[out], *self.guard_band)
+        return draw_records(self.pool, self.scene, self.matrices, inst, cl, ins, no_clip)
 
 
 class PlanCache:
@@ -397,4 +421,4 @@ def plan_frame(target: Mesh | Scene, camera: CameraLike, width: int, height: int
     culler = ViewCull(scene, vp, frustum=frustum, cones=cones, cull=cull,
                       keep_cone_culled=keep_cone_culled, clip_planes=clip_planes)
     return FramePlan(scene, pool, culler, instance_matrices(pool, scene, vp, clip_planes,
-                                                        n_clipping), vp)
+                                                        n_clipping), vp, (width, height))

@@ -218,6 +218,7 @@ class StageChain:
         events["raster"] = [raster.launch(queue, setup, bins, params, out, load)]
         _follow(queue, follow, out, bins, False)
         raster.wait(queue, out, follow)
+        self.setup.check_unclipped(queue, self.geometry.buffers)
         if bins.pending:
             # the scatter and raster ran without waiting for the list's length (BinStage.run
             # with defer); a list that did not fit drew nothing: scattered again, drawn again

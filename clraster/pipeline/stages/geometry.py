@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from ...base.layout import DRAW_INSIDE
+from ...base.layout import DRAW_INSIDE, DRAW_NO_CLIP
 from ..drawlist import GeometryPool
 from ..draws import FrameDraws
 from ._buffers import GrowBuffer
@@ -27,8 +27,9 @@ class GeometryBuffers:
     n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
     uploaded last (draws.FrameDraws). may_clip: whether setup can clip any of their
     triangles: False when every draw is inside the frustum by a margin (DRAW_INSIDE: the
-    vertex stage sets no clip bits for it) and no user plane clips (uclip 0), so that
-    setup need not wait to learn that none was clipped (`SetupStage.run`).
+    vertex stage sets no clip bits for it) or inside the near and far planes and the
+    guard band by one (DRAW_NO_CLIP, the host's test), and no user plane clips (uclip 0),
+    so that setup need not wait to learn that none was clipped (`SetupStage.run`).
     """
 
     positions: GrowBuffer
@@ -87,6 +88,6 @@ class GeometryStage:
                 gb.write(queue, arr)
         b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
         b.n_user, b.uclip = fd.n_user, fd.uclip
-        inside = (fd.draws["flags"] & DRAW_INSIDE) != 0
-        b.may_clip = bool((fd.n_user > 0 and fd.uclip != 0) or not inside.all())
+        unclipped = (fd.draws["flags"] & (DRAW_INSIDE | DRAW_NO_CLIP)) != 0
+        b.may_clip = bool((fd.n_user > 0 and fd.uclip != 0) or not unclipped.all())
         return b

@@ -78,6 +78,20 @@ class SetupStage:
         tests/test_processes.py. In host mode it is a plain store.)"""
         self.flag.write(queue, np.zeros(1, np.int32))
 
+    def check_unclipped(self, queue: cl.CommandQueue, geo: GeometryBuffers) -> None:
+        """After the pass's wait: where `run` did not wait for the clip count (``geo``'s
+        draws all DRAW_INSIDE or DRAW_NO_CLIP), check that setup found no triangle to clip.
+        The host's tests are conservative by a margin, so this never fires; if it did, the
+        triangles to clip were dropped from the image, and that must not pass silently.
+        (A read of host memory where the device shares it.)"""
+        if geo.may_clip or not geo.n_tris:
+            return
+        if int(self.flag.read(queue, np.int32, 1)[0]):
+            raise RuntimeError(
+                "internal error: setup clipped triangles of draws the host had found to need "
+                "no clipping (DRAW_INSIDE / DRAW_NO_CLIP), so the image lacks them. Please "
+                "report it with the camera and mesh; RasterConfig is not the cause")
+
     def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
             params: FrameParams, max_pieces: int | None = None
             ) -> tuple[SetupBuffers, list[cl.Event]]:
@@ -109,7 +123,8 @@ class SetupStage:
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
                            b.status.ensure(m),
-                           np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag)]
+                           np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag,
+                           b.clip_count.ensure(4 * max(m, 1)))]
         # Most passes clip nothing: then the clipper's count, the scan and their launches
         # are skipped; the wait here replaces the one after the scan. When no triangle can
         # be clipped (geo.may_clip: every draw inside the frustum by a margin, no clipping
@@ -121,8 +136,8 @@ class SetupStage:
         else:
             total = np.zeros(1, np.int32)
         # bin's arguments (read for clipped slots only); clip_count is written by k_count
+        # (setup_triangles zeroes the clipped slots' first)
         b.clip_offset.ensure(4 * max(m, 1))
-        b.clip_count.ensure(4 * max(m, 1))
         if m and total[0]:
             ev.append(self.k_count(queue, gsize, lsize, clip, outcode, *draw_args, *size,
                                    np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
