@@ -359,8 +359,15 @@ def _pair_extremes(planes: np.ndarray, scales: np.ndarray, row: np.ndarray, g: n
     # on contiguous (K, N) rows (strided (N, K) views cost 4x, with classify_extremes)
     c, e = np.take(tables.centre, g, axis=1), np.take(tables.half, g, axis=1)
     mag = np.take(tables.mag, g, axis=1)
-    p = np.take(np.ascontiguousarray(planes.transpose(2, 1, 0)), row, axis=2)
-    s = np.take(np.ascontiguousarray(scales.transpose(2, 1, 0)), row, axis=2)
+    p, s = np.ascontiguousarray(planes.transpose(2, 1, 0)), np.ascontiguousarray(
+        scales.transpose(2, 1, 0))
+    if (row[1:] >= row[:-1]).all():
+        # pairs in instance order (the two-phase schedule's sorted keys): each instance's
+        # rows repeated over its run, the same values as the gather below, ~4x faster
+        n = np.bincount(row, minlength=p.shape[2])
+        p, s = np.repeat(p, n, axis=2), np.repeat(s, n, axis=2)
+    else:
+        p, s = np.take(p, row, axis=2), np.take(s, row, axis=2)
     a = np.abs(p[:3])
     dist = ((p[0] * c[0] + p[1] * c[1]) + p[2] * c[2]) + p[3]
     reach = (a[0] * e[0] + a[1] * e[1]) + a[2] * e[2]

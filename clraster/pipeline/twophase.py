@@ -22,7 +22,9 @@ its mesh's cluster BVH leaf order; an instance of a small mesh is one group). Ph
 (frustum, cones: `cull.ViewCull.pairs`) and draws only last frame's visible clusters; the
 groups holding the other clusters of the instances in view are Hi-Z tested against phase
 1's pyramid first, and only the clusters of the groups not proved hidden are culled and
-Hi-Z tested one by one. A hidden group's clusters are counted occlusion-culled without
+Hi-Z tested one by one (phase 1's clusters are tested with the groups: when phase 2 draws
+nothing, the depth is final and those verdicts are step 4's). A hidden group's clusters
+are counted occlusion-culled without
 their frustum and cone tests (those of a group the test finds wholly outside a frustum
 plane, frustum-culled); the image is the same. 10M plant, first person: 8.2K of the
 106K clusters are culled one by one instead of all of them.
@@ -405,12 +407,20 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     draw_ms = (time.perf_counter() - t_draw) * 1e3
     hiz_ms = 0.0
     # the groups of the instances in view against phase 1's pyramid (their phase-1 keys
-    # aside: decided above)
+    # aside: decided above), and in the same launch phase 1's keys: if phase 2 draws
+    # nothing, the depth stays as it is and their verdicts are the next frame's
+    # visibility (the test below, one launch and wait fewer)
     tested_g = np.flatnonzero(inst_alive[grp.group_inst])
     g_code = np.full(grp.n_groups, Occlusion.VISIBLE, np.uint8)
+    codes1 = None
     if tested_g.size:
-        codes, ms = hiz(out, _box_rows(grp.rows, tested_g), vp32)
+        rows_g = _box_rows(grp.rows, tested_g)
+        rows = rows_g if not keys1.size else np.concatenate(
+            [rows_g, _box_rows(box_rows, keys1)], axis=1)
+        codes, ms = hiz(out, rows, vp32)
         g_code[tested_g] = codes[:tested_g.size]
+        if keys1.size:
+            codes1 = codes[rows_g.shape[1]:rows_g.shape[1] + keys1.size]
         hiz_ms += ms or 0.0
     # wholly outside a frustum plane: frustum-culled, when frustum culling is on (else,
     # as in the flat schedule, occlusion-culled)
@@ -435,9 +445,13 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     # visibility for the next frame, as the flat schedule
     drawn = np.concatenate([keys1, keys2[second]])
     if drawn.size:
-        codes, ms = hiz(out, _box_rows(box_rows, drawn), vp32, same_depth=not second.any())
+        if codes1 is not None and not second.any():   # (drawn is keys1)
+            codes = codes1
+        else:
+            codes, ms = hiz(out, _box_rows(box_rows, drawn), vp32,
+                            same_depth=not second.any())
+            hiz_ms += ms or 0.0
         vis = (codes[:drawn.size] == Occlusion.VISIBLE) | ~wbounded[drawn]
-        hiz_ms += ms or 0.0
         visible = drawn[vis]
     else:
         visible = drawn
