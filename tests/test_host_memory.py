@@ -209,12 +209,17 @@ def _close_views(rng: np.random.Generator, mesh: Mesh, n: int) -> list[Camera]:
     return cams
 
 
-def test_draws_marked_clip_free_have_no_vertex_to_clip():
-    """`ViewCull.clip_free` (DRAW_NO_CLIP) is conservative: over close views of two meshes,
-    no vertex of a draw it marks has a clip bit (near, far, guard band) in the twin's
-    float32 vertex stage, which the kernel matches bit for bit; and it marks draws in
-    views where other draws do need clipping (so the test tells the two apart)."""
+def test_draws_marked_clip_free_have_no_vertex_to_clip(monkeypatch):
+    """`ViewCull.clip_free` (DRAW_NO_CLIP) is conservative: over close views of two meshes
+    and a scene, no vertex of a draw it marks has a clip bit (near, far, guard band) in the
+    twin's float32 vertex stage, which the kernel matches bit for bit; and it marks draws
+    in views where other draws do need clipping (so the test tells the two apart). The
+    planner's shortcut that skips the test when an instance crosses the near or far plane
+    is turned off here, so that every view is tested."""
     from clraster.base.config import guard_band_factors
+    from clraster.pipeline import drawlist
+
+    monkeypatch.setattr(drawlist, "_NEAR_FAR", 0)
     from clraster.base.layout import DRAW_INSIDE, DRAW_NO_CLIP, OC_NEEDS_CLIP
     from clraster.pipeline.drawlist import PlanCache, plan_frame
     from clraster.pipeline.reference.vertex import draw_vertices, transform
@@ -280,6 +285,9 @@ def test_a_clip_free_mark_that_was_wrong_is_an_error(monkeypatch):
     """Should the host's clip test ever mark a draw that setup then has to clip, the frame
     would lack those triangles: the renderer raises instead of returning it."""
     from clraster.culling.cull import ViewCull
+    from clraster.pipeline import drawlist
+
+    monkeypatch.setattr(drawlist, "_NEAR_FAR", 0)   # (test even where the near plane cuts)
 
     mesh = _wavy_grid()
     r = Renderer(200, 150)

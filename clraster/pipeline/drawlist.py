@@ -21,6 +21,7 @@ from ..base.config import CLIP_TEST_DRAWS, guard_band_factors
 from ..base.layout import CLUSTER_MAX, DRAW_DTYPE, DRAW_INSIDE, DRAW_MIRRORED, DRAW_NO_CLIP
 from ..culling.clusters import clusters_of
 from ..culling.cull import ViewCull
+from ..culling.frustum import PLANE_NAMES
 from ..world.mesh import Mesh
 from ..world.precision import check_depth_range
 from ..world.scene import Scene
@@ -291,6 +292,10 @@ def key_boxes(pool: GeometryPool, scene) -> tuple[np.ndarray, np.ndarray, np.nda
     return wlo, whi, pool.bounded[gcl]
 
 
+#: The near and far planes' bits of a culling plane mask (`frustum.PLANE_NAMES` order).
+_NEAR_FAR = (1 << PLANE_NAMES.index("near")) | (1 << PLANE_NAMES.index("far"))
+
+
 class FramePlan:
     """Everything both renderers need before the vertex stage: the scene, its pool, the
     view's culling (`cull.ViewCull`: instances classified, pairs culled on demand) and the
@@ -364,9 +369,12 @@ class FramePlan:
             inst, cl, ins = inst[mask], cl[mask], ins[mask]
         no_clip = None
         out = np.flatnonzero(~ins)
-        # (user planes that clip make setup wait regardless: GeometryStage.upload_frame)
+        # (user planes that clip make setup wait regardless: GeometryStage.upload_frame;
+        # and a draw whose instance's box crosses the near or far plane is rarely free of
+        # clipping, while one such draw makes the pass wait: the camera inside a scene)
         if (self.guard_band is not None and 0 < out.size <= CLIP_TEST_DRAWS
-                and not (self.matrices.n_user and self.matrices.uclip)):
+                and not (self.matrices.n_user and self.matrices.uclip)
+                and not (self.culler.inst_mask[inst[out]] & _NEAR_FAR).any()):
             no_clip = np.zeros(ins.shape, bool)
             no_clip[out] = self.culler.clip_free(inst[out], cl[out], *self.guard_band)
         return draw_records(self.pool, self.scene, self.matrices, inst, cl, ins, no_clip)
