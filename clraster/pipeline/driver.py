@@ -217,12 +217,15 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
             and fd.n_tris <= config.batch_triangles):
         follow = follow_make(plan.pool, *_resolve_inputs(backend, plan, camera, o))
 
-    def one_pass(batch: FrameDraws, max_entries: int | None, into: Out | None) -> Out:
-        return backend._draw_pass(plan.pool, batch, params, totals, into, max_entries, o,
-                                  follow)
+    def draw(draws: FrameDraws, into: Out | None, after: Any = None) -> Out:
+        # a frame (or an occlusion phase) as a stream of bounded passes; ``after``: what to
+        # enqueue behind the rasters instead of the resolve (`twophase`: phase 1's Hi-Z)
+        then = follow if after is None else after
 
-    def draw(draws: FrameDraws, into: Out | None) -> Out:
-        # a frame (or an occlusion phase) as a stream of bounded passes
+        def one_pass(batch: FrameDraws, max_entries: int | None, into: Out | None) -> Out:
+            return backend._draw_pass(plan.pool, batch, params, totals, into, max_entries, o,
+                                      then)
+
         return stream_draws(draws, config.batch_triangles, config.batch_entries, one_pass,
                             into)
 

@@ -4,7 +4,6 @@ public entrances that check a frame's options and convert its target once (`rend
 
 from __future__ import annotations
 
-import functools
 import inspect
 import os
 import threading
@@ -33,7 +32,7 @@ from .resolving import ResolveTables, ResolveView, resolve_tables, shade_sources
 # clraster.output.post, which render_shaded then uses
 from .stages import post as _post_passes  # noqa: F401
 from .stages.chain import StageChain
-from .stages.pyramid import Pyramid, PyramidStage
+from .stages.pyramid import HizFollow, Pyramid, PyramidStage
 from .stages.raster import RasterOutput, RasterStage
 from .stages.resolve import ResolveFollow, ResolveStage
 from .stages.shade import ShadeStage
@@ -342,7 +341,7 @@ class Renderer:
 
     def _hiz_step(self, params: FrameParams) -> HiZ:
         self._pyramid = None
-        return functools.partial(self._hiz, zoff=params.zoff)
+        return _HizStep(self, params.zoff)
 
     def _buffers(self, out: RasterOutput) -> FrameBuffers:
         return out.depth, out.ids, out.bary, out.overdraw
@@ -414,6 +413,27 @@ class Renderer:
             events = []
         verdict, ev = self.pyramid.enqueue_test_rows(self.queue, pyr, rows, vp32, w, h, zoff)
         return verdict, event_ms([*events, ev] if ev else events)
+
+
+class _HizStep:
+    """The renderer's Hi-Z step of one frame (`two_phase`'s ``hiz``): called, the pyramid
+    of the frame's depth and a test, waited for (`Renderer._hiz`); `follow`, the same
+    enqueued behind a pass's raster instead (`HizFollow`)."""
+
+    def __init__(self, renderer: Renderer, zoff: float) -> None:
+        self._r, self._zoff = renderer, zoff
+
+    def __call__(self, out: RasterOutput, rows: np.ndarray, vp32: np.ndarray,
+                 same_depth: bool = False) -> tuple[np.ndarray, float]:
+        return self._r._hiz(out, rows, vp32, self._zoff, same_depth)
+
+    def follow(self, rows_fn: Any, vp32: np.ndarray) -> HizFollow:
+        r = self._r
+
+        def keep(pyr: Pyramid) -> None:   # a later test of the same depth tests it again
+            r._pyramid = pyr
+
+        return HizFollow(r.pyramid, rows_fn, vp32, r.width, r.height, self._zoff, keep)
 
 
 def check_render_options(width: int, height: int, options: dict[str, Any]) -> None:

@@ -52,7 +52,6 @@ from ..culling.cull import DrawList
 from ..culling.frustum import eye_from_view_proj
 from .boxes import Occlusion
 from .drawlist import FramePlan, key_boxes
-from .draws import FrameDraws
 from .params import FrameTotals
 
 __all__ = ["OCCLUSION_FIRST_CLUSTERS", "KeyGroups", "OcclusionHistory", "TwoPhaseResult",
@@ -252,9 +251,11 @@ def _box_rows(box_rows: np.ndarray, keys: np.ndarray) -> np.ndarray:
     return np.take(box_rows, idx, axis=1)
 
 
-#: draw(draws, into) → frame buffers: run the stage chain over ``draws`` (a subset of the
-#: frame's draws, maybe empty) into ``into`` (None: fresh cleared buffers).
-DrawFn = Callable[[FrameDraws, Any], Any]
+#: draw(draws, into[, after]) → frame buffers: run the stage chain over ``draws`` (a subset
+#: of the frame's draws, maybe empty) into ``into`` (None: fresh cleared buffers);
+#: ``after``: a follow the backend's passes call right after each raster launch (the
+#: ``hiz`` step's `follow`, where it has one).
+DrawFn = Callable[..., Any]
 class HizFn(Protocol):
     """hiz(frame buffers, rows float32 (6, K), view_proj float32 (16,), same_depth) →
     (uint8 (K,) `Occlusion` codes, milliseconds or None): the pyramid of the frame's depth
@@ -403,25 +404,41 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         _add_ms(totals, "cull (host)", t_cull)
         return None
     vp32 = plan.view_proj.astype(np.float32).reshape(-1)
-    t_draw = time.perf_counter()
-    out = draw(plan.draws_for(dl1), None)
-    draw_ms = (time.perf_counter() - t_draw) * 1e3
-    hiz_ms = 0.0
     # the groups of the instances in view against phase 1's pyramid (their phase-1 keys
     # aside: decided above), and in the same launch phase 1's keys: if phase 2 draws
     # nothing, the depth stays as it is and their verdicts are the next frame's
-    # visibility (the test below, one launch and wait fewer)
+    # visibility (the test below, one launch and wait fewer). Where the backend can
+    # (``hiz.follow``), the pyramid and this test are enqueued behind phase 1's raster,
+    # their boxes gathered while it runs: one wait for the three.
     tested_g = np.flatnonzero(inst_alive[grp.group_inst])
+    n_rows_g = -(-tested_g.size // 8) * 8   # (`_box_rows` pads to a multiple of 8)
+    rows_made: list[np.ndarray] = []
+
+    def rows1() -> np.ndarray:
+        if not rows_made:
+            rows_g = _box_rows(grp.rows, tested_g)
+            rows_made.append(rows_g if not keys1.size else np.concatenate(
+                [rows_g, _box_rows(box_rows, keys1)], axis=1))
+        return rows_made[0]
+
+    follow = getattr(hiz, "follow", None)
+    after = follow(rows1, vp32) if follow is not None and tested_g.size else None
+    t_draw = time.perf_counter()
+    out = draw(plan.draws_for(dl1), None, after)
+    draw_ms = (time.perf_counter() - t_draw) * 1e3
+    hiz_ms = 0.0
     g_code = np.full(grp.n_groups, Occlusion.VISIBLE, np.uint8)
     codes1 = None
     if tested_g.size:
-        rows_g = _box_rows(grp.rows, tested_g)
-        rows = rows_g if not keys1.size else np.concatenate(
-            [rows_g, _box_rows(box_rows, keys1)], axis=1)
-        codes, ms = hiz(out, rows, vp32)
+        res = after.result() if after is not None else None
+        if res is not None:
+            codes, ms = res
+            draw_ms -= ms   # (the draw's wait covered them: they are counted as tests)
+        else:
+            codes, ms = hiz(out, rows1(), vp32)
         g_code[tested_g] = codes[:tested_g.size]
         if keys1.size:
-            codes1 = codes[rows_g.shape[1]:rows_g.shape[1] + keys1.size]
+            codes1 = codes[n_rows_g:n_rows_g + keys1.size]
         hiz_ms += ms or 0.0
     # wholly outside a frustum plane: frustum-culled, when frustum culling is on (else,
     # as in the flat schedule, occlusion-culled)

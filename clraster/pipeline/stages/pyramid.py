@@ -9,7 +9,9 @@ depth under them; pixel (x, y) sits under texel (x >> L, y >> L) at every level.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pyopencl as cl
@@ -19,7 +21,7 @@ from ...base.config import HIZ_TEST_LOCAL, RasterConfig
 
 # PYR_LOG2: levels made per launch of pyramid_reduce (kernels/pyramid.cl)
 from ...base.layout import PYR_LOG2, level_shapes
-from ..device import kernel, program
+from ..device import event_ms, kernel, program
 from ..features import local_size
 from ._buffers import GrowBuffer
 
@@ -183,6 +185,21 @@ class PyramidStage:
         k = rows.shape[1]
         if k == 0:
             return np.empty(0, np.uint8), None
+        ev = self.launch_test_rows(queue, pyramid, rows, vp, width, height, zoff)
+        # Waited for in one C call, not interruptibly (device.wait): the build and the test
+        # take a few ms, and an interrupted wait would leave them running on the frame's
+        # depth and this stage's host-mode buffers (`GrowBuffer`) after the caller lets go.
+        queue.finish()
+        return self.test_result(queue, k), ev
+
+    def launch_test_rows(self, queue: cl.CommandQueue, pyramid: Pyramid, rows: np.ndarray,
+                         vp: np.ndarray, width: int, height: int, zoff: float = 0.5
+                         ) -> cl.Event:
+        """`enqueue_test_rows`' inputs written and its test enqueued (K > 0 boxes), without
+        waiting: after a wait that covers it, `test_result` (K) reads the verdicts. No other
+        test may be launched on this stage before then (they share its host-mode
+        buffers)."""
+        k = rows.shape[1]
         if k > MAX_TEST_BOXES:
             raise ValueError(f"{k:,} boxes in one call; at most {MAX_TEST_BOXES:,} (split "
                              "the list)")
@@ -201,14 +218,65 @@ class PyramidStage:
         b.view_proj.write(queue, vp)
         n_wi = n_pad // 8
         gsize = -(-n_wi // self.test_local) * self.test_local
-        ev = self.k_test(queue, (gsize,), (self.test_local,), bbox, np.int32(n_pad), bvp,
-                         np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
-                         np.int32(pyramid.n_levels), np.float32(zoff), bres)
-        # Waited for in one C call, not interruptibly (device.wait): the build and the test
-        # take a few ms, and an interrupted wait would leave them running on the frame's
-        # depth and this stage's host-mode buffers (`GrowBuffer`) after the caller lets go.
-        queue.finish()
-        return b.result.read(queue, np.uint8, k), ev
+        return self.k_test(queue, (gsize,), (self.test_local,), bbox, np.int32(n_pad), bvp,
+                           np.int32(width), np.int32(height), pyramid.buffer, pyramid.table,
+                           np.int32(pyramid.n_levels), np.float32(zoff), bres)
+
+    def test_result(self, queue: cl.CommandQueue, k: int) -> np.ndarray:
+        """The verdicts uint8 (K,) of the last test launched, once a wait covered it."""
+        return self.buffers.result.read(queue, np.uint8, k)
+
+
+class HizFollow:
+    """A depth pyramid and a Hi-Z test enqueued right behind the raster launch of a pass
+    (`StageChain.draw`'s ``follow``), so the pass's wait covers them: two-phase occlusion
+    culling's test of phase 1 (`clraster.pipeline.twophase`), with no host round trip
+    (the wait's wake-up, the frame's bookkeeping, the boxes' gather, a second wait)
+    between the raster and the test, the device idle meanwhile.
+
+    ``rows_fn()`` gives the boxes (float32 (6, K'), K' a multiple of 8, K' > 0: the
+    test's layout, `enqueue_test_rows`), called once, at the first launch, so their gather
+    runs while the raster does. A pass drawn again (its bin list did not fit, ``redraw``)
+    enqueues both again behind the second raster; a second pass of the phase (a phase the
+    budget streams) turns it off: `result` is then None and the caller tests after the
+    phase. ``on_build(pyramid)``: told of each pyramid built (the renderer keeps the last,
+    for tests of the same depth later in the frame)."""
+
+    def __init__(self, stage: PyramidStage, rows_fn: Callable[[], np.ndarray],
+                 vp32: np.ndarray, width: int, height: int, zoff: float,
+                 on_build: Callable[[Pyramid], None]) -> None:
+        self._stage, self._rows_fn, self._vp32 = stage, rows_fn, vp32
+        self._size, self._zoff, self._on_build = (width, height), zoff, on_build
+        self._rows: np.ndarray | None = None
+        self._launched: tuple[cl.CommandQueue, list[cl.Event]] | None = None
+        self._passes = 0
+        self._off = False
+
+    def __call__(self, queue: cl.CommandQueue, out: Any, bins: Any, redraw: bool) -> None:
+        """Enqueue the pyramid of ``out``'s depth (a `RasterOutput` whose raster was just
+        enqueued) and the test of the boxes against it."""
+        if not redraw:
+            self._passes += 1
+            self._off |= self._passes > 1
+        if self._off:
+            self._launched = None
+            return
+        if self._rows is None:
+            self._rows = self._rows_fn()
+        w, h = self._size
+        pyr = self._stage.build(queue, out.bufs[0], w, h)
+        self._on_build(pyr)
+        ev = self._stage.launch_test_rows(queue, pyr, self._rows, self._vp32, w, h,
+                                          self._zoff)
+        self._launched = (queue, [*pyr.events, ev])
+
+    def result(self) -> tuple[np.ndarray, float] | None:
+        """After the wait that followed the pass: the verdicts uint8 (K',) and the device
+        milliseconds of the pyramid and test, or None (turned off, or never launched)."""
+        if self._launched is None or self._off or self._rows is None:
+            return None
+        queue, events = self._launched
+        return self._stage.test_result(queue, self._rows.shape[1]), event_ms(events)
 
 
 def check_test_inputs(mins, maxs, view_proj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
