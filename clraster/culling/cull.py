@@ -956,10 +956,21 @@ class ViewCull:
         #: uint8 (I,) `Visibility` per instance (empty ones OUTSIDE), uint16 (I,) the
         #: planes each still crosses (`_classify_instances`)
         self.inst_state, self.inst_mask = _classify_instances(prep, self.view)
-        self.cone_view = _cone_view(prep, vp, cones, cull, cone_margin)
+        self._cone_args = (vp, cones, cull, cone_margin)
+        self._cone_view: _ConeView | None = None
+        self._cone_made = False
         t_inst = time.perf_counter()
         self.timings_ms = {"prepare": (t_prep - t_start) * 1e3,
                            "instances": (t_inst - t_prep) * 1e3}
+
+    @property
+    def cone_view(self) -> _ConeView | None:
+        """`_cone_view` of this view, made when first asked for (a view with every
+        instance outside never needs it)."""
+        if not self._cone_made:
+            self._cone_view = _cone_view(self.prep, *self._cone_args)
+            self._cone_made = True
+        return self._cone_view
 
     def outside_totals(self) -> tuple[int, int]:
         """(clusters, triangles) of the non-empty instances culled whole (OUTSIDE)."""

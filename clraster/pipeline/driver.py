@@ -195,11 +195,12 @@ def render_frame(backend: Backend[Out], target: Mesh | Scene, camera: CameraLike
     # the draw records: all of them now, or, with occlusion culling, those of each phase
     # when it is drawn (two_phase, which also culls the clusters: it may test only some of
     # them, hierarchically)
-    fd = plan.frame if not o.occlusion else None
+    empty = not o.occlusion and plan.empty
+    fd = plan.frame if not o.occlusion and not empty else None
     t_cull = (time.perf_counter() - t0) * 1e3
     counts = dict(plan.draw_list.counts) if not o.occlusion else {}
     params = FrameParams.make(w, h, config, o.cull, o.reversed_z, o.window)
-    if fd is not None and plan.empty:
+    if empty:
         # nothing in view: the cleared frame
         out = backend._clear(params, o)
         stats = FrameStats.from_counts(counts, np.zeros(0, np.uint8))
