@@ -1077,10 +1077,22 @@ class ViewCull:
     def all(self) -> DrawList:
         """The draw list of every (instance, cluster) pair of the scene."""
         t_inst = time.perf_counter()
-        prep, view, cone_view = self.prep, self.view, self.cone_view
+        prep, view = self.prep, self.view
         inst_state, inst_mask = self.inst_state, self.inst_mask
         timings = dict(self.timings_ms)
         pairs = _Pairs(self.keep_cone_culled)
+        if not (inst_state != OUTSIDE).any():
+            # nothing in view (every instance culled whole, or empty): the paths would find
+            # no pair, and the counts follow from the instances
+            none = np.zeros(0, np.int32)
+            t_end = time.perf_counter()
+            timings.update(clusters=0.0, cones=0.0, order=0.0,
+                           total=timings["prepare"] + timings["instances"]
+                           + (t_end - t_inst) * 1e3)
+            return DrawList(instance=none, cluster=none, inside=np.zeros(0, bool),
+                            counts=pairs.counts(prep, inst_state, 0), timings_ms=timings,
+                            cone_culled=pairs.cone_culled())
+        cone_view = self.cone_view
 
         def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
             t0 = time.perf_counter()
