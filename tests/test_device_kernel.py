@@ -139,3 +139,43 @@ def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue):
     assert not device.device_busy()
     cl.enqueue_copy(queue, a, buf)
     assert np.all(a > 0)
+
+
+def test_empty_frame_behind_abandoned_work_is_interruptible():
+    """A frame with nothing in view is cleared with one uninterruptible wait, which is
+    short, unless an interrupted frame's work still runs ahead of it on the renderer's
+    queue (`device.device_busy`): then Ctrl-C must still get through at once, as in any
+    other frame. The abandoned work is held back by a user event (the test's own stand-in
+    for an interrupted frame's kernels)."""
+    from clraster import Camera, Mesh, Renderer
+
+    mesh = Mesh(np.array([[0, 0, -2], [1, 0, -2], [0, 1, -2]], np.float32),
+                np.array([[0, 1, 2]], np.int32))
+    away = Camera.look_at(eye=(0, 0, 0), target=(0, 0, 1), up=(0, 1, 0))
+    r = Renderer(64, 48)
+    assert (r.render(mesh, away).triangle_id == -1).all()   # nothing in view
+    gate = cl.UserEvent(r.context)
+    cl.enqueue_barrier(r.queue, wait_for=[gate])   # nothing after it runs before the gate
+    device.abandon(r.queue, None)                  # as an interrupted frame leaves it
+    sent: list[float] = []
+
+    def interrupt() -> None:
+        sent.append(time.perf_counter())
+        _thread.interrupt_main()
+
+    timer = threading.Timer(0.2, interrupt)
+    fallback = threading.Timer(60.0, gate.set_status, (cl.command_execution_status.COMPLETE,))
+    timer.start()
+    fallback.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            r.render(mesh, away)
+        assert fallback.is_alive(), "the clear's wait ended only when the work could run"
+        assert time.perf_counter() - sent[0] < 2.0
+    finally:
+        timer.cancel()
+        fallback.cancel()
+        if gate.command_execution_status != cl.command_execution_status.COMPLETE:
+            gate.set_status(cl.command_execution_status.COMPLETE)
+    device.wait(r.queue)
+    assert (r.render(mesh, away).depth == 1.0).all()

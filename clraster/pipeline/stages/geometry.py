@@ -30,6 +30,8 @@ class GeometryBuffers:
     vertex stage sets no clip bits for it) or inside the near and far planes and the
     guard band by one (DRAW_NO_CLIP, the host's test), and no user plane clips (uclip 0),
     so that setup need not wait to learn that none was clipped (`SetupStage.run`).
+    host_clip_test: may_clip is False thanks to DRAW_NO_CLIP draws (the host's test, which
+    `SetupStage.check_unclipped` checks after the pass).
     """
 
     positions: GrowBuffer
@@ -47,6 +49,7 @@ class GeometryBuffers:
     n_verts: int = 0
     n_tris: int = 0
     may_clip: bool = True
+    host_clip_test: bool = False
 
 
 class GeometryStage:
@@ -88,6 +91,8 @@ class GeometryStage:
                 gb.write(queue, arr)
         b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
         b.n_user, b.uclip = fd.n_user, fd.uclip
-        unclipped = (fd.draws["flags"] & (DRAW_INSIDE | DRAW_NO_CLIP)) != 0
+        flags = fd.draws["flags"]
+        unclipped = (flags & (DRAW_INSIDE | DRAW_NO_CLIP)) != 0
         b.may_clip = bool((fd.n_user > 0 and fd.uclip != 0) or not unclipped.all())
+        b.host_clip_test = not b.may_clip and bool(((flags & DRAW_NO_CLIP) != 0).any())
         return b

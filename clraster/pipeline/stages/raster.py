@@ -13,7 +13,7 @@ import pyopencl as cl
 
 from ...base.config import SEG_TILES, RasterConfig
 from ..arraypool import ArrayPool
-from ..device import kernel, program, shares_host_memory, wait
+from ..device import device_busy, kernel, program, shares_host_memory, wait
 from ..params import FrameParams
 from ._buffers import GrowBuffer
 from .bin import BinBuffers
@@ -84,15 +84,21 @@ class RasterStage:
             cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
             self._zero_tiles = n_tiles + 1
         want = into.overdraw is not None
-        self.kernel(queue, (segments(params),), (1,), starts, starts, starts, np.int32(width),
+        ev = self.kernel(queue, (segments(params),), (1,), starts, starts, starts, np.int32(width),
                     np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
                     self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
                     self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0),
                     np.int32(0))
-        # one C call, not `wait`'s interruptible hand-over: a clear is a few ms at most
-        # (16.6 MB at 1080p) and the hand-over's wake-ups were a fifth of an empty frame
-        queue.finish()
+        if device_busy():
+            # an interrupted frame's work still runs ahead of the clear: wait interruptibly
+            wait(queue, keep=(into, self.buffers))   # (the kernel writes seg_stats too)
+        else:
+            # one C call, not `wait`'s interruptible hand-over: a clear is a few ms at most
+            # (16.6 MB at 1080p) and the hand-over's wake-ups were a fifth of an empty frame
+            queue.finish()
+            if ev.command_execution_status < 0:   # a failed clear raises, as `wait` does
+                ev.wait()
         into.sync(queue)
         return into
 

@@ -79,12 +79,15 @@ class SetupStage:
         self.flag.write(queue, np.zeros(1, np.int32))
 
     def check_unclipped(self, queue: cl.CommandQueue, geo: GeometryBuffers) -> None:
-        """After the pass's wait: where `run` did not wait for the clip count (``geo``'s
-        draws all DRAW_INSIDE or DRAW_NO_CLIP), check that setup found no triangle to clip.
+        """After the pass's wait: where `run` did not wait for the clip count because of
+        the host's clip test (``geo``'s draws all DRAW_INSIDE or DRAW_NO_CLIP, some of them
+        the latter), check that setup found no triangle to clip.
         The host's tests are conservative by a margin, so this never fires; if it did, the
         triangles to clip were dropped from the image, and that must not pass silently.
         (A read of host memory where the device shares it.)"""
-        if geo.may_clip or not geo.n_tris:
+        # (draws all DRAW_INSIDE have no clip bits at all: the vertex stage skips their
+        # outcode tests, so there is nothing to check, and no read on a discrete device)
+        if not geo.host_clip_test or not geo.n_tris:
             return
         if int(self.flag.read(queue, np.int32, 1)[0]):
             raise RuntimeError(
