@@ -3,6 +3,7 @@ launch packs scalars in one call (pyopencl's undeclared path took ~9 µs per sca
 device.wait waits for the device interruptibly."""
 
 import _thread
+import contextlib
 import threading
 import time
 
@@ -23,6 +24,32 @@ def ctx():
 @pytest.fixture(scope="module")
 def queue(ctx):
     return cl.CommandQueue(ctx)
+
+
+@contextlib.contextmanager
+def _interrupt_while_held(gate: cl.UserEvent):
+    """Ctrl-C (``_thread.interrupt_main``) 0.2 s from now, while ``gate`` holds a queue's
+    work back; a fallback opens the gate after 60 s, so a wait that cannot be interrupted
+    fails (the fallback is no longer alive) instead of hanging. Yields (the list that gets
+    the interrupt's time, the fallback timer); on exit both timers stop and the gate opens,
+    so the held work runs."""
+    sent: list[float] = []
+
+    def interrupt() -> None:
+        sent.append(time.perf_counter())
+        _thread.interrupt_main()
+
+    timer = threading.Timer(0.2, interrupt)
+    fallback = threading.Timer(60.0, gate.set_status, (cl.command_execution_status.COMPLETE,))
+    timer.start()
+    fallback.start()
+    try:
+        yield sent, fallback
+    finally:
+        timer.cancel()   # (should the wait end first, no interrupt after the test)
+        fallback.cancel()
+        if gate.command_execution_status != cl.command_execution_status.COMPLETE:
+            gate.set_status(cl.command_execution_status.COMPLETE)   # the work runs now
 
 
 def _setup_program(ctx):
@@ -104,17 +131,7 @@ def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue):
     gate = cl.UserEvent(ctx)
     cl.enqueue_barrier(queue, wait_for=[gate])   # nothing after it runs before the gate
     ev = spin(queue, (16,), (1,), buf, np.int32(100_000))
-    sent: list[float] = []
-
-    def interrupt() -> None:
-        sent.append(time.perf_counter())
-        _thread.interrupt_main()
-
-    timer = threading.Timer(0.2, interrupt)
-    fallback = threading.Timer(60.0, gate.set_status, (cl.command_execution_status.COMPLETE,))
-    timer.start()
-    fallback.start()
-    try:
+    with _interrupt_while_held(gate) as (sent, fallback):
         try:
             device.wait(queue)
         except KeyboardInterrupt:
@@ -129,11 +146,6 @@ def test_wait_returns_when_done_and_ctrl_c_ends_it_at_once(ctx, queue):
         assert latency < 2.0, f"the interrupt took {latency:.2f} s to get through"
         assert ev.command_execution_status != cl.command_execution_status.COMPLETE
         assert device.device_busy()   # the abandoned marker is kept until the work is done
-    finally:
-        timer.cancel()   # (should the wait end first, no interrupt after the test)
-        fallback.cancel()
-        if gate.command_execution_status != cl.command_execution_status.COMPLETE:
-            gate.set_status(cl.command_execution_status.COMPLETE)   # the work runs now
     device.wait(queue)
     assert ev.command_execution_status == cl.command_execution_status.COMPLETE
     assert not device.device_busy()
@@ -157,25 +169,10 @@ def test_empty_frame_behind_abandoned_work_is_interruptible():
     gate = cl.UserEvent(r.context)
     cl.enqueue_barrier(r.queue, wait_for=[gate])   # nothing after it runs before the gate
     device.abandon(r.queue, None)                  # as an interrupted frame leaves it
-    sent: list[float] = []
-
-    def interrupt() -> None:
-        sent.append(time.perf_counter())
-        _thread.interrupt_main()
-
-    timer = threading.Timer(0.2, interrupt)
-    fallback = threading.Timer(60.0, gate.set_status, (cl.command_execution_status.COMPLETE,))
-    timer.start()
-    fallback.start()
-    try:
+    with _interrupt_while_held(gate) as (sent, fallback):
         with pytest.raises(KeyboardInterrupt):
             r.render(mesh, away)
         assert fallback.is_alive(), "the clear's wait ended only when the work could run"
         assert time.perf_counter() - sent[0] < 2.0
-    finally:
-        timer.cancel()
-        fallback.cancel()
-        if gate.command_execution_status != cl.command_execution_status.COMPLETE:
-            gate.set_status(cl.command_execution_status.COMPLETE)
     device.wait(r.queue)
     assert (r.render(mesh, away).depth == 1.0).all()

@@ -41,6 +41,7 @@ planes for every draw).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import threading
@@ -363,7 +364,8 @@ def _pair_extremes(planes: np.ndarray, scales: np.ndarray, row: np.ndarray, g: n
         scales.transpose(2, 1, 0))
     if (row[1:] >= row[:-1]).all():
         # pairs in instance order (the two-phase schedule's sorted keys): each instance's
-        # rows repeated over its run, the same values as the gather below, ~4x faster
+        # rows repeated over its run, the same values as the gather below, without its
+        # indexing
         n = np.bincount(row, minlength=p.shape[2])
         p, s = np.repeat(p, n, axis=2), np.repeat(s, n, axis=2)
     else:
@@ -912,21 +914,12 @@ def build_draw_list(scene: Scene, view_proj: npt.ArrayLike, *, frustum: bool = T
                     clip_planes=clip_planes).all()
 
 
-_CLIP_ROWS_MEMO: dict[tuple[float, float], np.ndarray] = {}
-
-
 def _clip_rows(kx: float, ky: float) -> np.ndarray:
     """`ViewCull.clip_free`'s planes as combinations (6, 4) of the view-projection's x, y,
     z, w rows: near w + z, far w − z, then x + kx·w, kx·w − x, y + ky·w, ky·w − y (the
-    guard band, `clraster.base.config.guard_band_factors`); kept per (kx, ky)."""
-    rows = _CLIP_ROWS_MEMO.get((kx, ky))
-    if rows is None:
-        rows = np.array([[0, 0, 1, 1], [0, 0, -1, 1], [1, 0, 0, kx], [-1, 0, 0, kx],
-                         [0, 1, 0, ky], [0, -1, 0, ky]], np.float64)
-        if len(_CLIP_ROWS_MEMO) > 64:   # (renderers of many sizes)
-            _CLIP_ROWS_MEMO.clear()
-        _CLIP_ROWS_MEMO[(kx, ky)] = rows
-    return rows
+    guard band, `clraster.base.config.guard_band_factors`)."""
+    return np.array([[0, 0, 1, 1], [0, 0, -1, 1], [1, 0, 0, kx], [-1, 0, 0, kx],
+                     [0, 1, 0, ky], [0, -1, 0, ky]], np.float64)
 
 
 class ViewCull:
@@ -957,20 +950,15 @@ class ViewCull:
         #: planes each still crosses (`_classify_instances`)
         self.inst_state, self.inst_mask = _classify_instances(prep, self.view)
         self._cone_args = (vp, cones, cull, cone_margin)
-        self._cone_view: _ConeView | None = None
-        self._cone_made = False
         t_inst = time.perf_counter()
         self.timings_ms = {"prepare": (t_prep - t_start) * 1e3,
                            "instances": (t_inst - t_prep) * 1e3}
 
-    @property
+    @functools.cached_property
     def cone_view(self) -> _ConeView | None:
         """`_cone_view` of this view, made when first asked for (a view with every
         instance outside never needs it)."""
-        if not self._cone_made:
-            self._cone_view = _cone_view(self.prep, *self._cone_args)
-            self._cone_made = True
-        return self._cone_view
+        return _cone_view(self.prep, *self._cone_args)
 
     def outside_totals(self) -> tuple[int, int]:
         """(clusters, triangles) of the non-empty instances culled whole (OUTSIDE)."""
@@ -1057,22 +1045,11 @@ class ViewCull:
             if ((corners @ raw.T).min(axis=0) >= (mag @ cmag) * self.margin).all():
                 return np.ones(inst.size, bool)
         g = prep.mesh_base[prep.inst_umesh[inst]] + cl
-        tables = prep.pair_tables()
-        if inst[0] == inst[-1] and (inst == inst[0]).all():
-            # one instance (a mesh): its planes against every box at once, (6, 4) @ (4, N)
-            # products (the margin dwarfs their rounding; `_pair_extremes` costs ~4x here)
-            i = int(inst[0])
-            p, sc = raw @ prep.m[i], mag @ prep.abs_m[i]
-            c, e, bm = (np.take(a, g, axis=1) for a in (tables.centre, tables.half,
-                                                        tables.mag))
-            dmin = (p[:, :3] @ c + p[:, 3:]) - np.abs(p[:, :3]) @ e
-            mterm = sc[:, :3] @ bm + sc[:, 3:]
-        else:
-            uniq, row = np.unique(inst, return_inverse=True)
-            dmin, _, mterm = _pair_extremes(np.matmul(raw, prep.m[uniq]),
-                                            np.matmul(mag, prep.abs_m[uniq]),
-                                            row.reshape(-1), g, prep)
-        return (dmin >= mterm * self.margin).all(axis=0) & tables.bounded[g]
+        uniq, row = np.unique(inst, return_inverse=True)
+        dmin, _, mterm = _pair_extremes(np.matmul(raw, prep.m[uniq]),
+                                        np.matmul(mag, prep.abs_m[uniq]), row.reshape(-1), g,
+                                        prep)
+        return (dmin >= mterm * self.margin).all(axis=0) & prep.pair_tables().bounded[g]
 
     def all(self) -> DrawList:
         """The draw list of every (instance, cluster) pair of the scene."""
@@ -1081,18 +1058,10 @@ class ViewCull:
         inst_state, inst_mask = self.inst_state, self.inst_mask
         timings = dict(self.timings_ms)
         pairs = _Pairs(self.keep_cone_culled)
-        if not (inst_state != OUTSIDE).any():
-            # nothing in view (every instance culled whole, or empty): the paths would find
-            # no pair, and the counts follow from the instances
-            none = np.zeros(0, np.int32)
-            t_end = time.perf_counter()
-            timings.update(clusters=0.0, cones=0.0, order=0.0,
-                           total=timings["prepare"] + timings["instances"]
-                           + (t_end - t_inst) * 1e3)
-            return DrawList(instance=none, cluster=none, inside=np.zeros(0, bool),
-                            counts=pairs.counts(prep, inst_state, 0), timings_ms=timings,
-                            cone_culled=pairs.cone_culled())
-        cone_view = self.cone_view
+        # nothing in view (every instance culled whole, or empty): no path to run (they
+        # would find no pair), and the counts follow from the instances
+        in_view = bool((inst_state != OUTSIDE).any())
+        cone_view = self.cone_view if in_view else None
 
         def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
             t0 = time.perf_counter()
@@ -1113,10 +1082,10 @@ class ViewCull:
 
         tasks: list = []
         work: list[int] = []   # bounds on the pairs each task looks at (`_run_tasks`)
-        if prep.flat_ids.size:
+        if in_view and prep.flat_ids.size:
             tasks.append((flat_task, ()))
             work.append(int(prep.flat_count.sum()))   # (a bound: it is only compared)
-        for mc, members in prep.groups:
+        for mc, members in prep.groups if in_view else ():
             vis = inst_state[members] != OUTSIDE
             if vis.any():
                 tasks.append((group_task, (mc, members, vis)))

@@ -450,35 +450,35 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     k2 = np.sort(k2[~in_phase1[k2]])
     # the clusters of the groups in view, one by one: Hi-Z tested, and those not hidden
     # culled (frustum, cones) and drawn. A cluster the test hides counts occlusion-culled
-    # untested, one wholly outside a frustum plane frustum-culled, as the groups' are:
-    # culling first spent ~1.5 ms of the plant's frame on clusters that were then hidden
-    # (every one of them in a still view), the device idle
-    n_view2 = tri_view2 = 0
-    hid2 = k2[:0]
+    # untested, one wholly outside a frustum plane frustum-culled, as the groups' are (in
+    # a still view the test hides all of them: culling them first was host time with the
+    # device idle)
+    n_view2 = tri_view2 = tri_occ2 = 0
+    occ2 = k2[:0]   # the clusters the test hid
     if k2.size:
         codes, ms = hiz(out, _box_rows(box_rows, k2), vp32, same_depth=bool(tested_g.size))
         codes = codes[:k2.size]
         hiz_ms += ms or 0.0
         view2 = (codes == Occlusion.VIEW_CULLED) & vc.view.frustum & wbounded[k2]
         shown = (codes == Occlusion.VISIBLE) | ~wbounded[k2]   # (no box: never hidden)
-        hid2 = k2[~shown & ~view2]
+        occ2 = k2[~shown & ~view2]
         n_view2, tri_view2 = int(view2.sum()), int(np.take(grp.tris, k2[view2]).sum())
+        tri_occ2 = int(np.take(grp.tris, occ2).sum())
         k2 = k2[shown]
     dl2 = vc.pairs(grp.inst[k2], grp.cluster[k2])
     t_cull += dl2.timings_ms["total"]
-    keys2 = base[dl2.instance] + dl2.cluster
-    second = np.ones(keys2.size, bool)   # (every cluster that survived is drawn)
+    keys2 = base[dl2.instance] + dl2.cluster   # (every cluster that survived is drawn)
     t_draw = time.perf_counter()
     out = draw(plan.draws_for(dl2), out)
     draw_ms += (time.perf_counter() - t_draw) * 1e3
     # visibility for the next frame, as the flat schedule
-    drawn = np.concatenate([keys1, keys2[second]])
+    drawn = np.concatenate([keys1, keys2])
     if drawn.size:
-        if codes1 is not None and not second.any():   # (drawn is keys1)
+        if codes1 is not None and not keys2.size:   # (drawn is keys1)
             codes = codes1
         else:
             codes, ms = hiz(out, _box_rows(box_rows, drawn), vp32,
-                            same_depth=not second.any())
+                            same_depth=not keys2.size)
             hiz_ms += ms or 0.0
         vis = (codes[:drawn.size] == Occlusion.VISIBLE) | ~wbounded[drawn]
         visible = drawn[vis]
@@ -496,7 +496,6 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
     hid_g = np.flatnonzero(hidden)
     n_hidden, tri_hidden = group_totals(hidden)
     n_outside, tri_outside = group_totals(outside)
-    occ2 = hid2
 
     def occluded_keys() -> np.ndarray:
         keys = grp.keys_of(hid_g)
@@ -521,14 +520,13 @@ def _two_phase_groups(plan: FramePlan, history: OcclusionHistory, draw: DrawFn, 
         + c1["triangles_frustum_culled"] + c2["triangles_frustum_culled"],
         "triangles_cone_culled": c1["triangles_cone_culled"] + c2["triangles_cone_culled"],
         "triangles_drawn": c1["triangles_drawn"] + c2["triangles_drawn"] + tri_hidden
-        + int(np.take(grp.tris, occ2).sum()),
+        + tri_occ2,
     }
     counts.update(frame_counts)
     counts["clusters_occlusion_culled"] = n_hidden + int(occ2.size)
-    counts["triangles_occlusion_culled"] = tri_hidden + int(
-        np.take(grp.tris, occ2).sum())
+    counts["triangles_occlusion_culled"] = tri_hidden + tri_occ2
     counts["clusters_phase1"] = len(dl1)
-    counts["clusters_phase2"] = int(second.sum())
+    counts["clusters_phase2"] = int(keys2.size)
     plan.draw_list = _merge(dl1, dl2, base, frame_counts)
     _add_ms(totals, "cull (host)", t_cull)
     if hiz_ms:

@@ -213,7 +213,8 @@ class PyramidStage:
             soa[:, :k] = rows
         bbox = b.boxes.ensure(soa.nbytes, "box buffer")
         bvp, bres = b.view_proj.ensure(64), b.result.ensure(n_pad)
-        # (no pending command uses these two: every test waits for its result, in one call)
+        # (no pending command uses these two: a test's result is read, after a wait, before
+        # the next test is launched)
         b.boxes.write(queue, soa)
         b.view_proj.write(queue, vp)
         n_wi = n_pad // 8

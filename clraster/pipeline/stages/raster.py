@@ -94,8 +94,8 @@ class RasterStage:
             # an interrupted frame's work still runs ahead of the clear: wait interruptibly
             wait(queue, keep=(into, self.buffers))   # (the kernel writes seg_stats too)
         else:
-            # one C call, not `wait`'s interruptible hand-over: a clear is a few ms at most
-            # (16.6 MB at 1080p) and the hand-over's wake-ups were a fifth of an empty frame
+            # one C call, not `wait`'s interruptible hand-over (its waiter thread's wake-ups):
+            # a clear is a few ms at most (16.6 MB at 1080p)
             queue.finish()
             if ev.command_execution_status < 0:   # a failed clear raises, as `wait` does
                 ev.wait()
