@@ -43,8 +43,8 @@ VARIANTS = {
     "no_store": ("    if (st == ST_RASTER) {\n        /* the record's first 32 bytes",
                  "    if (width > 0) return;\n"
                  "    if (st == ST_RASTER) {\n        /* the record's first 32 bytes"),
-    "no_record": ("        d8[1] = (int8)",
-                  "        if (n > 0) continue;\n        d8[1] = (int8)"),
+    "no_record": ("        d8[1] = r[k];",
+                  "        if (n > 0) continue;\n        d8[1] = r[k];"),
     "no_values": ("    int n = q->n;\n    for (int k = n;",
                   "    q->n = 0; return;\n    int n = q->n;\n    for (int k = n;"),
 }

@@ -412,8 +412,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--wireframe-bias", type=float, default=1e-4, metavar="D",
                    help="window-depth bias of the wireframe's depth test (default 1e-4): an "
                         "edge shows where its depth <= surface depth + D")
-    r.add_argument("--tile-log2", type=int, choices=range(3, 7), default=4, metavar="{3..6}",
-                   help="tiles are 2**N pixels square (default 4); never changes the image")
+    r.add_argument("--tile-log2", type=int, choices=range(3, 7),
+                   default=RasterConfig().tile_log2, metavar="{3..6}",
+                   help="tiles are 2**N pixels square (default: RasterConfig's, "
+                        f"{RasterConfig().tile_log2}); never changes the image")
     r.add_argument("--reference", action="store_true",
                    help="render with the NumPy reference pipeline instead of OpenCL")
     r.add_argument("--repeat", type=int, default=1, metavar="N",

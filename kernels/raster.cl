@@ -534,8 +534,8 @@ __kernel void raster_tiles(__global const float *clip_bary,
      * nothing, the outputs stay untouched, the host runs the pass again */
     if (BIN_LIST_OVER(bin_summary, bin_cap)) return;
     int tiles_y = (height + TILE_SIZE - 1) >> TILE_LOG2;
-    /* segments per row: the host's choice (clraster/pipeline/stages/raster.py segments, about
-     * SEG_TILES tiles each) */
+    /* segments per row: the host's choice (clraster/pipeline/stages/raster.py segments, whole
+     * tiles of about SEG_PIXELS pixels each) */
     int segs = (int)get_global_size(0) / tiles_y, seg_tiles = (tiles_x + segs - 1) / segs;
     int g = get_global_id(0);
     int ty = g / segs, seg = g - ty * segs;

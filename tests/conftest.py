@@ -130,13 +130,16 @@ def pixel_centres(width: int, height: int):
 
 
 _RENDERERS: dict[tuple[int, int, int, bool], object] = {}
+#: the tile size the helpers below render with unless told (the product's default)
+DEFAULT_TILE_LOG2 = RasterConfig().tile_log2
 
 
-def get_renderer(width: int, height: int, tile_log2: int = 4, hiz: bool = True):
+def get_renderer(width: int, height: int, tile_log2: int | None = None, hiz: bool = True):
     """The session's Renderer for this size, tile size and tile Hi-Z setting (built on
     first use)."""
     from clraster import Renderer
 
+    tile_log2 = DEFAULT_TILE_LOG2 if tile_log2 is None else tile_log2
     key = (width, height, tile_log2, hiz)
     r = _RENDERERS.get(key)
     if r is None:
@@ -162,28 +165,30 @@ def client():
 
 @pytest.fixture(scope="session")
 def renderer_for():
-    """``renderer_for(width, height, tile_log2=4)`` → a cached Renderer."""
+    """``renderer_for(width, height, tile_log2=None)`` → a cached Renderer (None: the
+    default tile size)."""
     return get_renderer
 
 
 # The core-pipeline tests pin per-triangle counts (every face reaches setup), so they render
 # with object culling off; tests/test_culling*.py cover it being on.
-def render_cl(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+def render_cl(mesh, camera, width, height, cull="none", tile_log2=None, culling=False,
               hiz=True):
     return get_renderer(width, height, tile_log2, hiz).render(mesh, camera, cull=cull,
                                                          frustum=culling, cones=culling)
 
 
-def render_ref(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+def render_ref(mesh, camera, width, height, cull="none", tile_log2=None, culling=False,
                hiz=True):
     from clraster.pipeline import reference
 
+    tile_log2 = DEFAULT_TILE_LOG2 if tile_log2 is None else tile_log2
     return reference.render(mesh, camera, width, height, cull=cull, frustum=culling,
                             cones=culling,
                             config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz))
 
 
-def render_both(mesh, camera, width, height, cull="none", tile_log2=4, culling=False,
+def render_both(mesh, camera, width, height, cull="none", tile_log2=None, culling=False,
                 hiz=True):
     """(OpenCL frame, NumPy-twin frame) for the same input and config."""
     return (render_cl(mesh, camera, width, height, cull, tile_log2, culling, hiz),

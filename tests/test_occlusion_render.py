@@ -87,12 +87,14 @@ PRE_OCCLUSION = ("instances_total", "instances_frustum_culled", "instances_empty
 
 # -- helpers ------------------------------------------------------------------------------
 
-def occ_renderer(size=SIZE, tile_log2: int = 4, hiz: bool = True,
+def occ_renderer(size=SIZE, tile_log2: int | None = None, hiz: bool = True,
                  groups: int | None = None) -> Renderer:
     """A renderer of its own for occlusion frames (its history is the test's business; the
-    programs are cached per context, so this is cheap). groups: `occlusion_groups` (None:
-    the default, hierarchical; 0: flat two-phase)."""
+    programs are cached per context, so this is cheap). tile_log2 None: the default tile
+    size. groups: `occlusion_groups` (None: the default, hierarchical; 0: flat two-phase)."""
     kw = {} if groups is None else {"occlusion_groups": groups}
+    if tile_log2 is None:
+        tile_log2 = RasterConfig().tile_log2
     return Renderer(*size, config=RasterConfig(tile_log2=tile_log2, tile_hiz=hiz, **kw))
 
 

@@ -31,11 +31,13 @@ from clraster.pipeline.streaming import draw_range, stream_draws
 from clraster.world.generators import plant, plant_inside_camera, random_scene
 
 #: A budget larger than any scene here: the unbatched frame.
-UNBATCHED = RasterConfig(batch_triangles=2**31 - 1, batch_entries=2**31 - 1)
+UNBATCHED = RasterConfig(tile_log2=4, batch_triangles=2**31 - 1, batch_entries=2**31 - 1)
 
 
 def _config(tris: int, entries: int = 2**31 - 1) -> RasterConfig:
-    return RasterConfig(batch_triangles=tris, batch_entries=entries)
+    # 16 px tiles: the entry budgets and counts of these tests were chosen for them (a
+    # full-screen quad makes ~16x as many entries as with the default 64 px tiles)
+    return RasterConfig(tile_log2=4, batch_triangles=tris, batch_entries=entries)
 
 
 def _passes(renderer: Renderer) -> list[int]:

@@ -39,7 +39,7 @@ __all__ = [
     "DENSE_INSTANCES", "DENSE_PAIRS",
     "FLAT_CLUSTERS", "FLAT_MAX_PAIRS", "GUARD_BAND_PIXELS", "HIZ_TEST_LOCAL",
     "KERNEL_TUNABLES", "LINES_LOCAL", "MAX_IMAGE_SIZE", "MIN_CHUNK_TRIANGLES",
-    "OCCLUSION_FIRST_CLUSTERS", "QUERY_SPAN", "SCAN_CHUNKS", "SEG_TILES", "THREAD_PAIRS",
+    "OCCLUSION_FIRST_CLUSTERS", "QUERY_SPAN", "SCAN_CHUNKS", "SEG_PIXELS", "THREAD_PAIRS",
     "TRIM_ROWS", "WIDE_RUN", "RasterConfig", "guard_band_factors",
 ]
 
@@ -65,11 +65,13 @@ KERNEL_TUNABLES = ("WIDE_RUN", "TRIM_ROWS", "QUERY_SPAN")
 
 # ---- Launch shapes (host stages; speed only) -----------------------------------------------
 
-#: stages/raster.py: tiles per raster work-item, about (a row of tiles is cut into segments
-#: of this many). Tiles; >= 1. Fewer: more work-items, shorter runs of empty tiles to clear
-#: (256 px at 16 px tiles); more: whole rows, which leave a core idle when the work sits in
-#: a few rows (kernels/raster.cl).
-SEG_TILES = 16
+#: stages/raster.py: pixels of a row of tiles per raster work-item, about (a row of tiles is
+#: cut into segments of this many pixels' worth of whole tiles, at least one). Pixels;
+#: >= 1. Narrower: more work-items, shorter runs of empty tiles to clear; wider: fewer
+#: work-items, which leave a core idle when the work sits in a few rows (the plant seen
+#: from inside: 16 px tiles in 256 px segments balanced, 64 px tiles in 1024 px segments did
+#: not; bench/README.md).
+SEG_PIXELS = 128
 #: stages/setup.py: ranges of the clip-count scan, one work-item each. >= 1; a few per core.
 SCAN_CHUNKS = 64
 #: stages/bin.py: fewest triangles per bin chunk (RasterConfig.bin_chunks caps the count).
@@ -126,8 +128,12 @@ class RasterConfig:
 
     Attributes:
         tile_log2: screen tiles are ``1 << tile_log2`` pixels square (3..6: 8..64 px).
-            Smaller tiles bin more entries; larger ones keep more per-tile state in
-            private memory (64×64 = 32 KiB per work-item) and balance worse on few cores.
+            Smaller tiles bin more entries (a piece goes to every tile its edges reach) and
+            pay the per-tile set-up more often; larger ones keep more per-tile state in
+            private memory (64 KiB per raster work-item at 64 × 64: depth, winner, id and
+            overdraw per pixel). Default 6 (64 px): the fastest on every scene of the
+            benchmark (the 10M plant seen from inside 0.78× the frame time of 16 px tiles,
+            the dragon at 1080p 0.95×; bench/README.md).
         bin_chunks: the triangle stream is cut into this many contiguous chunks for
             binning; each chunk counts and scatters its own triangles per tile, so the
             per-tile lists keep submission order with no atomics. Memory is
@@ -186,7 +192,7 @@ class RasterConfig:
             job (bench/README.md, "Views in flight").
     """
 
-    tile_log2: int = 4
+    tile_log2: int = 6
     bin_chunks: int = 64
     batch_triangles: int = 1 << 20
     batch_entries: int = 1 << 21

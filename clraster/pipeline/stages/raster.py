@@ -11,7 +11,7 @@ from typing import Any, cast
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import SEG_TILES, RasterConfig
+from ...base.config import SEG_PIXELS, RasterConfig
 from ..arraypool import ArrayPool
 from ..device import device_busy, kernel, program, shares_host_memory, wait
 from ..params import FrameParams
@@ -30,11 +30,13 @@ def zeros_array(shape: tuple[int, ...], dtype: type) -> np.ndarray:
     return np.frombuffer(mm, dtype, count=n).reshape(shape)
 
 
-def segments(params: FrameParams) -> int:
+def segments(params: FrameParams, tile_log2: int) -> int:
     """Work-items of the raster kernel: rows of tiles × segments of each row, a segment
-    being about `SEG_TILES` tiles (config; 544 work-items at 1920x1080 with 16 px tiles).
-    The kernel reads the segments per row back from its global size."""
-    return params.tiles_y * -(-params.tiles_x // SEG_TILES)
+    being the whole tiles of about `SEG_PIXELS` pixels (config; at least one tile: 255
+    work-items at 1920x1080 with 64 px tiles). The kernel reads the segments per row back
+    from its global size."""
+    seg_tiles = max(1, SEG_PIXELS >> tile_log2)
+    return params.tiles_y * -(-params.tiles_x // seg_tiles)
 
 
 @dataclass
@@ -84,9 +86,10 @@ class RasterStage:
             cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
             self._zero_tiles = n_tiles + 1
         want = into.overdraw is not None
-        ev = self.kernel(queue, (segments(params),), (1,), starts, starts, starts, np.int32(width),
+        n = segments(params, self.config.tile_log2)
+        ev = self.kernel(queue, (n,), (1,), starts, starts, starts, np.int32(width),
                     np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
-                    self.buffers.seg_stats.ensure(16 * segments(params)), np.int32(0),
+                    self.buffers.seg_stats.ensure(16 * n), np.int32(0),
                     np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
                     self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0),
                     np.int32(0))
@@ -168,11 +171,12 @@ class RasterStage:
         want_bary = out.bary is not None
         # an output not wanted gets another buffer as its (untouched) argument; overdraw,
         # when present, is the last buffer
-        return self.kernel(queue, (segments(params),), (1,), setup.clip_bary.buf,
+        n = segments(params, self.config.tile_log2)
+        return self.kernel(queue, (n,), (1,), setup.clip_bary.buf,
                            bins.tile_start.buf, bins.entries.buf,
                            np.int32(width), np.int32(height), np.int32(params.tiles_x),
                            *out.bufs[:2], out.bufs[2] if want_bary else out.bufs[1],
-                           self.buffers.seg_stats.ensure(16 * segments(params)),
+                           self.buffers.seg_stats.ensure(16 * n),
                            np.int32(load), np.int32(want),
                            out.bufs[-1] if want else out.bufs[1], np.int32(want_bary),
                            *self._window(queue, params), bins.summary.buf, np.int32(bins.cap),
@@ -199,7 +203,7 @@ class RasterStage:
         # kept the GIL for the whole kernel (~200 ms of a big frame during which no other
         # Python thread ran)
         out.sync(queue)
-        n = segments(params)
+        n = segments(params, self.config.tile_log2)
         return self.buffers.seg_stats.read(queue, np.int64, 2 * n).reshape(n, 2)
 
 
