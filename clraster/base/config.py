@@ -131,9 +131,11 @@ class RasterConfig:
             Smaller tiles bin more entries (a piece goes to every tile its edges reach) and
             pay the per-tile set-up more often; larger ones keep more per-tile state in
             private memory (64 KiB per raster work-item at 64 × 64: depth, winner, id and
-            overdraw per pixel). Default 6 (64 px): the fastest on every scene of the
-            benchmark (the 10M plant seen from inside 0.78× the frame time of 16 px tiles,
-            the dragon at 1080p 0.95×; bench/README.md).
+            overdraw per pixel). Default 6 (64 px): on PoCL (pip and distribution builds)
+            the fastest on every scene of the benchmark (the 10M plant seen from inside
+            0.78× the frame time of 16 px tiles, the dragon at 1080p 0.95×); Intel's CPU
+            runtime, which runs work-items in SIMD lanes each with its own tile state,
+            rasterizes small triangles faster at 16 px (bench/README.md).
         bin_chunks: the triangle stream is cut into this many contiguous chunks for
             binning; each chunk counts and scatters its own triangles per tile, so the
             per-tile lists keep submission order with no atomics. Memory is
