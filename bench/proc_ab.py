@@ -6,6 +6,7 @@
     python bench/proc_ab.py HEAD HEAD --env-b '{"POCL_WORK_GROUP_METHOD": "loops"}'   # PoCL option
     python bench/proc_ab.py 23d0dc1 --size 3840x2160 --rounds 9
     python bench/proc_ab.py HEAD WORKTREE --scenes dragon --evict 2000   # cold caches
+    python bench/proc_ab.py HEAD HEAD --config-a '{"tile_log2": 4}'       # RasterConfig
 
 Where `tree_ab.py` starts a process per frame, each tree here keeps one process (one
 Renderer per scene, warmed up) and renders one frame per request, the two trees taking
@@ -41,9 +42,10 @@ MESHES = REPO.parent / "shared" / "meshes"
 WORKER = r'''
 import json, resource, sys, time
 tree, W, H, M = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4] + "/"
+CONFIG = json.loads(sys.argv[5])
 sys.path.insert(0, tree)
 import numpy as np
-from clraster import Camera, Mesh, Renderer
+from clraster import Camera, Mesh, RasterConfig, Renderer
 FILES = {"spot": "spot.ply", "dragon": "stanford_dragon_vrip.ply",
          "bunny": "stanford_bunny.ply", "lucy": "stanford_lucy_100k.ply",
          "armadillo": "armadillo_86k.ply", "dragon202k": "stanford_dragon_res2.ply"}
@@ -74,7 +76,7 @@ def scene(name):
             t = Mesh.load(M + FILES[name])
             cam = Camera.framing(*t.bounds(), aspect=W / H)
         scenes[name] = (t, cam, kw)
-        renderers[name] = Renderer(W, H)
+        renderers[name] = Renderer(W, H, config=RasterConfig(**CONFIG))
     return scenes[name] + (renderers[name],)
 
 
@@ -115,6 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--env-a", default="{}", help="extra environment of A's worker, JSON "
                     '(e.g. \'{"POCL_WORK_GROUP_METHOD": "loops"}\')')
     ap.add_argument("--env-b", default="{}", help="extra environment of B's worker, JSON")
+    ap.add_argument("--config-a", default="{}", help="RasterConfig keywords of A's "
+                    'renderers, JSON (e.g. \'{"tile_log2": 4}\')')
+    ap.add_argument("--config-b", default="{}", help="RasterConfig keywords of B's renderers")
     ap.add_argument("--evict", type=int, default=0, metavar="MB",
                     help="touch this many MB before each timed frame (cold caches)")
     a = ap.parse_args(argv)
@@ -122,10 +127,12 @@ def main(argv: list[str] | None = None) -> int:
     tmp = Path(tempfile.mkdtemp())
     (tmp / "worker.py").write_text(WORKER)
     procs = {}
-    for tag, rev, kw, env in (("A", a.a, a.kwa, a.env_a), ("B", a.b, a.kwb, a.env_b)):
+    for tag, rev, kw, env, cfg in (("A", a.a, a.kwa, a.env_a, a.config_a),
+                                   ("B", a.b, a.kwb, a.env_b, a.config_b)):
         tree = export(rev, tmp / tag)
         p = subprocess.Popen([sys.executable, str(tmp / "worker.py"), str(tree), w, h,
-                              str(MESHES)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              str(MESHES), json.dumps(json.loads(cfg))],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                              text=True, cwd=tmp, env={**os.environ, **json.loads(env)})
         procs[tag] = (p, json.loads(kw))
 
