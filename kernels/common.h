@@ -40,20 +40,21 @@
  * bb_min (setup.cl value_planes); r1, r2 = w0/w1, w0/w2: perspective correction of the
  * weights.
  *
- * Draw [DRAW_DTYPE]: one drawn cluster of one instance. vert_base / tri_base: where its
- * vertices / triangles start in this frame's vertex and triangle streams; face_base: triangle
+ * Draw [DRAW_DTYPE]: one drawn cluster of one instance. tri_base: where its triangles start
+ * in this frame's triangle stream (vert_base, where its vertices start in the twin's vertex
+ * stream, is not read here: setup makes each draw's vertices itself); face_base: triangle
  * id of the instance's face 0; flags: DRAW_INSIDE = cluster inside the frustum by a margin,
  * no clip tests needed.
  *
- * Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The vertex
- * stage runs a work-group per draw (VERTEX_LANES local vertices a work-item), setup_triangles
- * a work-item per draw (its triangles SETUP_LANES at a time), the clipper's kernels one
+ * Clusters (meshlets) hold at most CLUSTER_MAX triangles and CLUSTER_MAX vertices.
+ * setup_triangles runs a work-item per draw (its vertices VERTEX_LANES at a time, then its
+ * triangles SETUP_LANES at a time), the clipper's kernels one
  * work-item per (draw, local triangle): work-item g serves draw g >> CLUSTER_LOG2, local
  * index g & (CLUSTER_MAX - 1).
  *
  * WinVert [WINVERT_DTYPE]: a vertex after the viewport transform (viewport_vertex below).
- * int2 [WINXY_DTYPE]: its 24.8 fixed-point x, y alone: the vertex stream's window positions
- * (vertex.cl writes them, setup.cl reads them; win_xy below).
+ * int2 [WINXY_DTYPE]: its 24.8 fixed-point x, y alone: a vertex's window position as
+ * setup keeps it (win_xy below).
  *
  * LineRec [LINE_DTYPE]: one set-up line segment (lines.cl).
  */
@@ -64,7 +65,7 @@
  * device's compiler once (clraster.pipeline.features: each builtin built and run on known
  * inputs) and passes -DCLRASTER_NO_<FEATURE> for each one it lacks; -DCLRASTER_PORTABLE
  * forces every fallback (always on Oclgrind, which also needs the workarounds of its own
- * in vertex.cl and raster.cl; CLRASTER_FALLBACKS=all). */
+ * in setup.cl and raster.cl; CLRASTER_FALLBACKS=all). */
 #ifdef CLRASTER_PORTABLE
 #define CLRASTER_NO_RINTF
 #define CLRASTER_NO_SQRTF
@@ -207,12 +208,12 @@ inline bool any8(int8 m)
 #define MASK_INT8(m) __builtin_convertvector(m, int8)
 #endif
 
-/* vertex.cl's lane stores (store_lanes) need three Clang features at once: vector shuffles,
- * elementwise roundeven and ext_vector_type typedefs of element alignment. Fallback: the
- * vertex kernel's per-vertex loop, the same values vertex by vertex. */
+/* setup.cl's vertex lanes (draw_vertices) need three Clang features at once: vector
+ * shuffles, elementwise roundeven and ext_vector_type typedefs of element alignment.
+ * Fallback: vertex by vertex, the same values. */
 #if !defined(CLRASTER_NO_SHUFFLEVECTOR) && !defined(CLRASTER_NO_ROUNDEVEN) &&              \
     !defined(CLRASTER_NO_EXT_VECTOR_TYPE)
-#define CLRASTER_LANE_STORES
+#define CLRASTER_VERTEX_LANES
 #endif
 
 /* A helper PoCL must inline. Its inliner left some larger helpers called once per triangle
@@ -239,15 +240,15 @@ inline double mind(double a, double b) { return a <= b ? a : b; }
 #define FACE_N(rows, r, k) as_float((rows)[(long)FACE_ROW_WORDS * (r) + 3 + (k)])
 
 /* Row r of M · [x y z 1]ᵀ for a row-major 4 × 4 matrix m (float or double), in the order
- * the NumPy twin sums (vertex.cl for triangles, lines.cl for line endpoints, user planes and
- * depth rows too). x, y, z are scalars or vectors (the vertex stage's lanes): the same
+ * the NumPy twin sums (setup.cl's vertices for triangles, lines.cl for line endpoints, user
+ * planes and depth rows too). x, y, z are scalars or vectors (setup's vertex lanes): the same
  * operations per lane. Products are rounded, so it matters that nothing is fused
  * (FP_CONTRACT is off). */
 #define MAT_ROW(m, r, x, y, z)                                                              \
     ((((m)[4 * (r)] * (x) + (m)[4 * (r) + 1] * (y)) + (m)[4 * (r) + 2] * (z)) + (m)[4 * (r) + 3])
 
-/* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M (lines.cl; vertex.cl does the same
- * per lane with MAT_ROW). */
+/* clip = M · [x y z 1]ᵀ for a row-major float32 matrix M (lines.cl, setup.cl's vertex_of;
+ * setup.cl's draw_vertices does the same per lane with MAT_ROW). */
 inline float4 clip_transform(__global const float *m, float px, float py, float pz)
 {
     return (float4)(MAT_ROW(m, 0, px, py, pz), MAT_ROW(m, 1, px, py, pz),
@@ -294,9 +295,9 @@ inline uint frustum_outcode_d(double4 c)
 #define WIN_Z(z, iw) (((z) * (iw)) * 0.5f + 0.5f)
 
 /* A vertex after the viewport transform (WinVert): 24.8 fixed-point window x/y (y down),
- * window depth (z/w + 1)/2 and 1/w. Computed per vertex in vertex.cl for vertices inside the
- * guard band (8 lanes at a time, with the same WIN_* expressions and rounding) and per
- * clipped vertex in setup.cl, so both are bit-identical. */
+ * window depth (z/w + 1)/2 and 1/w. Computed for the vertices inside the guard band by
+ * setup.cl's draw_vertices (8 lanes at a time, with the same WIN_* expressions and
+ * rounding) and per clipped vertex by its clipper, so both are bit-identical. */
 inline WinVert viewport_vertex(float4 c, float hw, float hh)
 {
     WinVert v;

@@ -6,7 +6,7 @@
  *
  * Three launches, one work-item per segment each:
  *
- * line_setup   clip = M·[x y z 1]ᵀ in float32 (vertex.cl's operation order), 6-bit outcodes
+ * line_setup   clip = M·[x y z 1]ᵀ in float32 (setup.cl's vertex operation order), 6-bit outcodes
  *              (x<-w, x>w, y<-w, y>w, z<-w, z>w; OC_INVALID for a NaN/Inf clip position).
  *              Cohen–Sutherland: c0 | c1 == 0 -> trivial accept; c0 & c1 != 0 -> trivial
  *              reject; otherwise clip. The clipper (double, as in setup.cl) visits the

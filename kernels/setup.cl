@@ -42,7 +42,8 @@ typedef struct { double4 p; double r; } ClipIn;
 __constant uint PLANE_BIT[6] = {OC_Z_NEG, OC_Z_POS, OC_GB_X_NEG, OC_GB_X_POS, OC_GB_Y_NEG,
                                 OC_GB_Y_POS};
 
-/* Signed distance to clip plane p, >= 0 inside; the same expressions as vertex.cl. */
+/* Signed distance to clip plane p, >= 0 inside; the same expressions as the outcodes
+ * (vertex_outcode). */
 inline double plane_dist(int p, double4 v, double kx, double ky)
 {
     switch (p) {
@@ -355,10 +356,186 @@ inline int clip_and_emit(float4 c0, float4 c1, float4 c2, ClipIn d0, ClipIn d1, 
     return count;
 }
 
+/* ---- The vertex stage: a draw's vertices, made by the setup work-item of the draw -------
+ *
+ * Object space -> clip space (the instance's row-major float32 matrix, mvps[16 * instance]:
+ * clip = M · [x y z 1]ᵀ, MAT_ROW), the outcodes, the snapped window x, y of the vertices that
+ * can be drawn unclipped, and the user clip plane codes. setup_triangles makes them for
+ * the CLUSTER_MAX vertices of its draw at most, into private memory (DrawVerts), before it
+ * sets up the draw's triangles from them; the clipper's kernels make them for the three
+ * corners of their triangle (vertex_of). The same operations in the same order either
+ * way, so the same bits. (A kernel of its own wrote them to a vertex stream in global
+ * memory that setup then gathered from: on the dragon at 1080p ~1 ms of device time for
+ * 27 bytes a vertex written and read back; bench/README.md.)
+ * Outcode bit k is set iff the signed distance to plane k is negative; the distances are the
+ * same expressions the clipper uses (plane_dist), so the two never disagree. A draw inside
+ * the frustum by a margin (DRAW_INSIDE) skips the plane tests: all their bits would be 0.
+ * User clip planes (n_user of them): ucode bit k is set iff the vertex's distance to plane
+ * k, in double from its object-space position and the instance's object-space plane
+ * (uplanes[(instance·n_user + k)·4 ..]), is negative: user_dist, the expression the
+ * clipper evaluates for the same vertex. */
+
+/* One vertex of a draw with flags `flags`: its outcode from clip position c, and its
+ * window position (24.8, viewport_vertex's rounding; (0, 0) where it cannot be drawn
+ * unclipped). */
+ALWAYS_INLINE uint vertex_outcode(float4 c, int flags, float kx, float ky)
+{
+    if (!(finite_f(c.x) && finite_f(c.y) && finite_f(c.z) && finite_f(c.w)))
+        return OC_INVALID;
+    if (flags & DRAW_INSIDE) return 0;
+    uint o = frustum_outcode(c);
+    o |= (c.x + kx * c.w < 0.0f) ? OC_GB_X_NEG : 0;
+    o |= (kx * c.w - c.x < 0.0f) ? OC_GB_X_POS : 0;
+    o |= (c.y + ky * c.w < 0.0f) ? OC_GB_Y_NEG : 0;
+    o |= (ky * c.w - c.y < 0.0f) ? OC_GB_Y_POS : 0;
+    o |= (c.w > 0.0f) ? 0 : OC_W_NONPOS;
+    return o;
+}
+
+/* The user clip plane bits of object-space vertex (px, py, pz) of instance plane rows q
+ * (n_user planes; none for a vertex with OC_INVALID, as the clipper never sees one). */
+ALWAYS_INLINE uint vertex_ucode(__global const double *q, int n_user, uint o, float px,
+                                float py, float pz)
+{
+    uint uc = 0;
+    if (o & OC_INVALID) return 0;
+    for (int k = 0; k < n_user; ++k)
+        uc |= user_dist(q + 4 * k, px, py, pz) < 0.0 ? 1u << k : 0u;
+    return uc;
+}
+
+/* The clip position, outcode and user plane bits of pool vertex pv of a draw of instance
+ * `inst` with flags `flags` (the clipper's corners). */
+ALWAYS_INLINE float4 vertex_of(__global const float *pos, __global const float *mvps,
+                               __global const double *uplanes, int n_user, int pv, int inst,
+                               int flags, float kx, float ky, uint *oc, uint *uc)
+{
+    float px = pos[3 * pv], py = pos[3 * pv + 1], pz = pos[3 * pv + 2];
+    float4 c = clip_transform(mvps + 16 * inst, px, py, pz);
+    *oc = vertex_outcode(c, flags, kx, ky);
+    *uc = n_user > 0 ? vertex_ucode(uplanes + 4 * n_user * inst, n_user, *oc, px, py, pz) : 0u;
+    return c;
+}
+
+/* A draw's vertices by local index (its cluster's, CLUSTER_MAX at most), as setup reads
+ * them: clip x, y, w (z is only tested), window x, y (24.8; 0 where the vertex cannot be
+ * drawn unclipped), outcode and user plane bits (0 without user planes). */
+typedef struct {
+    float x[CLUSTER_MAX], y[CLUSTER_MAX], w[CLUSTER_MAX];
+    int wx[CLUSTER_MAX], wy[CLUSTER_MAX], oc[CLUSTER_MAX], uc[CLUSTER_MAX];
+} __attribute__((aligned(32))) DrawVerts;
+
+/* The nv vertices of a draw (instance matrix m, flags, pool positions from `first`: a
+ * cluster's positions lie side by side in the pool) into V; returns the OR of their
+ * outcodes. VERTEX_LANES (8) vertices at a time in float8 lanes where the compiler has
+ * the builtins (CLRASTER_VERTEX_LANES, common.h): a full set's 24 floats as three vector
+ * loads with x, y and z picked out by shuffles (eight rounds of scalar loads stored to
+ * private lanes and loaded back as vectors stalled on store-to-load forwarding: the
+ * transform cost setup ~0.5 ms more on the dragon at 1080p, against ~0.03 ms this way),
+ * outcodes as vector compares selected into int8 bits, window positions by
+ * __builtin_elementwise_roundeven (rint in the default rounding mode). Otherwise, and under
+ * CLRASTER_PORTABLE (Oclgrind computed vector compares ORed into int8 masks wrongly, and
+ * has no roundeven), vertex by vertex. */
+#ifdef CLRASTER_VERTEX_LANES
+#if VERTEX_LANES != 8
+#error "draw_vertices is written for 8 lanes (float8, int8): VERTEX_LANES must be 8"
+#endif
+#define LANE_BIT8(test, bit) ((test) ? (int8)(bit) : (int8)0)
+#endif
+ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
+                                 __global const float *m, int flags, float kx, float ky,
+                                 float hw, float hh, __global const double *q, int n_user,
+                                 DrawVerts *V)
+{
+    uint any = 0;
+#ifdef CLRASTER_VERTEX_LANES
+    int8 any8 = (int8)0;
+    for (int lv0 = 0; lv0 < nv; lv0 += 8) {
+        int n = imin(8, nv - lv0);
+        __global const float *p0 = pos + 3 * (first + lv0);
+        float8 x, y, z;
+        if (n == 8) {
+            float8 a = LOAD_F8(p0), b = LOAD_F8(p0 + 8), c = LOAD_F8(p0 + 16);
+            x = __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 9, 12, 15, 0, 0),
+                                        c, 0, 1, 2, 3, 4, 5, 10, 13);
+            y = __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 10, 13, 0, 0, 0),
+                                        c, 0, 1, 2, 3, 4, 8, 11, 14);
+            z = __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 8, 11, 14, 0, 0, 0),
+                                        c, 0, 1, 2, 3, 4, 9, 12, 15);
+        } else {
+            /* the draw's last, partial set (its spare lanes repeat vertex lv0, and nothing
+             * reads them: a triangle's local indices are < nv); a vector load here could
+             * read past the pool's end */
+            float px[8] __attribute__((aligned(32))), py[8] __attribute__((aligned(32)));
+            float pz[8] __attribute__((aligned(32)));
+            for (int l = 0; l < 8; ++l) {
+                int k = l < n ? l : 0;
+                px[l] = p0[3 * k]; py[l] = p0[3 * k + 1]; pz[l] = p0[3 * k + 2];
+            }
+            x = *(float8 *)px; y = *(float8 *)py; z = *(float8 *)pz;
+        }
+        /* clip_transform, per lane */
+        float8 cx = MAT_ROW(m, 0, x, y, z), cy = MAT_ROW(m, 1, x, y, z);
+        float8 cz = MAT_ROW(m, 2, x, y, z), cw = MAT_ROW(m, 3, x, y, z);
+        /* viewport_vertex's arithmetic (a lane with w = 0 gets inf here, never kept) */
+        float8 iw = 1.0f / cw;
+        float8 xs = WIN_X_SUB(cx, iw, hw), ys = WIN_Y_SUB(cy, iw, hh);
+        /* vertex_outcode, per lane */
+        const int8 exp_mask = (int8)0x7f800000;
+        int8 finite = ((as_int8(cx) & exp_mask) != exp_mask)
+                      & ((as_int8(cy) & exp_mask) != exp_mask)
+                      & ((as_int8(cz) & exp_mask) != exp_mask)
+                      & ((as_int8(cw) & exp_mask) != exp_mask);
+        int8 o = (int8)0;
+        if (!(flags & DRAW_INSIDE)) {
+            o |= FRUSTUM_OUTCODE(cx, cy, cz, cw, 0.0f, LANE_BIT8);
+            o |= (cx + kx * cw < 0.0f) ? (int8)OC_GB_X_NEG : (int8)0;
+            o |= (kx * cw - cx < 0.0f) ? (int8)OC_GB_X_POS : (int8)0;
+            o |= (cy + ky * cw < 0.0f) ? (int8)OC_GB_Y_NEG : (int8)0;
+            o |= (ky * cw - cy < 0.0f) ? (int8)OC_GB_Y_POS : (int8)0;
+            o |= (cw > 0.0f) ? (int8)0 : (int8)OC_W_NONPOS;
+        }
+        o = finite ? o : (int8)OC_INVALID;
+        int8 drawn = (o & (int8)(OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0;
+        /* 0 chosen before the conversion: a non-finite or out-of-range lane converted to
+         * int would be undefined (LLVM's poison), even where the choice then drops it */
+        int8 wx = convert_int8(__builtin_elementwise_roundeven(drawn ? xs : (float8)0.0f));
+        int8 wy = convert_int8(__builtin_elementwise_roundeven(drawn ? ys : (float8)0.0f));
+        *(float8 *)&V->x[lv0] = cx; *(float8 *)&V->y[lv0] = cy; *(float8 *)&V->w[lv0] = cw;
+        *(int8 *)&V->wx[lv0] = wx; *(int8 *)&V->wy[lv0] = wy; *(int8 *)&V->oc[lv0] = o;
+        any8 |= o;
+    }
+    any = (uint)(((any8.s0 | any8.s1) | (any8.s2 | any8.s3))
+                 | ((any8.s4 | any8.s5) | (any8.s6 | any8.s7)));
+    if (n_user > 0)
+        for (int v = 0; v < nv; ++v) {
+            __global const float *p = pos + 3 * (first + v);
+            V->uc[v] = (int)vertex_ucode(q, n_user, (uint)V->oc[v], p[0], p[1], p[2]);
+        }
+#else
+    for (int v = 0; v < nv; ++v) {
+        __global const float *p = pos + 3 * (first + v);
+        float4 c = clip_transform(m, p[0], p[1], p[2]);
+        uint o = vertex_outcode(c, flags, kx, ky);
+        int wx = 0, wy = 0;
+        if (!(o & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP))) {
+            float iw = 1.0f / c.w;
+            wx = (int)RINTF(WIN_X_SUB(c.x, iw, hw));
+            wy = (int)RINTF(WIN_Y_SUB(c.y, iw, hh));
+        }
+        V->x[v] = c.x; V->y[v] = c.y; V->w[v] = c.w;
+        V->wx[v] = wx; V->wy[v] = wy; V->oc[v] = (int)o;
+        V->uc[v] = n_user > 0 ? (int)vertex_ucode(q, n_user, o, p[0], p[1], p[2]) : 0;
+        any |= o;
+    }
+#endif
+    return any;
+}
+
 /* Which triangle this work-item of the clipper's kernels works on: local triangle
  * get_local_id of draw get_group_id (work-groups of CLUSTER_MAX; the draw is uniform over
  * the group). Gives its slot in the frame's triangle stream, its three vertices in the
- * frame's vertex stream, its id and its draw's flags. Returns 0 for idle work-items. */
+ * geometry pool, its id and its draw's flags. Returns 0 for idle work-items. */
 inline int triangle_of(uint n_draws, __global const Draw *draws,
                        __global const int4 *clusters, __global const uchar4 *local_tris,
                        __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
@@ -371,9 +548,9 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     if ((int)lt >= ci.y) return 0;
     uchar4 tv = local_tris[ci.x + lt];
     *slot = dr.tri_base + (int)lt;
-    *i0 = dr.vert_base + tv.x;
-    *i1 = dr.vert_base + tv.y;
-    *i2 = dr.vert_base + tv.z;
+    *i0 = ci.z + tv.x;
+    *i1 = ci.z + tv.y;
+    *i2 = ci.z + tv.z;
     *id = dr.face_base + face_ids[ci.x + lt];
     *flags = dr.flags;
     return 1;
@@ -385,17 +562,14 @@ inline int triangle_of(uint n_draws, __global const Draw *draws,
     __global const int *restrict face_ids, __global const float *restrict pos,             \
     __global const double *restrict mvps64,                                                \
     __global const double *restrict zrows, __global const double *restrict uplanes,       \
-    const int n_user, const uint uclip, __global const uchar *restrict ucode
+    const int n_user, const uint uclip, __global const float *restrict mvps
 
-/* The distances of triangle (i0, i1, i2) of draw dr to the user planes in umask, into
- * ud[3k + j] (vertex j, plane k): user_dist, as the vertex stage's ucode. */
-inline void user_dists(__global const float *pos, __global const int4 *clusters,
-                       __global const double *uplanes, int n_user, uint umask, Draw dr,
-                       int i0, int i1, int i2, double *ud)
+/* The distances of triangle (i0, i1, i2) (pool vertices) of draw dr to the user planes in
+ * umask, into ud[3k + j] (vertex j, plane k): user_dist, as vertex_ucode. */
+inline void user_dists(__global const float *pos, __global const double *uplanes,
+                       int n_user, uint umask, Draw dr, int i0, int i1, int i2, double *ud)
 {
-    /* the pool's positions of the draw's cluster, side by side (vertex.cl) */
-    int vb = clusters[dr.cluster].z - dr.vert_base;
-    int v[3] = {vb + i0, vb + i1, vb + i2};
+    int v[3] = {i0, i1, i2};
     __global const double *q = uplanes + 4 * n_user * dr.instance;
     for (int k = 0; k < n_user; ++k) {
         if (!(umask & (1u << k))) continue;
@@ -612,21 +786,23 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
     q->n = 0;
 }
 
-/* The piece of unclipped triangle t (vertices i0, i1, i2 of the vertex stream, id; the
- * draw's pool vertex of stream vertex 0 `vpool`) that passed the outcode, facing,
+/* The piece of unclipped triangle t (local vertices i0, i1, i2 of the draw's vertices V,
+ * id; the pool vertex of local vertex 0 `vpool`) that passed the outcode, facing,
  * clipping and w tests: piece_cover (with the cover bits `known` the lanes found), its
  * status and tile word, and, for a piece, its record's first 32 bytes (x, y, box) now and
  * the rest through the queue q (value_planes8 once SETUP_LANES are waiting; the caller
  * empties it at the draw's end). */
 ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool,
-                                int known, __global const int2 *win, int width, int height,
+                                int known, const DrawVerts *V, int width, int height,
                                 int tiles_x, __global Piece *pieces, __global uchar *status,
                                 __global int *tile1, ValueQueue *q)
 {
     Piece pc;
     int sw = 0, one = TILE1_NONE;
     long area2;
-    int st = piece_cover(win[i0], win[i1], win[i2], width, height, known, &pc, &sw, &area2);
+    int st = piece_cover((int2)(V->wx[i0], V->wy[i0]), (int2)(V->wx[i1], V->wy[i1]),
+                         (int2)(V->wx[i2], V->wy[i2]), width, height, known, &pc, &sw,
+                         &area2);
     if (st == ST_RASTER) {
         /* the record's first 32 bytes; binning reads the records right after this stage
          * and, with a large enough last-level cache, finds them there (ordinary stores) */
@@ -667,14 +843,13 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
 }
 
 /* The fates of local triangles lt0 .. lt0 + n - 1 (n <= SETUP_LANES) of draw dr (its
- * cluster's triangles tv, pool vertices from pool0; codes = 0: every outcode of the draw is
- * 0) in lanes: the decided ones' status and tile word stored; returns the lanes still open
+ * cluster's triangles tv, its vertices V, pool vertices from pool0; codes = 0: every
+ * outcode of the draw is 0) in lanes: the decided ones' status and tile word stored; returns the lanes still open
  * (bit j: triangle lt0 + j, for raster_piece), their records' lines and corner positions
  * asked for. */
 ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *tv,
-                               __global const ushort *outcode, __global const uchar *ucode,
-                               int n_user, uint uclip, __global const float4 *clip,
-                               __global const int2 *win, int width, int height, int cull,
+                               const DrawVerts *V, int n_user, uint uclip, int width,
+                               int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
                                __global int *tile1, __global int *any_clipped,
                                __global int *clip_count, __global const float *pos,
@@ -688,10 +863,10 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
 #define TV_X(i) (int)tv[i].x
 #define TV_Y(i) (int)tv[i].y
 #define TV_Z(i) (int)tv[i].z
-    int8 i0 = dr.vert_base + GATHER8(int8, TV_X, lt);
-    int8 i1 = dr.vert_base + GATHER8(int8, TV_Y, lt);
-    int8 i2 = dr.vert_base + GATHER8(int8, TV_Z, lt);
-#define OUTC(i) (int)outcode[i]
+    int8 i0 = GATHER8(int8, TV_X, lt);
+    int8 i1 = GATHER8(int8, TV_Y, lt);
+    int8 i2 = GATHER8(int8, TV_Z, lt);
+#define OUTC(i) V->oc[i]
     int8 o_or = (int8)0, o_and = (int8)0;   /* (all 0 where the draw's outcodes are) */
     if (codes) {
         int8 o0 = GATHER8(int8, OUTC, i0), o1 = GATHER8(int8, OUTC, i1);
@@ -703,7 +878,7 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
      * clipping planes (uclip bits; the others, a polygon window's, only reject) → clipped */
     int8 u_or = (int8)0, u_and = (int8)0;
     if (n_user > 0) {
-#define UC(i) (int)ucode[i]
+#define UC(i) V->uc[i]
         int8 u0 = GATHER8(int8, UC, i0), u1 = GATHER8(int8, UC, i1);
         int8 u2 = GATHER8(int8, UC, i2);
         u_or = u0 | u1 | u2;
@@ -719,9 +894,9 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     DECIDE((o_or & OC_INVALID) != 0, ST_INVALID);
     DECIDE(((o_and & OC_FRUSTUM) != 0) | (u_and != 0), ST_TRIVIAL_REJECT);
     /* facing (FACING_DET) from the float32 clip positions in double lanes */
-#define CX(i) clip[i].x
-#define CY(i) clip[i].y
-#define CW(i) clip[i].w
+#define CX(i) V->x[i]
+#define CY(i) V->y[i]
+#define CW(i) V->w[i]
 #define CLIP_D8(E, ix) TO_DOUBLE8(GATHER8(float8, E, ix))
     double8 ax = CLIP_D8(CX, i0), ay = CLIP_D8(CY, i0), aw = CLIP_D8(CW, i0);
     double8 bx = CLIP_D8(CX, i1), by = CLIP_D8(CY, i1), bw = CLIP_D8(CW, i1);
@@ -753,8 +928,8 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     int8 kc = (int8)0;   /* the cover bits found here (COVER_KNOWN added), else 0 */
     if (any8(open)) {
         /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
-#define WX(i) win[i].x
-#define WY(i) win[i].y
+#define WX(i) V->wx[i]
+#define WY(i) V->wy[i]
         int8 x0 = GATHER8(int8, WX, i0) & open, y0 = GATHER8(int8, WY, i0) & open;
         int8 x1 = GATHER8(int8, WX, i1) & open, y1 = GATHER8(int8, WY, i1) & open;
         int8 x2 = GATHER8(int8, WX, i2) & open, y2 = GATHER8(int8, WY, i2) & open;
@@ -826,11 +1001,9 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     return left;
 }
 
-__kernel void setup_triangles(__global const float4 *restrict clip,
-                              __global const ushort *restrict outcode,
-                              __global const int2 *restrict win, DRAW_ARGS, const int width,
-                              const int height, const int cull, const float kx, const float ky,
-                              const int reversed, __global Piece *restrict pieces,
+__kernel void setup_triangles(DRAW_ARGS, const int width, const int height, const int cull,
+                              const float kx, const float ky, const int reversed,
+                              __global Piece *restrict pieces,
                               __global uchar *restrict status,
                               const int tiles_x, __global int *restrict tile1,
                               __global int *restrict any_clipped,
@@ -845,11 +1018,14 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     __global const uchar4 *tv = local_tris + ci.x;
     int nt = imin(ci.y, CLUSTER_MAX);   /* (the host refuses larger clusters) */
     int nb = (nt + SETUP_LANES - 1) / SETUP_LANES;
-    /* whether any vertex of the draw has an outcode bit: most draws of a framed mesh have
-     * none (inside the frustum by a margin: vertex.cl sets only OC_INVALID there), and their
-     * batches then skip the outcodes' gathers (one pass over the draw's contiguous codes) */
-    uint any_code = 0;
-    for (int v = 0; v < imin(ci.w, CLUSTER_MAX); ++v) any_code |= outcode[dr.vert_base + v];
+    /* the draw's vertices, and whether any has an outcode bit: most draws of a framed mesh
+     * have none (inside the frustum by a margin: only OC_INVALID is tested there), and
+     * their batches then skip the outcodes' gathers */
+    DrawVerts V;
+    uint any_code = draw_vertices(pos, ci.z, imin(ci.w, CLUSTER_MAX), mvps + 16 * dr.instance,
+                                  dr.flags, kx, ky, 0.5f * (float)width,
+                                  0.5f * (float)height, uplanes + 4 * n_user * dr.instance,
+                                  n_user, &V);
     int codes = any_code != 0;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
     uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
@@ -861,8 +1037,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
     for (int h = 0; h < nb + SETUP_LAG; ++h) {
         if (h < nb) {
             int lt0 = SETUP_LANES * h;
-            open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, outcode, ucode,
-                                  n_user, uclip, clip, win, width, height, cull, pieces,
+            open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, &V, n_user,
+                                  uclip, width, height, cull, pieces,
                                   status, tile1, any_clipped, clip_count, pos, ci.z, known,
                                   codes);
         }
@@ -871,9 +1047,8 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         for (uint left = open[h - SETUP_LAG]; left; left &= left - 1) {
             int l = lt0 + CTZ(left);
             uchar4 v = tv[l];
-            raster_piece(dr.tri_base + l, dr.vert_base + v.x, dr.vert_base + v.y,
-                         dr.vert_base + v.z, dr.face_base + face_ids[ci.x + l],
-                         ci.z - dr.vert_base, known[l], win, width, height, tiles_x, pieces,
+            raster_piece(dr.tri_base + l, v.x, v.y, v.z, dr.face_base + face_ids[ci.x + l],
+                         ci.z, known[l], &V, width, height, tiles_x, pieces,
                          status, tile1, &q);
             if (q.n == SETUP_LANES)
                 value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo,
@@ -884,38 +1059,45 @@ __kernel void setup_triangles(__global const float4 *restrict clip,
         value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo, pieces);
 }
 
-/* The clipper on triangle (i0, i1, i2) of this work-item's draw (setup_count_clipped and
- * setup_clipped, whose arguments carry these names): its frustum/guard-band planes and
- * clipping user planes from the outcodes, the user-plane distances, then clip_and_emit
+/* The clipper on triangle (i0, i1, i2) (pool vertices) of this work-item's draw
+ * (setup_count_clipped and setup_clipped, whose arguments carry these names): its corners
+ * (vertex_of: the clip positions, outcodes and user plane bits setup_triangles made), its
+ * frustum/guard-band planes and clipping user planes from those codes, the user-plane
+ * distances, then clip_and_emit
  * with (write, out, out_bary, base), its piece count into `count`. A macro because the
  * buffers are kernel arguments of both kernels. */
 #define CLIP_TRIANGLE(count, write, out, out_bary, base) do {                             \
-    uint o_or_ = outcode[i0] | outcode[i1] | outcode[i2];                                 \
-    uint u_or_ = n_user > 0 ? (uint)(ucode[i0] | ucode[i1] | ucode[i2]) & uclip : 0u;      \
-    double ud_[3 * USER_PLANES_MAX];                                                      \
     Draw dr_ = draws[get_group_id(0)];                                                    \
-    user_dists(pos, clusters, uplanes, n_user, u_or_, dr_, i0, i1, i2, ud_);              \
-    int vp_ = clusters[dr_.cluster].z - dr_.vert_base;   /* pool vertex of stream vertex 0 */ \
+    uint oc0_, oc1_, oc2_, uc0_, uc1_, uc2_;                                              \
+    float4 c0_ = vertex_of(pos, mvps, uplanes, n_user, i0, dr_.instance, dr_.flags, kx, ky, \
+                           &oc0_, &uc0_);                                                 \
+    float4 c1_ = vertex_of(pos, mvps, uplanes, n_user, i1, dr_.instance, dr_.flags, kx, ky, \
+                           &oc1_, &uc1_);                                                 \
+    float4 c2_ = vertex_of(pos, mvps, uplanes, n_user, i2, dr_.instance, dr_.flags, kx, ky, \
+                           &oc2_, &uc2_);                                                 \
+    uint o_or_ = oc0_ | oc1_ | oc2_;                                                      \
+    uint u_or_ = (uc0_ | uc1_ | uc2_) & uclip;                                            \
+    double ud_[3 * USER_PLANES_MAX];                                                      \
+    user_dists(pos, uplanes, n_user, u_or_, dr_, i0, i1, i2, ud_);                        \
     ClipIn d0_, d1_, d2_;                                                                 \
-    CLIP_IN(d0_, vp_ + i0, dr_.instance);                                                 \
-    CLIP_IN(d1_, vp_ + i1, dr_.instance);                                                 \
-    CLIP_IN(d2_, vp_ + i2, dr_.instance);                                                 \
-    count = clip_and_emit(clip[i0], clip[i1], clip[i2], d0_, d1_, d2_,                    \
+    CLIP_IN(d0_, i0, dr_.instance);                                                       \
+    CLIP_IN(d1_, i1, dr_.instance);                                                       \
+    CLIP_IN(d2_, i2, dr_.instance);                                                       \
+    count = clip_and_emit(c0_, c1_, c2_, d0_, d1_, d2_,                                   \
                   o_or_ & OC_NEEDS_CLIP, u_or_, ud_, kx, ky, width, height, zs, zo, id,   \
                   (write), (out), (out_bary), (base));                                    \
 } while (0)
 
 /* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into
  * clip_count; other triangles' entries are left unwritten (read through status). */
-__kernel void setup_count_clipped(__global const float4 *restrict clip,
-                                  __global const ushort *restrict outcode, DRAW_ARGS,
+__kernel void setup_count_clipped(DRAW_ARGS,
                                   const int width, const int height, const float kx,
                                   const float ky, const int reversed,
                                   __global const uchar *restrict status,
                                   __global int *restrict clip_count)
 {
     DEPTH_MODE(reversed);
-    /* a draw inside the frustum by a margin has no outcode bits (vertex.cl), so without
+    /* a draw inside the frustum by a margin has no outcode bits (vertex_outcode), so without
      * clipping user planes none of its triangles is clipped: its group leaves at once
      * (most of a framed mesh; the kernel runs over every triangle of the frame) */
     uint g = get_group_id(0);
@@ -927,8 +1109,7 @@ __kernel void setup_count_clipped(__global const float4 *restrict clip,
     CLIP_TRIANGLE(clip_count[t], 0, 0, 0, 0);
 }
 
-__kernel void setup_clipped(__global const float4 *restrict clip,
-                            __global const ushort *restrict outcode, DRAW_ARGS,
+__kernel void setup_clipped(DRAW_ARGS,
                             const int width, const int height, const float kx, const float ky,
                             const int reversed, __global const uchar *restrict status,
                             __global const int *restrict clip_count,

@@ -67,7 +67,7 @@ def test_every_stage_kernel_is_declared(ctx):
     """Every kernel of the stage programs gets argument info (the programs are built with
     -cl-kernel-arg-info; without it PoCL gives none) and its scalars a dtype."""
     opts = RasterConfig().build_options()
-    for stage in ("vertex", "setup", "bin", "raster", "pyramid", "query", "lines"):
+    for stage in ("setup", "bin", "raster", "pyramid", "query", "lines"):
         prg = device.program(ctx, stage, opts)
         for name in prg.kernel_names.split(";"):
             k = cl.Kernel(prg, name)

@@ -3,14 +3,14 @@
 The whole-frame comparisons (test_differential.py) say *that* a frame differs; these say
 *where*: random triangle soups (tests/random_scenes.py: slivers, specks, huge and
 near-crossing triangles, w = 0 vertices, degenerate ones, duplicates, a clipped grid) go
-through the OpenCL `StageChain` (geometry → vertex → setup → bin) and through the twin's
-vertex, setup and bin functions over the very same draw records, and the stage boundaries
-are compared record by record, in pipeline order, so the first failing assertion names the
+through the OpenCL `StageChain` (geometry → setup → bin) and through the twin's vertex,
+setup and bin functions over the very same draw records, and the stage boundaries are
+compared record by record, in pipeline order, so the first failing assertion names the
 stage:
 
-* vertex → setup: clip-space positions and outcodes of every stream vertex (exact), window
-  positions of the vertices that need no clipping (exact);
-* setup → bin: status of every triangle, clip_count (clipped triangles) / clip_offset, the
+* setup → bin (setup makes its draws' vertices itself, in private memory: their clip
+  positions, outcodes and window positions are checked through what setup makes of them):
+  status of every triangle, clip_count (clipped triangles) / clip_offset, the
   setup record of every unclipped survivor, the clipped pieces and their parent
   barycentrics (all exact, bytes);
 * bin → raster: tile_start and every tile list (exact, bytes: same records, same order).
@@ -32,6 +32,7 @@ from clraster.base.layout import (
     OC_W_NONPOS,
     PIECE_DTYPE,
     ST_CLIPPED,
+    ST_INVALID,
     ST_RASTER,
 )
 from clraster.pipeline.device import default_context
@@ -105,21 +106,12 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
     chain = StageChain(ctx, config, raster=False)
     bins = chain.bin(queue, pool, fd, params, FrameTotals())
     queue.finish()
-    verts, setup = chain.vertex.buffers, chain.setup.buffers
-    n, m = fd.n_verts, fd.n_tris
-    assert (verts.n_verts, setup.n_tris) == (n, m)
+    setup = chain.setup.buffers
+    m = fd.n_tris
+    assert setup.n_tris == m
 
-    # -- vertex → setup ---------------------------------------------------------------------
+    # -- setup (its vertices made per draw, as the twin's vertex stage) → bin ---------------
     clip, oc, win = ref_vertex.transform_draws(pool, fd, params.kx, params.ky, w, h)
-    got_oc = _read(queue, verts.outcode, np.uint16, n)
-    _assert_records("vertex", "outcode", got_oc, oc)
-    _assert_records("vertex", "clip position", _read(queue, verts.clip, np.float32, n, (4,)),
-                    clip)
-    plain = (oc & (OC_NEEDS_CLIP | OC_INVALID | OC_W_NONPOS)) == 0
-    _assert_records("vertex", "window position (unclipped vertices)",
-                    _read(queue, verts.win, win.dtype, n)[plain], win[plain])
-
-    # -- setup → bin ------------------------------------------------------------------------
     tri_verts, ids = ref_setup.draw_triangles(pool, fd)
     st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, cull, params.kx, params.ky,
                          ref_setup.object_clip(pool, fd), ref_setup.draw_mirrored(pool, fd))
@@ -162,11 +154,13 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
 
 @pytest.mark.parametrize("frustum", [False, True])
 def test_vertex_lanes_match_twin_on_invalid_and_w0_vertices(device, frustum):
-    """The vertex stage's full sets of eight lanes (kernels/vertex.cl store_lanes) against
-    the twin: NaN and infinite coordinates (OC_INVALID), vertices in the eye plane (w = 0)
-    and behind it, far outside the guard band, mixed into the sets of lanes; with the
-    frustum test on, clusters of a dense patch inside the frustum by a margin skip the
-    plane tests (DRAW_INSIDE; a cluster with a non-finite vertex never is one)."""
+    """Setup's vertices made in full sets of eight lanes (kernels/setup.cl draw_vertices)
+    against the twin's vertex stage, through what setup makes of them (each triangle's
+    status and, for a piece, its record: snapped corners, box and value planes): NaN and
+    infinite coordinates (OC_INVALID), vertices in the eye plane (w = 0) and behind it, far
+    outside the guard band, mixed into the sets of lanes; with the frustum test on, clusters
+    of a dense patch inside the frustum by a margin skip the plane tests (DRAW_INSIDE; a
+    cluster with a non-finite vertex never is one)."""
     ctx, queue = device
     w, h = 96, 64
     lens = Lens(70.0, 0.5, 100.0)
@@ -196,21 +190,25 @@ def test_vertex_lanes_match_twin_on_invalid_and_w0_vertices(device, frustum):
     chain = StageChain(ctx, config, raster=False)
     chain.bin(queue, pool, fd, params, FrameTotals())
     queue.finish()
-    verts, n = chain.vertex.buffers, fd.n_verts
+    setup, n, m = chain.setup.buffers, fd.n_verts, fd.n_tris
     clip, oc, win = ref_vertex.transform_draws(pool, fd, params.kx, params.ky, w, h)
-    _assert_records("vertex", "outcode", _read(queue, verts.outcode, np.uint16, n), oc)
-    _assert_records("vertex", "clip position", _read(queue, verts.clip, np.float32, n, (4,)),
-                    clip)
-    plain = (oc & (OC_NEEDS_CLIP | OC_INVALID | OC_W_NONPOS)) == 0
-    _assert_records("vertex", "window position (unclipped vertices)",
-                    _read(queue, verts.win, win.dtype, n)[plain], win[plain])
-    # not vacuous: full sets of eight lanes hold each kind of vertex
+    tri_verts, ids = ref_setup.draw_triangles(pool, fd)
+    st = ref_setup.setup(clip, oc, win, tri_verts, ids, w, h, "none", params.kx, params.ky,
+                         ref_setup.object_clip(pool, fd), ref_setup.draw_mirrored(pool, fd))
+    _assert_records("setup", "status", _read(queue, setup.status, np.uint8, m), st.status)
+    live = st.status == ST_RASTER
+    _assert_records("setup", "setup record (unclipped)",
+                    _read(queue, setup.pieces, PIECE_DTYPE, m)[live], st.pieces[live])
+    # not vacuous: full sets of eight lanes hold each kind of vertex, and triangles of each
+    # kind reach setup's decisions
     full = np.zeros(n, bool)
     for d in fd.draws:
         nv = int(pool.clusters[d["cluster"]][3])   # (tri_offset, n_tris, vert_offset, n_verts)
         full[d["vert_base"]:d["vert_base"] + nv // 8 * 8] = True
+    plain = (oc & (OC_NEEDS_CLIP | OC_INVALID | OC_W_NONPOS)) == 0
     for kind in (OC_INVALID, OC_W_NONPOS):
         assert (full & ((oc & kind) != 0)).any(), kind
     assert (full & plain).any()
+    assert {ST_INVALID, ST_CLIPPED, ST_RASTER} <= set(np.unique(st.status).tolist())
     if frustum:
         assert (fd.draws["flags"] & DRAW_INSIDE).any()

@@ -140,16 +140,16 @@ class RasterConfig:
             binning; each chunk counts and scatters its own triangles per tile, so the
             per-tile lists keep submission order with no atomics. Memory is
             ``bin_chunks × tiles × 4`` bytes.
-        batch_triangles: a frame's draws go through the stage chain (vertex → setup →
-            bin → raster) in consecutive batches of at most this many triangles, each
-            rasterized into the same frame buffers (`clraster.pipeline.streaming`), so the
-            vertex, setup and bin buffers are sized by the batch, never by the scene: at
-            most 226 bytes per triangle of the budget (`StageChain.budget_bounds`: draw
-            records, the vertex stream of three vertices, the setup record, status and tile
+        batch_triangles: a frame's draws go through the stage chain (setup, with the
+            vertex transform → bin → raster) in consecutive batches of at most this many
+            triangles, each rasterized into the same frame buffers
+            (`clraster.pipeline.streaming`), so the setup and bin buffers are sized by the
+            batch, never by the scene: at most 145 bytes per triangle of the budget
+            (`StageChain.budget_bounds`: draw records, the setup record, status and tile
             words, the list of slots to bin). A draw (one cluster, ≤ CLUSTER_MAX triangles)
             is the smallest unit, so values below CLUSTER_MAX are refused. Never changes the
             image or the counts. Each extra pass costs a few launches and waits, and the
-            raster reloads the tiles it touches. Default ``1 << 20`` (226 MiB of these
+            raster reloads the tiles it touches. Default ``1 << 20`` (145 MiB of these
             buffers): the dragon (871K triangles) in one pass; smaller budgets were slower,
             larger ones no faster (bench/README.md, "Streamed frames").
         batch_entries: the (piece, tile) entries of one pass's bin list, at most (clipped

@@ -86,9 +86,8 @@ CULL_MODES = {"none": CULL_NONE, "back": CULL_BACK, "front": CULL_FRONT}
 #: Clusters (meshlets) have at most CLUSTER_MAX triangles and CLUSTER_MAX vertices. The
 #: clipper's kernels run one work-item per (draw, local triangle): work-item g serves draw
 #: g >> CLUSTER_LOG2, local index g & (CLUSTER_MAX - 1); setup_triangles one per draw, its
-#: triangles SETUP_LANES at a time, and the vertex kernel one per VERTEX_LANES local
-#: vertices of a draw (kernels/setup.cl, kernels/vertex.cl: CLUSTER_MAX / VERTEX_LANES
-#: work-items per draw).
+#: triangles SETUP_LANES at a time, after making the draw's vertices VERTEX_LANES at a
+#: time (kernels/setup.cl draw_vertices).
 CLUSTER_LOG2 = 7
 CLUSTER_MAX = 1 << CLUSTER_LOG2
 VERTEX_LANES = 8
@@ -162,8 +161,9 @@ IDMIN_CLEAR = np.uint32(0xFFFFFFFF)
 
 #: One drawn (instance, cluster) pair (C ``Draw``). cluster: global cluster index in the
 #: geometry pool; vert_base / tri_base: first vertex / triangle slot of the draw in this
-#: frame's streams; face_base: triangle id of the instance's face 0; flags: DRAW_INSIDE,
-#: DRAW_MIRRORED, DRAW_NO_CLIP.
+#: frame's streams (the kernels have a triangle stream only: setup makes each draw's
+#: vertices itself; the twin keeps a vertex stream); face_base: triangle id of the
+#: instance's face 0; flags: DRAW_INSIDE, DRAW_MIRRORED, DRAW_NO_CLIP.
 DRAW_DTYPE = np.dtype([("cluster", np.int32), ("instance", np.int32), ("vert_base", np.int32),
                        ("tri_base", np.int32), ("face_base", np.int32), ("flags", np.int32),
                        ("pad", np.int32, 2)])

@@ -1,7 +1,7 @@
 """What every stage of one frame reads (`FrameParams`) and what the passes of a frame add up
 (`FrameTotals`); plain data shared by the OpenCL stage chain and the NumPy twin.
 
-A frame may run the stage chain (geometry → vertex → setup → bin → raster) several times
+A frame may run the stage chain (geometry → setup → bin → raster) several times
 into the same frame buffers — the two phases of occlusion culling, and within each the
 bounded batches of a streamed frame (`clraster.pipeline.streaming`) — so the per-frame parameters
 are built once and passed to every pass, and the counts and timings of the passes

@@ -91,8 +91,8 @@ class Renderer:
                        kept to make the next frames' arrays without page faults
                        (`clraster.arraypool`: a frame's arrays are its own as long as
                        anything refers to them)
-      + per pass       ≤ 226·M + 228·E bytes (682 MiB at the defaults; draws, vertex stream,
-                       setup records, clipped pieces, bin entries; `StageChain.budget_bounds`
+      + per pass       ≤ 145·M + 228·E bytes (601 MiB at the defaults; draws, setup
+                       records, clipped pieces, bin entries; `StageChain.budget_bounds`
                        computes them, tests/test_budget_text.py checks these figures)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
       + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and

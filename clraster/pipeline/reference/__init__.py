@@ -1,10 +1,10 @@
 """The NumPy twin of the OpenCL pipeline.
 
 Each module mirrors one kernel file with the same inputs, outputs, integer rules and float32
-operation order (vertex ↔ kernels/vertex.cl, setup ↔ setup.cl, bin ↔ bin.cl, raster ↔
-raster.cl, pyramid ↔ pyramid.cl, query ↔ query.cl), so for the same input it produces the
-same triangle ids and depths. It is the test oracle and the benchmark baseline, vectorized
-throughout (no per-pixel Python loops).
+operation order (vertex ↔ the vertices kernels/setup.cl makes per draw, setup ↔ setup.cl,
+bin ↔ bin.cl, raster ↔ raster.cl, pyramid ↔ pyramid.cl, query ↔ query.cl), so for the same
+input it produces the same triangle ids and depths. It is the test oracle and the benchmark
+baseline, vectorized throughout (no per-pixel Python loops).
 
 `render` draws one frame; `Renderer` keeps what the OpenCL `clraster.Renderer` keeps between
 frames (the scene of a bare Mesh, the occlusion-culling history). Both are backends of the one
@@ -135,11 +135,12 @@ def render(target: Target, camera: CameraLike, width: int, height: int, *,
 def draw_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
               totals: FrameTotals, into: Images | None = None) -> Images:
     """The twin's stage chain over the draws ``fd`` of ``pool``: vertex → setup → bin →
-    raster into ``into`` (an earlier pass's images, not modified; None: clear), streamed
-    in batches within ``config``'s budget by the renderer's own batching function
-    (`clraster.pipeline.streaming.stream_draws`), so the twin's memory per pass is bounded like the
-    device's and it runs the same passes. Adds the counts and host times to ``totals``;
-    returns the new images."""
+    raster (its vertex stream, made by `vertex.transform_draws`, is what each setup
+    work-item of kernels/setup.cl makes for its draw) into ``into`` (an earlier pass's
+    images, not modified; None: clear), streamed in batches within ``config``'s budget by
+    the renderer's own batching function (`clraster.pipeline.streaming.stream_draws`), so
+    the twin's memory per pass is bounded like the device's and it runs the same passes.
+    Adds the counts and host times to ``totals``; returns the new images."""
 
     def one_pass(batch: FrameDraws, max_entries: int | None, into: Images | None
                  ) -> Images:
@@ -161,7 +162,6 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
                 np.zeros((h, w, 3), np.float32))
     t0 = time.perf_counter()
     clip, oc, win = vertex_.transform_draws(pool, fd, params.kx, params.ky, w, h)
-    t1 = time.perf_counter()
     tri_verts, ids = setup_.draw_triangles(pool, fd)
     st = setup_.setup(clip, oc, win, tri_verts, ids, w, h, params.cull, params.kx, params.ky,
                       setup_.object_clip(pool, fd, params.reversed_z),
@@ -183,8 +183,8 @@ def _one_pass(pool, fd: FrameDraws, params: FrameParams, config: RasterConfig,
     totals.binned_entries += int(entries.size)
     totals.fragments_tested += tested
     totals.fragments_passed += passed
-    for stage, ms in (("vertex", t1 - t0), ("setup", t2 - t1), ("bin", t3 - t2),
-                      ("raster", t4 - t3)):
+    # (the vertex transform is part of setup, as in kernels/setup.cl)
+    for stage, ms in (("setup", t2 - t0), ("bin", t3 - t2), ("raster", t4 - t3)):
         totals.add_time(stage, ms * 1e3)
     return depth, ids_img, bary
 

@@ -1,4 +1,6 @@
-"""NumPy twin of kernels/vertex.cl: the same float32 operations in the same order."""
+"""NumPy twin of the vertex stage inside kernels/setup.cl (`draw_vertices`, `vertex_of`):
+the same float32 operations in the same order, kept here as a vertex stream (each setup
+work-item of the kernel makes its own draw's vertices in private memory)."""
 
 from __future__ import annotations
 
@@ -81,7 +83,7 @@ def transform(vertices: np.ndarray, mvp: np.ndarray, kx: np.float32, ky: np.floa
         oc[inside] = 0
     bad = ~np.all(np.isfinite(clip), axis=1)
     oc[bad] = OC_INVALID
-    win = np.zeros(v.shape[0], WINXY_DTYPE)   # x, y alone, as vertex.cl writes them
+    win = np.zeros(v.shape[0], WINXY_DTYPE)   # x, y alone, as setup.cl keeps them
     ok = (oc & (OC_INVALID | OC_W_NONPOS | OC_NEEDS_CLIP)) == 0
     wv = viewport(clip[ok], width, height)
     win["x"][ok], win["y"][ok] = wv["x"], wv["y"]
@@ -104,6 +106,6 @@ def draw_vertices(pool, fd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def transform_draws(pool, fd, kx: np.float32, ky: np.float32, width: int, height: int):
-    """Vertex stage over a frame's draws (mirrors vertex_transform in kernels/vertex.cl)."""
+    """Vertex stage over a frame's draws (mirrors draw_vertices in kernels/setup.cl)."""
     pv, inst, inside = draw_vertices(pool, fd)
     return transform(pool.positions[pv], fd.mvps[inst], kx, ky, width, height, inside)

@@ -1,4 +1,5 @@
-"""The stage chain, written once: geometry → vertex → setup → bin (→ raster).
+"""The stage chain, written once: geometry → setup (with the vertex transform) → bin
+(→ raster).
 
 Each stage's ``run`` takes the upstream stage's buffers object and the frame's
 `clraster.pipeline.params.FrameParams`, and returns its own buffers object (each dataclass documents
@@ -19,7 +20,7 @@ from typing import Any, cast
 import pyopencl as cl
 
 from ...base.config import RasterConfig
-from ...base.layout import DRAW_DTYPE, PIECE_DTYPE, WINXY_DTYPE
+from ...base.layout import DRAW_DTYPE, PIECE_DTYPE
 from ..device import abandon, wait
 from ..draws import FrameDraws
 from ..params import BinBudgetExceeded, FrameParams, FrameTotals
@@ -28,7 +29,6 @@ from .bin import BinBuffers, BinStage
 from .geometry import GeometryStage
 from .raster import RasterOutput, RasterStage
 from .setup import SetupStage
-from .vertex import VertexStage
 
 
 class StageChain:
@@ -53,7 +53,6 @@ class StageChain:
         self.context = ctx
         self.config = config
         self.geometry = GeometryStage(ctx)
-        self.vertex = VertexStage(ctx, config)
         self.setup = SetupStage(ctx, config)
         self.binning = BinStage(ctx, config)
         self.raster = RasterStage(ctx, config) if raster else None
@@ -85,18 +84,14 @@ class StageChain:
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
-        least one triangle), vertex stream 27 bytes × 3·M vertices (a draw has at most 3
-        vertices per triangle), setup 109·M (96-byte record, status, clip count and
+        least one triangle), setup 109·M (96-byte record, status, clip count and
         offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
         pieces than E is split like one with too many entries), bin entries 96·E and the
         list of slots to bin 4·M. The per-tile buffers (C·T counts, tile starts, tile
         stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
-        g, v, s, b = (self.geometry.buffers, self.vertex.buffers, self.setup.buffers,
-                      self.binning.buffers)
-        return {g.draws: DRAW_DTYPE.itemsize * m, v.clip: 16 * 3 * m, v.outcode: 2 * 3 * m,
-                v.ucode: 3 * m,
-                v.win: WINXY_DTYPE.itemsize * 3 * m, s.pieces: PIECE_DTYPE.itemsize * m,
+        g, s, b = self.geometry.buffers, self.setup.buffers, self.binning.buffers
+        return {g.draws: DRAW_DTYPE.itemsize * m, s.pieces: PIECE_DTYPE.itemsize * m,
                 s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
                 b.entries: PIECE_DTYPE.itemsize * e, b.live: 4 * m}
@@ -109,7 +104,7 @@ class StageChain:
 
     def device_bytes(self) -> int:
         """Bytes of device memory the chain's buffers hold now (pool included)."""
-        stages: list[Any] = [self.geometry, self.vertex, self.setup, self.binning]
+        stages: list[Any] = [self.geometry, self.setup, self.binning]
         if self.raster is not None:
             stages.append(self.raster)
         total = self.setup.partial.capacity + self.setup.flag.capacity
@@ -120,7 +115,7 @@ class StageChain:
 
     def bin(self, queue: cl.CommandQueue, pool, fd: FrameDraws, params: FrameParams,
             totals: FrameTotals, *, max_entries: int | None = None) -> BinBuffers:
-        """Run geometry upload → vertex → setup → bin over the draws ``fd`` of ``pool`` (a
+        """Run geometry upload → setup → bin over the draws ``fd`` of ``pool`` (a
         `drawlist.GeometryPool` or `clraster.pipeline.boxes.BoxGeometry`; uploaded only when it is a
         different object from last time). Adds the clipped pieces, binned entries and the
         stages' events (pending, see `FrameTotals.settle`) to ``totals``.
@@ -155,12 +150,10 @@ class StageChain:
         self.geometry.upload_pool(queue, pool)
         geo = self.geometry.upload_frame(queue, fd)
         self.setup.prepare(queue)   # while the queue is idle (SetupStage.prepare)
-        verts, ev_v = self.vertex.run(queue, geo, params)
-        events: dict[str, list] = {"vertex": ev_v}
+        events: dict[str, list] = {}
         stage = "setup"
         try:
-            setup, events["setup"] = self.setup.run(queue, geo, verts, params,
-                                                    max_pieces=max_entries)
+            setup, events["setup"] = self.setup.run(queue, geo, params, max_pieces=max_entries)
             stage = "bin"
             bins, events["bin"] = self.binning.run(queue, setup, params, max_entries,
                                                    defer=defer)

@@ -15,7 +15,7 @@ from ._buffers import GrowBuffer
 
 @dataclass
 class GeometryBuffers:
-    """Scene → vertex/setup boundary (see drawlist.GeometryPool for shapes and dtypes).
+    """Scene → setup boundary (see drawlist.GeometryPool for shapes and dtypes).
 
     positions, clusters, local_tris, face_ids: the pool, uploaded once per scene (not its
     vert_ids: the kernels read a cluster's positions in place, so the pool must store them
@@ -24,10 +24,10 @@ class GeometryBuffers:
     float64 (I, 4), uplanes: float64 (I, K, 4) (draws.FrameDraws), uploaded for every
     pass. n_user: K, the user clip planes of the draws uploaded last; uclip: the bits of
     those that clip (`FrameDraws.uclip`).
-    n_draws, n_verts, n_tris: D and the sizes of the vertex and triangle streams of the draws
-    uploaded last (draws.FrameDraws). may_clip: whether setup can clip any of their
-    triangles: False when every draw is inside the frustum by a margin (DRAW_INSIDE: the
-    vertex stage sets no clip bits for it) or inside the near and far planes and the
+    n_draws, n_tris: D and the size of the triangle stream of the draws uploaded last
+    (draws.FrameDraws). may_clip: whether setup can clip any of their triangles: False when
+    every draw is inside the frustum by a margin (DRAW_INSIDE: setup's vertices get no clip
+    bits there) or inside the near and far planes and the
     guard band by one (DRAW_NO_CLIP, the host's test), and no user plane clips (uclip 0),
     so that setup need not wait to learn that none was clipped (`SetupStage.run`).
     host_clip_test: may_clip is False thanks to DRAW_NO_CLIP draws (the host's test, which
@@ -46,7 +46,6 @@ class GeometryBuffers:
     n_draws: int = 0
     n_user: int = 0
     uclip: int = 0
-    n_verts: int = 0
     n_tris: int = 0
     may_clip: bool = True
     host_clip_test: bool = False
@@ -77,19 +76,19 @@ class GeometryStage:
 
     def upload_frame(self, queue: cl.CommandQueue, fd: FrameDraws) -> GeometryBuffers:
         """Upload the draw records of ``fd`` (a frame's draws, or any subset of them);
-        returns the buffers, the vertex and setup stages' input. Call while no enqueued
+        returns the buffers, the setup stage's input. Call while no enqueued
         command uses them: every pass waits for its raster before the next one uploads,
         and after one ended by an exception `StageChain` waits for what it left running.
         Where the device works in host memory (`GrowBuffer` host mode) the records are
         copied into the buffers' own arrays; five blocking writes were five commands,
-        ~0.2 ms a pass before the vertex stage could start."""
+        ~0.2 ms a pass before the first kernel could start."""
         b = self.buffers
         for gb, arr in ((b.draws, fd.draws), (b.mvps, fd.mvps), (b.mvps64, fd.mvps64),
                         (b.zrows, fd.zrows), (b.uplanes, fd.uplanes)):
             gb.ensure(arr.nbytes)
             if arr.nbytes:
                 gb.write(queue, arr)
-        b.n_draws, b.n_verts, b.n_tris = int(fd.draws.shape[0]), fd.n_verts, fd.n_tris
+        b.n_draws, b.n_tris = int(fd.draws.shape[0]), fd.n_tris
         b.n_user, b.uclip = fd.n_user, fd.uclip
         flags = fd.draws["flags"]
         unclipped = (flags & (DRAW_INSIDE | DRAW_NO_CLIP)) != 0

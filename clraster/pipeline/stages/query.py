@@ -1,10 +1,10 @@
 """Exact occlusion queries, host side (kernels/query.cl).
 
-The boxes (clraster.pipeline.boxes.box_geometry: 12 triangles per box, clusters of 10 boxes drawn in
-box order) go through this stage's own `StageChain` of geometry, vertex, setup (cull "none")
-and binning stages — the same kernels and programs as the renderer's, separate buffers, so a
-query never disturbs a renderer's state — and then one work-item per tile walks the tile's
-list read-only against the depth buffer (query_tiles).
+The boxes (clraster.pipeline.boxes.box_geometry: 12 triangles per box, clusters of 10 boxes
+drawn in box order) go through this stage's own `StageChain` of geometry, setup (with the
+vertex transform; cull "none") and binning stages — the same kernels and programs as the
+renderer's, separate buffers, so a query never disturbs a renderer's state — and then one
+work-item per tile walks the tile's list read-only against the depth buffer (query_tiles).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ class QueryBuffers:
 
 
 class QueryStage:
-    """Draws boxes through vertex → setup → bin (its own `StageChain`) and counts their
+    """Draws boxes through setup → bin (its own `StageChain`) and counts their
     passing samples."""
 
     def __init__(self, ctx: cl.Context, config: RasterConfig | None = None) -> None:
@@ -50,8 +50,8 @@ class QueryStage:
         `clraster.pipeline.boxes.box_geometry` — against the float32 (H, W) depth buffer
         ``depth_buf``; blocking.
 
-        Returns int64 (n_boxes,) counts and the device milliseconds per stage (vertex,
-        setup, bin, query).
+        Returns int64 (n_boxes,) counts and the device milliseconds per stage (setup, bin,
+        query).
         """
         params = FrameParams.make(width, height, self.config, "none")
         totals = FrameTotals()

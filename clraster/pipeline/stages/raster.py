@@ -184,8 +184,8 @@ class RasterStage:
 
     def prepare(self, queue: cl.CommandQueue, params: FrameParams) -> None:
         """Upload the frame's window mask, if it has a new one, before the pass's first
-        kernel: a host-to-device write enqueued behind running kernels (the vertex, setup
-        and bin stages of a deferred pass) blocks the calling thread with the GIL held
+        kernel: a host-to-device write enqueued behind running kernels (the setup and bin
+        stages of a deferred pass) blocks the calling thread with the GIL held
         (docs/ARCHITECTURE.md)."""
         self._window(queue, params)
 

@@ -1,7 +1,7 @@
 """Resolve host side (kernels/resolve.cl): the per-pixel outputs asked for
 (`clraster.base.checks.RESOLVE_OUTPUTS`) made after the frame's last raster pass from its ids
-and barycentrics and the scene's geometry already on the device (the pool positions the
-vertex stage reads, `GeometryBuffers.positions`), one launch a frame (two where a pass is
+and barycentrics and the scene's geometry already on the device (the pool positions setup
+reads, `GeometryBuffers.positions`), one launch a frame (two where a pass is
 drawn again, `ResolveFollow`). Device shading
 (`clraster.pipeline.stages.shade`) reads the tables this stage uploads."""
 

@@ -1,5 +1,7 @@
-"""Triangle setup host side (kernels/setup.cl): status per triangle, setup records (pieces)
-for unclipped survivors, then count → scan → write for clipped triangles."""
+"""Triangle setup host side (kernels/setup.cl): the draws' vertices (object → clip space,
+outcodes, window positions: the vertex stage, made by each draw's work-item), status per
+triangle, setup records (pieces) for unclipped survivors, then count → scan → write for
+clipped triangles."""
 
 from __future__ import annotations
 
@@ -16,7 +18,6 @@ from ..features import local_size
 from ..params import BinBudgetExceeded, FrameParams
 from ._buffers import GrowBuffer
 from .geometry import GeometryBuffers
-from .vertex import ClipBuffers
 
 
 @dataclass
@@ -85,7 +86,7 @@ class SetupStage:
         The host's tests are conservative by a margin, so this never fires; if it did, the
         triangles to clip were dropped from the image, and that must not pass silently.
         (A read of host memory where the device shares it.)"""
-        # (draws all DRAW_INSIDE have no clip bits at all: the vertex stage skips their
+        # (draws all DRAW_INSIDE have no clip bits at all: setup skips their vertices'
         # outcode tests, so there is nothing to check, and no read on a discrete device)
         if not geo.host_clip_test or not geo.n_tris:
             return
@@ -95,34 +96,32 @@ class SetupStage:
                 "no clipping (DRAW_INSIDE / DRAW_NO_CLIP), so the image lacks them. Please "
                 "report it with the camera and mesh; RasterConfig is not the cause")
 
-    def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, verts: ClipBuffers,
-            params: FrameParams, max_pieces: int | None = None
-            ) -> tuple[SetupBuffers, list[cl.Event]]:
-        """Set up the ``geo.n_tris`` triangles of the uploaded draws (geo) over the vertex
-        stage's outputs (verts). Returns the buffers (n_clip_pieces = P) and the profiling
+    def run(self, queue: cl.CommandQueue, geo: GeometryBuffers, params: FrameParams,
+            max_pieces: int | None = None) -> tuple[SetupBuffers, list[cl.Event]]:
+        """Transform the vertices of the uploaded draws (geo) and set up their
+        ``geo.n_tris`` triangles. Returns the buffers (n_clip_pieces = P) and the profiling
         events. ``max_pieces``: when P > max_pieces, raise
         `clraster.pipeline.params.BinBudgetExceeded` (P) before the clipped pieces are sized or
         written (a streamed frame splits the pass; None: no limit)."""
         b = self.buffers
         rec = PIECE_DTYPE.itemsize
         n_draws, m = geo.n_draws, geo.n_tris
-        clip, outcode, win = verts.clip.buf, verts.outcode.buf, verts.win.buf
         kx, ky = params.kx, params.ky
-        # the pool too (user clip plane distances from object space, common.h user_dist)
-        # and the float64 matrices and depth rows (the double positions of the value planes
-        # and the clipper's inputs, kernels/setup.cl CLIP_IN)
+        # the pool and the float32 matrices (the vertices), the user planes (their codes
+        # and the clipper's distances, common.h user_dist), and the float64 matrices and
+        # depth rows (the double positions of the value planes and the clipper's inputs,
+        # kernels/setup.cl CLIP_IN)
         draw_args = (geo.draws.buf, np.uint32(n_draws), geo.clusters.buf, geo.local_tris.buf,
                      geo.face_ids.buf, geo.positions.buf, geo.mvps64.buf,
                      geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
-                     verts.ucode.buf)
+                     geo.mvps.buf)
         size = np.int32(params.width), np.int32(params.height)
         # one work-group per draw (kernels/setup.cl triangle_of); setup_triangles: one
         # work-item per draw
         gsize = (max(n_draws, 1) * CLUSTER_MAX,)
         lsize = (CLUSTER_MAX,)
         flag = cast(cl.Buffer, self.flag.buf)   # zeroed by `prepare`
-        ev = [self.k_setup(queue, (max(n_draws, 1),), (1,), clip, outcode, win,
-                           *draw_args, *size,
+        ev = [self.k_setup(queue, (max(n_draws, 1),), (1,), *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
                            b.status.ensure(m),
@@ -142,7 +141,7 @@ class SetupStage:
         # (setup_triangles zeroes the clipped slots' first)
         b.clip_offset.ensure(4 * max(m, 1))
         if m and total[0]:
-            ev.append(self.k_count(queue, gsize, lsize, clip, outcode, *draw_args, *size,
+            ev.append(self.k_count(queue, gsize, lsize, *draw_args, *size,
                                    np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
                                    b.status.buf, b.clip_count.buf))
             chunks = np.uint32(min(SCAN_CHUNKS, m))
@@ -162,7 +161,7 @@ class SetupStage:
         if max_pieces is not None and p > max_pieces:
             raise BinBudgetExceeded(p, max_pieces, ev)
         if p:
-            ev.append(self.k_clipped(queue, gsize, lsize, clip, outcode, *draw_args, *size,
+            ev.append(self.k_clipped(queue, gsize, lsize, *draw_args, *size,
                                      np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
                                      b.status.buf, b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
