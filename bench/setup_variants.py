@@ -3,12 +3,13 @@ of kernels/setup.cl that stop at a given step: where a dense mesh's setup time g
 
     python bench/setup_variants.py ../shared/meshes/stanford_dragon_vrip.ply 640 480
 
-One frame is rendered to capture the setup stage's inputs (the vertex stage's outputs, the
-draws); then each variant is built from the working tree's source with one substitution
+One frame is rendered to capture the setup stage's inputs (the pool, the draws); then each
+variant is built from the working tree's source with one substitution
 (timing only: a variant's results are wrong by design, and are never read) and launched
 ``--rounds`` times in turn with the same arguments; min and median kernel times (OpenCL
-profiling events) are printed. Variants: ``base`` (the kernel), ``indices`` (return once the
-work-item has its lanes' vertex indices), ``facing`` (after the lanes' facing), ``lanes``
+profiling events) are printed. Variants: ``base`` (the kernel), ``vertices`` (return once the
+work-item has made its draw's vertices), ``indices`` (return once the work-item has its
+lanes' vertex indices), ``facing`` (after the lanes' facing), ``lanes``
 (after the lanes' fates and stores, before the pieces), ``no_prefetch`` (without the
 prefetch of the pieces' record lines), ``no_store`` (each piece's coverage made, nothing of
 it stored), ``no_record`` (value_planes8 without its stores of the records' last 64 bytes),
@@ -35,7 +36,13 @@ from clraster.base.config import RasterConfig
 #: taken out). The lanes' stores are skipped by the exits: a variant's outputs are never read.
 _EXIT = "    if (width > 0) return 0u;\n"   # in batch_fates
 VARIANTS = {
-    "indices": ("#define OUTC(i) (int)outcode[i]\n", _EXIT + "#define OUTC(i) (int)outcode[i]\n"),
+    # (a few of the draw's vertices read back at a run-time index, so that none is dropped)
+    "vertices": ("    int codes = any_code != 0;\n",
+                 "    if (width > 0) {\n        int j_ = nt & (CLUSTER_MAX - 1);\n"
+                 "        status[d] = (uchar)(any_code + V.wx[j_] + V.wy[j_] + V.oc[j_]"
+                 " + (int)(V.x[j_] + V.y[j_] + V.w[j_]));\n        return;\n    }\n"
+                 "    int codes = any_code != 0;\n"),
+    "indices": ("#define OUTC(i) V->oc[i]\n", _EXIT + "#define OUTC(i) V->oc[i]\n"),
     "facing": ("    int8 clipped = (", _EXIT + "    int8 clipped = ("),
     "lanes": ("    return left;\n", "    return width > 0 ? 0u : left;\n"),
     "no_prefetch": ("        PREFETCH(rec); PREFETCH(rec + 64);\n",
@@ -61,9 +68,9 @@ def main() -> None:
     captured = {}
     run = setup_stage.SetupStage.run
 
-    def capture(self, queue, geo, verts, params, max_pieces=None):
-        captured["args"] = (self, queue, geo, verts, params)
-        return run(self, queue, geo, verts, params, max_pieces)
+    def capture(self, queue, geo, params, max_pieces=None):
+        captured["args"] = (self, queue, geo, params)
+        return run(self, queue, geo, params, max_pieces)
 
     setup_stage.SetupStage.run = capture   # type: ignore[method-assign]
     mesh = clraster.Mesh.load(a.mesh)
@@ -74,12 +81,11 @@ def main() -> None:
     r = clraster.Renderer(a.width, a.height)
     r.render(mesh, cam)
     setup_stage.SetupStage.run = run   # type: ignore[method-assign]
-    stage, queue, geo, verts, params = captured["args"]
+    stage, queue, geo, params = captured["args"]
     b = stage.buffers
-    args = (verts.clip.buf, verts.outcode.buf, verts.win.buf, geo.draws.buf,
-            np.uint32(geo.n_draws), geo.clusters.buf, geo.local_tris.buf, geo.face_ids.buf,
-            geo.positions.buf, geo.mvps64.buf, geo.zrows.buf, geo.uplanes.buf,
-            np.int32(geo.n_user), np.uint32(geo.uclip), verts.ucode.buf,
+    args = (geo.draws.buf, np.uint32(geo.n_draws), geo.clusters.buf, geo.local_tris.buf,
+            geo.face_ids.buf, geo.positions.buf, geo.mvps64.buf, geo.zrows.buf,
+            geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip), geo.mvps.buf,
             np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
             np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),
             b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf, stage.flag.buf,
