@@ -10,6 +10,7 @@ accumulate in one `FrameTotals`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -117,12 +118,12 @@ class FrameTotals:
         until `settle`; their times are known only once they are complete."""
         self.pending.setdefault(stage, []).extend(e for e in events if e is not None)
 
-    def settle(self) -> None:
-        """Add the device times of the pending events to timings_ms; call once they are
-        complete (after a blocking read or a wait on their queue)."""
+    def settle(self, event_ms: Callable[[list], float]) -> None:
+        """Add the device times of the pending events to timings_ms, each stage's from
+        ``event_ms(events)`` (milliseconds: `clraster.pipeline.device.event_ms`); call once
+        they are complete (after a blocking read or a wait on their queue)."""
         for stage, events in self.pending.items():
-            self.add_time(stage, sum((e.profile.end - e.profile.start) for e in events)
-                          * 1e-6)
+            self.add_time(stage, event_ms(events))
         self.pending.clear()
 
     def stats(self, counts: dict[str, int]) -> FrameStats:

@@ -21,7 +21,7 @@ import pyopencl as cl
 
 from ...base.config import RasterConfig
 from ...base.layout import DRAW_DTYPE, PIECE_DTYPE
-from ..device import abandon, wait
+from ..device import abandon, event_ms, wait
 from ..draws import FrameDraws
 from ..params import BinBudgetExceeded, FrameParams, FrameTotals
 from ._buffers import GrowBuffer
@@ -231,7 +231,7 @@ class StageChain:
         totals.fragments_tested += int(rstats[:, 0].sum())
         totals.fragments_passed += int(rstats[:, 1].sum())
         _add_events(totals, events)
-        totals.settle()   # the raster waited for the queue: every event is complete
+        totals.settle(event_ms)   # the raster waited for the queue: every event is complete
         return out
 
 

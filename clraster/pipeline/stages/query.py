@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ...base.config import RasterConfig
 from ..boxes import BoxGeometry
-from ..device import kernel, program
+from ..device import event_ms, kernel, program
 from ..draws import FrameDraws
 from ..params import FrameParams, FrameTotals
 from ._buffers import GrowBuffer
@@ -73,5 +73,5 @@ class QueryStage:
         if err[0]:
             raise RuntimeError("occlusion query: a tile list is not in box order; the box "
                                "geometry must be drawn box after box (a bug in clraster)")
-        totals.settle()   # the blocking read above waited for everything before it
+        totals.settle(event_ms)   # the blocking read above waited for everything before it
         return out.astype(np.int64), totals.timings_ms
