@@ -1,6 +1,9 @@
-/* Triangle setup: trivial reject, clipping, back-face / zero-area cull, fixed-point snap.
+/* The vertex stage and triangle setup: object -> clip space, outcodes and the viewport
+ * transform of each draw's vertices; trivial reject, clipping, back-face / zero-area cull,
+ * fixed-point snap of its triangles.
  *
- * setup_triangles (a work-item per draw, its triangles SETUP_LANES at a time) writes, for
+ * setup_triangles (a work-item per draw: its vertices VERTEX_LANES at a time, draw_vertices,
+ * into private memory, then its triangles SETUP_LANES at a time) writes, for
  * every unclipped survivor, one Piece at the triangle's slot in the frame's triangle
  * stream, and a status per triangle; setup_count_clipped, for the triangles that need the
  * clipper, the number of pieces they make. The host scans those counts; setup_clipped then
