@@ -422,11 +422,16 @@ ALWAYS_INLINE float4 vertex_of(__global const float *pos, __global const float *
 
 /* A draw's vertices by local index (its cluster's, CLUSTER_MAX at most), as setup reads
  * them: clip x, y, w (z is only tested), window x, y (24.8; 0 where the vertex cannot be
- * drawn unclipped), outcode and user plane bits (0 without user planes). */
+ * drawn unclipped), outcode and user plane bits (0 without user planes); and in double,
+ * for the value planes (value_planes8), the window x, y and depth key and clip w of the
+ * double clip position (CLIP_IN: the float64 matrix times the pool position) — value_planes'
+ * per-vertex steps, made once per vertex instead of once per piece corner (meaningless
+ * where w <= 0: such a vertex is never a piece's). */
 typedef struct {
+    double vx[CLUSTER_MAX], vy[CLUSTER_MAX], vz[CLUSTER_MAX], vw[CLUSTER_MAX];
     float x[CLUSTER_MAX], y[CLUSTER_MAX], w[CLUSTER_MAX];
     int wx[CLUSTER_MAX], wy[CLUSTER_MAX], oc[CLUSTER_MAX], uc[CLUSTER_MAX];
-} __attribute__((aligned(32))) DrawVerts;
+} __attribute__((aligned(64))) DrawVerts;
 
 /* The nv vertices of a draw (instance matrix m, flags, pool positions from `first`: a
  * cluster's positions lie side by side in the pool) into V; returns the OR of their
@@ -448,6 +453,8 @@ typedef struct {
 ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
                                  __global const float *m, int flags, float kx, float ky,
                                  float hw, float hh, __global const double *q, int n_user,
+                                 __global const double *m64, __global const double *zr,
+                                 int reversed, double hwd, double hhd, double zs, double zo,
                                  DrawVerts *V)
 {
     uint any = 0;
@@ -507,6 +514,15 @@ ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
         *(float8 *)&V->x[lv0] = cx; *(float8 *)&V->y[lv0] = cy; *(float8 *)&V->w[lv0] = cw;
         *(int8 *)&V->wx[lv0] = wx; *(int8 *)&V->wy[lv0] = wy; *(int8 *)&V->oc[lv0] = o;
         any8 |= o;
+        /* CLIP_IN and value_planes' window position and depth key, per lane */
+        double8 dx = TO_DOUBLE8(x), dy = TO_DOUBLE8(y), dz = TO_DOUBLE8(z);
+        double8 vw = MAT_ROW(m64, 3, dx, dy, dz);
+        double8 vr = reversed ? MAT_ROW(zr, 0, dx, dy, dz) : MAT_ROW(m64, 2, dx, dy, dz);
+        double8 iwd = 1.0 / vw;
+        *(double8 *)&V->vx[lv0] = (MAT_ROW(m64, 0, dx, dy, dz) * iwd + 1.0) * hwd;
+        *(double8 *)&V->vy[lv0] = (1.0 - MAT_ROW(m64, 1, dx, dy, dz) * iwd) * hhd;
+        *(double8 *)&V->vz[lv0] = (vr * iwd) * zs + zo;
+        *(double8 *)&V->vw[lv0] = vw;
     }
     any = (uint)(((any8.s0 | any8.s1) | (any8.s2 | any8.s3))
                  | ((any8.s4 | any8.s5) | (any8.s6 | any8.s7)));
@@ -528,6 +544,14 @@ ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
         }
         V->x[v] = c.x; V->y[v] = c.y; V->w[v] = c.w;
         V->wx[v] = wx; V->wy[v] = wy; V->oc[v] = (int)o;
+        double dx = (double)p[0], dy = (double)p[1], dz = (double)p[2];
+        double vw = MAT_ROW(m64, 3, dx, dy, dz);
+        double vr = reversed ? MAT_ROW(zr, 0, dx, dy, dz) : MAT_ROW(m64, 2, dx, dy, dz);
+        double iwd = 1.0 / vw;
+        V->vx[v] = (MAT_ROW(m64, 0, dx, dy, dz) * iwd + 1.0) * hwd;
+        V->vy[v] = (1.0 - MAT_ROW(m64, 1, dx, dy, dz) * iwd) * hhd;
+        V->vz[v] = (vr * iwd) * zs + zo;
+        V->vw[v] = vw;
         V->uc[v] = n_user > 0 ? (int)vertex_ucode(q, n_user, o, p[0], p[1], p[2]) : 0;
         any |= o;
     }
@@ -656,21 +680,6 @@ typedef struct {
 /* Per lane: a where the lane mask m (long8 -1/0) is set, else b (double8); min as mind */
 #define SELD8(m, a, b) as_double8((as_long8(a) & (m)) | (as_long8(b) & ~(m)))
 #define MIND8(a, b) SELD8((a) <= (b), (a), (b))
-#define POS_X(i) pos[3 * (i)]
-#define POS_Y(i) pos[3 * (i) + 1]
-#define POS_Z(i) pos[3 * (i) + 2]
-/* CLIP_IN for the pool vertices of index vector ix in lanes: clip x, y, w and the depth
- * numerator r (kernels pos, reversed and the instance's rows m, zr in scope) */
-#define CLIP_IN8(x, y, w, r, ix) do {                                                      \
-    double8 px_ = TO_DOUBLE8(GATHER8(float8, POS_X, ix));                                  \
-    double8 py_ = TO_DOUBLE8(GATHER8(float8, POS_Y, ix));                                  \
-    double8 pz_ = TO_DOUBLE8(GATHER8(float8, POS_Z, ix));                                  \
-    x = MAT_ROW(m, 0, px_, py_, pz_);                                                      \
-    y = MAT_ROW(m, 1, px_, py_, pz_);                                                      \
-    w = MAT_ROW(m, 3, px_, py_, pz_);                                                      \
-    if (reversed) r = MAT_ROW(zr, 0, px_, py_, pz_);                                       \
-    else r = MAT_ROW(m, 2, px_, py_, pz_);                                                 \
-} while (0)
 #define LOAD_Q8(a) (*(int8 *)(a))
 
 /* The 8 x 8 int matrix of vectors a[0..7] transposed into t[0..7] (t[k].sj = a[j].sk): by
@@ -712,13 +721,10 @@ typedef struct {
 }
 #endif
 
-/* The value planes of the q->n (1..SETUP_LANES) queued pieces of instance inst, in lanes,
- * and the rest of their records (id, flags, values, cover, pad: the record's last 64
- * bytes); the queue is emptied. */
-ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
-                                 __global const double *mvps64, __global const double *zrows,
-                                 int inst, int reversed, double hw, double hh, double zs,
-                                 double zo, __global Piece *pieces)
+/* The value planes of the q->n (1..SETUP_LANES) queued pieces of the draw whose vertices
+ * are V, in lanes, and the rest of their records (id, flags, values, cover, pad: the
+ * record's last 64 bytes); the queue is emptied. */
+ALWAYS_INLINE void value_planes8(ValueQueue *q, const DrawVerts *V, __global Piece *pieces)
 {
     int n = q->n;
     for (int k = n; k < SETUP_LANES; ++k) {   /* idle lanes: lane 0's piece (never stored) */
@@ -727,18 +733,19 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
         q->y1[k] = q->y1[0]; q->x2[k] = q->x2[0]; q->y2[k] = q->y2[0];
         q->px0[k] = q->px0[0]; q->py0[k] = q->py0[0]; q->as[k] = q->as[0];
     }
-    __global const double *m = mvps64 + 16 * inst, *zr = zrows + 4 * inst;
-    double8 ax, ay, aw, ar, bx, by, bw, br, cx, cy, cw, cr;
-    CLIP_IN8(ax, ay, aw, ar, LOAD_Q8(q->pa));
-    CLIP_IN8(bx, by, bw, br, LOAD_Q8(q->pb));
-    CLIP_IN8(cx, cy, cw, cr, LOAD_Q8(q->pc));
-    /* value_planes, lane by lane */
-    double8 iw0 = 1.0 / aw, iw1 = 1.0 / bw, iw2 = 1.0 / cw;
-    double8 x0 = (ax * iw0 + 1.0) * hw, y0 = (1.0 - ay * iw0) * hh;
-    double8 x1 = (bx * iw1 + 1.0) * hw, y1 = (1.0 - by * iw1) * hh;
-    double8 x2 = (cx * iw2 + 1.0) * hw, y2 = (1.0 - cy * iw2) * hh;
-    double8 z0 = (ar * iw0) * zs + zo, z1 = (br * iw1) * zs + zo;
-    double8 z2 = (cr * iw2) * zs + zo;
+    /* value_planes, lane by lane, from its per-vertex steps made by draw_vertices */
+#define V_X(i) V->vx[i]
+#define V_Y(i) V->vy[i]
+#define V_Z(i) V->vz[i]
+#define V_W(i) V->vw[i]
+    int8 ia = LOAD_Q8(q->pa), ib = LOAD_Q8(q->pb), ic = LOAD_Q8(q->pc);
+    double8 x0 = GATHER8(double8, V_X, ia), y0 = GATHER8(double8, V_Y, ia);
+    double8 x1 = GATHER8(double8, V_X, ib), y1 = GATHER8(double8, V_Y, ib);
+    double8 x2 = GATHER8(double8, V_X, ic), y2 = GATHER8(double8, V_Y, ic);
+    double8 z0 = GATHER8(double8, V_Z, ia), z1 = GATHER8(double8, V_Z, ib);
+    double8 z2 = GATHER8(double8, V_Z, ic);
+    double8 aw = GATHER8(double8, V_W, ia), bw = GATHER8(double8, V_W, ib);
+    double8 cw = GATHER8(double8, V_W, ic);
     double8 as = *(double8 *)q->as;
     double8 area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0);
     long8 keep = (area >= 0.5 * as) & (area <= 2.0 * as);   /* else the snapped corners */
@@ -790,13 +797,12 @@ ALWAYS_INLINE void value_planes8(ValueQueue *q, __global const float *pos,
 }
 
 /* The piece of unclipped triangle t (local vertices i0, i1, i2 of the draw's vertices V,
- * id; the pool vertex of local vertex 0 `vpool`) that passed the outcode, facing,
+ * id) that passed the outcode, facing,
  * clipping and w tests: piece_cover (with the cover bits `known` the lanes found), its
  * status and tile word, and, for a piece, its record's first 32 bytes (x, y, box) now and
  * the rest through the queue q (value_planes8 once SETUP_LANES are waiting; the caller
  * empties it at the draw's end). */
-ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool,
-                                int known, const DrawVerts *V, int width, int height,
+ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int known, const DrawVerts *V, int width, int height,
                                 int tiles_x, __global Piece *pieces, __global uchar *status,
                                 __global int *tile1, ValueQueue *q)
 {
@@ -813,9 +819,9 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
                                               pc.y[2], pc.bb_min, pc.bb_max);
         int k = q->n++;
         q->slot[k] = t;
-        q->pa[k] = vpool + i0;
-        q->pb[k] = vpool + (sw ? i2 : i1);
-        q->pc[k] = vpool + (sw ? i1 : i2);
+        q->pa[k] = i0;
+        q->pb[k] = sw ? i2 : i1;
+        q->pc[k] = sw ? i1 : i2;
         q->x0[k] = pc.x[0]; q->y0[k] = pc.y[0];
         q->x1[k] = pc.x[1]; q->y1[k] = pc.y[1];
         q->x2[k] = pc.x[2]; q->y2[k] = pc.y[2];
@@ -846,17 +852,15 @@ ALWAYS_INLINE void raster_piece(int t, int i0, int i1, int i2, int id, int vpool
 }
 
 /* The fates of local triangles lt0 .. lt0 + n - 1 (n <= SETUP_LANES) of draw dr (its
- * cluster's triangles tv, its vertices V, pool vertices from pool0; codes = 0: every
- * outcode of the draw is 0) in lanes: the decided ones' status and tile word stored; returns the lanes still open
- * (bit j: triangle lt0 + j, for raster_piece), their records' lines and corner positions
- * asked for. */
+ * cluster's triangles tv, its vertices V; codes = 0: every outcode of the draw is 0) in
+ * lanes: the decided ones' status and tile word stored; returns the lanes still open (bit
+ * j: triangle lt0 + j, for raster_piece), their records' lines asked for. */
 ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *tv,
                                const DrawVerts *V, int n_user, uint uclip, int width,
                                int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
                                __global int *tile1, __global int *any_clipped,
-                               __global int *clip_count, __global const float *pos,
-                               int pool0, uchar *known, int codes)
+                               __global int *clip_count, uchar *known, int codes)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
@@ -987,19 +991,15 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
         STORE_LANE(0) STORE_LANE(1) STORE_LANE(2) STORE_LANE(3)
         STORE_LANE(4) STORE_LANE(5) STORE_LANE(6)
     }
-    /* the open lanes' record lines and corner positions (CLIP_IN), asked for now: most
-     * slots of the records' buffer are never written in a frame of a dense mesh, and a
-     * store to a line not in the cache waited for it (raster_piece runs SETUP_LAG batches
-     * later) */
+    /* the open lanes' record lines, asked for now: most slots of the records' buffer are
+     * never written in a frame of a dense mesh, and a store to a line not in the cache
+     * waited for it (raster_piece runs SETUP_LAG batches later) */
     int8 bits = open & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
     uint left = (uint)(((bits.s0 | bits.s1) | (bits.s2 | bits.s3))
                        | ((bits.s4 | bits.s5) | (bits.s6 | bits.s7)));
     for (uint m = left; m; m &= m - 1) {
         __global const char *rec = (__global const char *)&pieces[t0 + CTZ(m)];
         PREFETCH(rec); PREFETCH(rec + 64);
-        uchar4 q = tv[lt0 + CTZ(m)];
-        __global const float *p0 = pos + 3 * pool0;
-        PREFETCH(p0 + 3 * q.x); PREFETCH(p0 + 3 * q.y); PREFETCH(p0 + 3 * q.z);
     }
     return left;
 }
@@ -1028,13 +1028,14 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
     uint any_code = draw_vertices(pos, ci.z, imin(ci.w, CLUSTER_MAX), mvps + 16 * dr.instance,
                                   dr.flags, kx, ky, 0.5f * (float)width,
                                   0.5f * (float)height, uplanes + 4 * n_user * dr.instance,
-                                  n_user, &V);
+                                  n_user, mvps64 + 16 * dr.instance, zrows + 4 * dr.instance,
+                                  reversed, 0.5 * (double)width, 0.5 * (double)height, zs,
+                                  zo, &V);
     int codes = any_code != 0;
     uint open[CLUSTER_MAX / SETUP_LANES];   /* batch h's open lanes (batch_fates) */
     uchar known[CLUSTER_MAX] __attribute__((aligned(8)));   /* their cover bits, or 0 */
     ValueQueue q;   /* pieces waiting for their value planes */
     q.n = 0;
-    double hw = 0.5 * (double)width, hh = 0.5 * (double)height;
     /* batch h's fates, then the pieces of batch h - SETUP_LAG: their records' lines were
      * asked for SETUP_LAG batches earlier */
     for (int h = 0; h < nb + SETUP_LAG; ++h) {
@@ -1042,8 +1043,7 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
             int lt0 = SETUP_LANES * h;
             open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, &V, n_user,
                                   uclip, width, height, cull, pieces,
-                                  status, tile1, any_clipped, clip_count, pos, ci.z, known,
-                                  codes);
+                                  status, tile1, any_clipped, clip_count, known, codes);
         }
         if (h < SETUP_LAG) continue;
         int lt0 = SETUP_LANES * (h - SETUP_LAG);
@@ -1051,15 +1051,11 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
             int l = lt0 + CTZ(left);
             uchar4 v = tv[l];
             raster_piece(dr.tri_base + l, v.x, v.y, v.z, dr.face_base + face_ids[ci.x + l],
-                         ci.z, known[l], &V, width, height, tiles_x, pieces,
-                         status, tile1, &q);
-            if (q.n == SETUP_LANES)
-                value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo,
-                              pieces);
+                         known[l], &V, width, height, tiles_x, pieces, status, tile1, &q);
+            if (q.n == SETUP_LANES) value_planes8(&q, &V, pieces);
         }
     }
-    if (q.n > 0)
-        value_planes8(&q, pos, mvps64, zrows, dr.instance, reversed, hw, hh, zs, zo, pieces);
+    if (q.n > 0) value_planes8(&q, &V, pieces);
 }
 
 /* The clipper on triangle (i0, i1, i2) (pool vertices) of this work-item's draw
