@@ -4,6 +4,7 @@ the same bins, in one process, interleaved.
     python bench/raster_ab.py HEAD                          # dragon at 1920x1080
     python bench/raster_ab.py HEAD --mesh spot.ply --n 40
     python bench/raster_ab.py HEAD --plant 10100000         # plant, first person, occlusion
+    python bench/raster_ab.py HEAD --mesh quad --close --evict 100   # the fill sweep's quad
 
 Two renderers are built, one from each set of sources (as `kernel_ab.py` does), each
 renders the scene a few times; then only `RasterStage.run` is repeated on the bins of each
@@ -36,7 +37,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("rev", help="git revision whose kernels/ is the baseline (A)")
     ap.add_argument("--mesh", default="stanford_dragon_vrip.ply",
-                    help="a file in ../shared/meshes (default the dragon)")
+                    help="a file in ../shared/meshes (default the dragon), or quad (the "
+                         "fill sweep's large quad)")
+    ap.add_argument("--close", action="store_true",
+                    help="seen from close by, as the fill sweep's scenes (spec.close_camera)")
+    ap.add_argument("--evict", type=int, default=0, metavar="MB",
+                    help="touch this many MB before each launch (cold caches, as in the "
+                         "harness)")
     ap.add_argument("--plant", type=int, help="use scenes.plant(N), first person, occlusion")
     ap.add_argument("--size", default="1920x1080")
     ap.add_argument("--n", type=int, default=30, help="launches per tree")
@@ -49,8 +56,11 @@ def main(argv: list[str] | None = None) -> int:
         cam = plant_inside_camera(target, w, h)
         kw["occlusion"] = True
     else:
-        target = clraster.Mesh.load(str(REPO.parent / "shared" / "meshes" / a.mesh))
-        cam = clraster.Camera.framing(*target.bounds(), aspect=w / h)
+        from clraster.bench.spec import close_camera, quad_mesh
+        target = (quad_mesh() if a.mesh == "quad"
+                  else clraster.Mesh.load(str(REPO.parent / "shared" / "meshes" / a.mesh)))
+        cam = (close_camera(*target.bounds(), w, h) if a.close or a.mesh == "quad"
+               else clraster.Camera.framing(*target.bounds(), aspect=w / h))
 
     # the (queue, params, keywords) of each chain's last pass
     last: dict[int, tuple] = {}
@@ -67,8 +77,11 @@ def main(argv: list[str] | None = None) -> int:
 
     times: dict[str, list[float]] = {name: [] for name in renderers}
     outs = {}
+    junk = np.ones(a.evict << 17) if a.evict else None   # float64: MB << 17 of them
     for i in range(a.n):
         for name in (list(renderers) if i % 2 == 0 else list(renderers)[::-1]):
+            if junk is not None:
+                junk += 1.0   # read and write every line: the caches hold none of the frame
             ch = renderers[name].chain
             queue, params, k = last[id(ch)]
             out, _, ev = ch.raster.run(queue, ch.setup.buffers, ch.binning.buffers, params,

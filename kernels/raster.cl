@@ -211,6 +211,157 @@ ALWAYS_INLINE int8 edges_inside8(const PieceEdges *E, const long8 *sv, int b)
     return MASK_INT8(in);
 }
 
+/* Write one resolved tile row (rd depth, ri ids, rb interleaved barycentrics, columns
+ * tx0 .. tx0 + nx - 1 of row y) into the outputs: a whole aligned tile row with
+ * non-temporal stores (they skip reading each output line into the cache before
+ * overwriting it: half the memory traffic), other rows pixel by pixel. ``keep``: the
+ * winners of the row (a later pass, load: the earlier pass's pixels that nothing beat, win
+ * < 0, stay as they are); NULL: every pixel is written. */
+ALWAYS_INLINE void store_row(const float *rd, const int *ri, const float *rb, const int *keep,
+                             int y, int tx0, int nx, const int width,
+                             __global float *depth_out, __global int *id_out,
+                             __global float *bary_out, const int want_bary)
+{
+    size_t orow = (size_t)y * width + tx0;
+#if TILE_SIZE >= 8
+    if (!keep && nx == TILE_SIZE && (orow & 7) == 0) {
+        /* 32-byte aligned: the frame arrays are page-aligned (RasterOutput.allocate) */
+        __global float8 *d8 = (__global float8 *)(depth_out + orow);
+        __global int8 *i8 = (__global int8 *)(id_out + orow);
+        for (int j = 0; j < TILE_SIZE / 8; ++j) {
+            NT_STORE(((const float8 *)rd)[j], d8 + j);
+            NT_STORE(((const int8 *)ri)[j], i8 + j);
+        }
+        if (want_bary) {
+            __global float8 *b8 = (__global float8 *)(bary_out + 3 * orow);
+            for (int j = 0; j < 3 * TILE_SIZE / 8; ++j)
+                NT_STORE(((const float8 *)rb)[j], b8 + j);
+        }
+        return;
+    }
+#endif
+    for (int lx = 0; lx < nx; ++lx) {
+        if (keep && keep[lx] < 0) continue;   /* the earlier pass's winner stays */
+        size_t o = orow + lx;
+        depth_out[o] = rd[lx];
+        id_out[o] = ri[lx];
+        if (want_bary) {
+            bary_out[3 * o] = rb[3 * lx];
+            bary_out[3 * o + 1] = rb[3 * lx + 1];
+            bary_out[3 * o + 2] = rb[3 * lx + 2];
+        }
+    }
+}
+
+/* A tile whose list is one wide piece (at least WIDE_RUN columns of the tile, not a cover
+ * piece), drawn into cleared outputs with no window and no overdraw count: every covered
+ * centre is tested against the clear depth alone (z < 1: nothing beats or ties the clear
+ * value), so the depth, id and barycentrics of each row follow from its run of covered
+ * columns without the tile's private buffers — no clearing them, no depth-test stores,
+ * no resolve pass re-reading them. The same runs (edge_columns), depths (depth_at's
+ * operations in lanes, as depth_block8), barycentrics (resolve8 lanes, the bits of
+ * resolve1), counts and tile Hi-Z decision as raster_tile's general path, which the
+ * differential tests compare against the twin. (A large triangle's interior: most tiles
+ * of a quad, a wall or a floor seen from close by.) Returns false, having done nothing,
+ * for a piece this does not take. */
+ALWAYS_INLINE bool sole_piece_tile(int tx0, int ty0, int e0,
+                                   __global const float *clip_bary,
+                                   __global const Piece *entries, const int width,
+                                   const int height, __global float *depth_out,
+                                   __global int *id_out, __global float *bary_out,
+                                   long *tile_tested, long *tile_passed, const int want_bary,
+                                   const int hiz)
+{
+    int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
+    __global const Piece *pc = &entries[e0];
+    int x0 = imax(bb_x(pc->bb_min), tx0), x1 = imin(bb_x(pc->bb_max), tx1);
+    int y0 = imax(bb_y(pc->bb_min), ty0), y1 = imin(bb_y(pc->bb_max), ty1);
+    if (pc->cover || x1 - x0 < WIDE_RUN) return false;
+    /* the general path's tile Hi-Z skips the piece untested when its nearest depth is
+     * behind the clear value, the tile's farthest depth */
+    if (y0 > y1 || (hiz && pc->zlo > 1.0f)) y1 = y0 - 1;   /* no covered row */
+    PieceEdges E;
+    piece_edges(pc->x[0], pc->y[0], pc->x[1], pc->y[1], pc->x[2], pc->y[2], tx0, y0, &E);
+    DepthPlane P;
+    depth_plane(pc, &P);
+    int rx0 = P.x0 - tx0, id = pc->id;
+    int lx0 = x0 - tx0, lx1 = x1 - tx0;
+    if (y1 - y0 >= TRIM_ROWS) {   /* the general path's row trim, the same rows */
+        int k0 = 0, k1 = y1 - y0;
+        for (int i = 0; i < 3; ++i)
+            edge_columns(E.e[i] + (long)(E.sx[i] > 0 ? lx1 : lx0) * E.sx[i], E.sy[i], &k0,
+                         &k1);
+        if (k0 > k1) {
+            y1 = y0 - 1;
+        } else {
+            edges_down(&E, k0);
+            y1 = y0 + k1;
+            y0 += k0;
+        }
+    }
+    long tested = 0;
+    LANE_COUNTER(npass);
+    int nx = tx1 - tx0 + 1;
+    for (int y = ty0; y <= ty1; ++y) {
+        /* the row's outputs, written out whole by store_row (blocks of eight stored
+         * non-temporally as they were made ran slower: half lines of three streams) */
+        float rd[TILE_SIZE] __attribute__((aligned(32)));
+        float rb[3 * TILE_SIZE] __attribute__((aligned(32)));
+        int ri[TILE_SIZE] __attribute__((aligned(32)));
+        int c0 = 0, c1 = -1;   /* the row's covered columns */
+        float zrow = 0.0f;
+        if (y >= y0 && y <= y1) {
+            c0 = lx0; c1 = lx1;
+            for (int i = 0; i < 3; ++i) edge_columns(E.e[i], E.sx[i], &c0, &c1);
+            zrow = depth_row(&P, y);
+            edges_down(&E, 1);
+            tested += c1 >= c0 ? c1 - c0 + 1 : 0;
+        }
+        for (int b = 0; b < nx; b += 8) {
+            int8 lx = (int8)(b) + LANE8;
+            int8 in = (lx >= (int8)(c0)) & (lx <= (int8)(c1));
+            float8 zf = (float8)(zrow) + (float8)(P.dzdx) * CONVERT_VEC(lx - (int8)(rx0), float8);
+            float8 z = zf >= (float8)(P.zlo) ? zf : (float8)(P.zlo);   /* maxf */
+            int8 pass = in & (z < (float8)(1.0f));
+            COUNT_LANES(npass, pass);
+            float8 d = pass ? z : (float8)(1.0f);
+            int8 i8 = pass ? (int8)(id) : (int8)(-1);
+            int n = imin(8, nx - b);   /* the image's last tile column may be partial */
+            if (n == 8) {
+                *(float8 *)&rd[b] = d;
+                *(int8 *)&ri[b] = i8;
+            } else {
+                float dd[8] __attribute__((aligned(32)));
+                int ii[8] __attribute__((aligned(32)));
+                *(float8 *)dd = d; *(int8 *)ii = i8;
+                for (int j = 0; j < n; ++j) { rd[b + j] = dd[j]; ri[b + j] = ii[j]; }
+            }
+            if (!want_bary) continue;
+            int4 p4 = pass.lo & pass.hi, q4 = pass.lo | pass.hi;
+            int2 p2 = p4.lo & p4.hi, q2 = q4.lo | q4.hi;
+            if ((p2.x & p2.y) && n == 8) {   /* all eight passed */
+                resolve8(pc, tx0 + b, y, clip_bary, &rb[3 * b]);
+            } else if (!(q2.x | q2.y)) {   /* none */
+                for (int j = 0; j < 3 * n; ++j) rb[3 * b + j] = 0.0f;
+            } else {
+                float b24[24] __attribute__((aligned(32)));
+                int pm[8] __attribute__((aligned(32)));
+                *(int8 *)pm = pass;
+                resolve8(pc, tx0 + b, y, clip_bary, b24);
+                for (int j = 0; j < n; ++j) {
+                    rb[3 * (b + j)] = pm[j] ? b24[3 * j] : 0.0f;
+                    rb[3 * (b + j) + 1] = pm[j] ? b24[3 * j + 1] : 0.0f;
+                    rb[3 * (b + j) + 2] = pm[j] ? b24[3 * j + 2] : 0.0f;
+                }
+            }
+        }
+        store_row(rd, ri, rb, 0, y, tx0, nx, width, depth_out, id_out, bary_out, want_bary);
+    }
+    *tile_tested += tested;
+    *tile_passed += LANE_TOTAL(npass);
+    return true;
+}
+
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
 inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
@@ -221,6 +372,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         const int want_bary, __global const uchar *wmask,
                         const int use_window, const int hiz)
 {
+    if (e1 - e0 == 1 && !load && !use_window && !want_overdraw
+        && sole_piece_tile(tx0, ty0, e0, clip_bary, entries, width, height, depth_out,
+                           id_out, bary_out, tile_tested, tile_passed, want_bary, hiz))
+        return;
     int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
     float zbuf[TILE_PIXELS] __attribute__((aligned(32)));
     int win[TILE_PIXELS] __attribute__((aligned(32)));   /* winning entry, -1 = none */
@@ -412,10 +567,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     }
 
     /* resolve: id and perspective-correct barycentrics of the winner, per pixel, a row at
-     * a time into private arrays, then written out: a whole aligned tile row with
-     * non-temporal stores (they skip reading each output line into the cache before
-     * overwriting it: half the memory traffic), other rows pixel by pixel. A later pass
-     * (load) leaves the earlier pass's pixels that nothing beat as they are. */
+     * a time into private arrays, then written out (store_row). A later pass (load)
+     * leaves the earlier pass's pixels that nothing beat as they are. */
     int nx = tx1 - tx0 + 1;
     for (int y = ty0; y <= ty1; ++y) {
         /* aligned for the float8 copies below (OpenCL's vload8 is a library call on PoCL) */
@@ -477,34 +630,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 rb[3 * lx] = B0; rb[3 * lx + 1] = B1; rb[3 * lx + 2] = B2;
             }
         }
-#if TILE_SIZE >= 8
-        if (!load && nx == TILE_SIZE && (orow & 7) == 0) {
-            /* 32-byte aligned: the frame arrays are page-aligned (RasterOutput.allocate) */
-            __global float8 *d8 = (__global float8 *)(depth_out + orow);
-            __global int8 *i8 = (__global int8 *)(id_out + orow);
-            for (int j = 0; j < TILE_SIZE / 8; ++j) {
-                NT_STORE(((float8 *)rd)[j], d8 + j);
-                NT_STORE(((int8 *)ri)[j], i8 + j);
-            }
-            if (want_bary) {
-                __global float8 *b8 = (__global float8 *)(bary_out + 3 * orow);
-                for (int j = 0; j < 3 * TILE_SIZE / 8; ++j)
-                    NT_STORE(((float8 *)rb)[j], b8 + j);
-            }
-            continue;
-        }
-#endif
-        for (int lx = 0; lx < nx; ++lx) {
-            if (load && win[lrow + lx] < 0) continue;   /* the earlier pass's winner stays */
-            size_t o = orow + lx;
-            depth_out[o] = rd[lx];
-            id_out[o] = ri[lx];
-            if (want_bary) {
-                bary_out[3 * o] = rb[3 * lx];
-                bary_out[3 * o + 1] = rb[3 * lx + 1];
-                bary_out[3 * o + 2] = rb[3 * lx + 2];
-            }
-        }
+        store_row(rd, ri, rb, load ? &win[lrow] : 0, y, tx0, nx, width, depth_out, id_out,
+                  bary_out, want_bary);
     }
     *tile_tested += tested;
     *tile_passed += passed;

@@ -20,12 +20,13 @@ from conftest import (
     TILE_LOG2S,
     MatrixCamera,
     assert_frames_equal,
+    get_renderer,
     render_both,
     render_cl,
 )
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from random_scenes import KINDS, Lens, random_soup, random_view, to_world
+from random_scenes import KINDS, Lens, _eye_point, random_soup, random_view, to_world
 
 from clraster import Mesh
 
@@ -133,6 +134,66 @@ def test_soup_has_every_kind():
     s = frame.stats
     assert s.clipped > 50 and s.trivially_rejected > 50 and s.degenerate > 50
     assert s.no_sample > 50 and s.rasterized > 500
+
+
+def _large_triangles(kind: str, w: int, h: int, lens: Lens) -> Mesh:
+    """A few triangles far larger than a tile (eye space): most tiles' lists are one piece
+    covering them, which the raster draws without its tile buffers (raster.cl
+    sole_piece_tile)."""
+    near, far = lens.near, lens.far
+
+    def p(px, py, d):
+        return _eye_point(px * w, py * h, d * near, w, h, lens)
+
+    if kind == "quad":   # slanted, past the image's edges on every side
+        v = [p(-0.3, -0.2, 3), p(1.3, -0.25, 8), p(1.35, 1.2, 20), p(-0.2, 1.3, 5)]
+        f = [[0, 3, 2], [0, 2, 1]]
+    elif kind == "inside":   # inside the image: partial tiles along every edge
+        v = [p(0.05, 0.1, 2), p(0.9, 0.2, 4), p(0.3, 0.95, 3)]
+        f = [[0, 2, 1]]
+    elif kind == "near":   # through the near plane: clipped pieces (parent barycentrics)
+        v = [p(0.5, -0.5, 0.25), p(-0.4, 1.1, 6), p(1.4, 1.2, 9)]
+        f = [[0, 1, 2]]
+    elif kind == "far":   # through the far plane
+        v = [p(-0.2, 0.1, 2), p(1.3, 0.0, far / near * 1.5), p(0.4, 1.2, far / near * 0.999)]
+        f = [[0, 1, 2]]
+    else:   # "farthest": just inside the far plane, at a depth that rounds to 1 (the clear
+        # value, which nothing beats: tested, never passing)
+        d = far / near * (1.0 - 1e-7)
+        v = [p(-0.2, -0.1, d), p(1.3, 0.0, d), p(0.4, 1.2, d)]
+        f = [[0, 1, 2]]
+    return Mesh(np.array(v, dtype=np.float64), np.array(f))
+
+
+@pytest.mark.parametrize("kind", ["quad", "inside", "near", "far", "farthest"])
+@pytest.mark.parametrize("size", [(131, 77), (200, 120)])
+def test_large_triangles_match_twin(kind, size):
+    """Triangles far larger than a tile, at every tile size, with and without the tile
+    Hi-Z, both windings: OpenCL and twin identical (ids, depth, barycentrics bit for bit,
+    counts), and depth and ids the same without barycentrics."""
+    w, h = size
+    lens = Lens(70.0, 0.5, 40.0)
+    mesh = _large_triangles(kind, w, h, lens)
+    cam = MatrixCamera(lens.projection(w / h))
+    for faces in (mesh.faces, mesh.faces[:, ::-1]):
+        m = Mesh(mesh.vertices, np.ascontiguousarray(faces))
+        for t in TILE_LOG2S:
+            for hiz in (True, False):
+                a, b = render_both(m, cam, w, h, cull="none", tile_log2=t, hiz=hiz)
+                ctx = f"{kind} size={size} tile_log2={t} hiz={hiz}"
+                if kind != "farthest":
+                    assert (a.triangle_id >= 0).mean() > 0.15, ctx   # large, as claimed
+                assert_frames_equal(a, b, ctx)
+                np.testing.assert_array_equal(a.barycentrics.view(np.uint32),
+                                              b.barycentrics.view(np.uint32), err_msg=ctx)
+                lean = get_renderer(w, h, t, hiz).render(m, cam, cull="none",
+                                                         outputs=("depth", "ids"))
+                np.testing.assert_array_equal(lean.triangle_id, a.triangle_id, err_msg=ctx)
+                np.testing.assert_array_equal(lean.depth, a.depth, err_msg=ctx)
+    if kind == "far":   # the far plane really cuts it
+        assert a.stats.clipped >= 1
+    if kind == "farthest":   # covered, tested, and not drawn
+        assert a.stats.fragments_tested > w * h // 4 and a.stats.fragments_passed == 0
 
 
 @pytest.mark.parametrize("size", [(127, 65), (33, 17), (64, 129)])
