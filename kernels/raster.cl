@@ -10,7 +10,9 @@
  * wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id
  * and perspective-correct barycentrics (relative to the parent triangle's vertices) are
  * resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
- * farthest depth is skipped untested (tile Hi-Z, see raster_tile).
+ * farthest depth is skipped untested (tile Hi-Z, see raster_tile). A tile whose list is one
+ * wide piece, drawn into cleared outputs, goes row by row without the private buffers
+ * (sole_piece_tile: the interior of a large triangle).
  *
  * Depth arithmetic is spelled out operation by operation; clraster/pipeline/reference/raster.py
  * does the same float32 operations, so both z-buffers and hence the triangle ids agree exactly.
