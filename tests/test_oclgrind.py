@@ -1,8 +1,9 @@
 """Memory and race checking on the Oclgrind simulator.
 
 tests/oclgrind_run.py renders small differential cases (33×17, a random soup with clipped,
-degenerate and invalid triangles, an empty and a one-triangle mesh; tile sizes 8, 16 and
-64 px; cull none/back) on the Oclgrind device and compares them with the NumPy twin. It runs
+degenerate and invalid triangles, an empty and a one-triangle mesh, a quad past the image's
+edges, the last two also without overdraw counts; tile sizes 8, 16 and 64 px; cull
+none/back) on the Oclgrind device and compares them with the NumPy twin. It runs
 in a subprocess with OCLGRIND_DATA_RACES=1 so that Oclgrind's reports (printed on stderr)
 can be captured and parsed.
 
@@ -89,6 +90,9 @@ def test_oclgrind_matches_twin(oclgrind_run):
     pyramids = out["pyramids"]
     assert len(pyramids) == 2 and all(p["equal"] for p in pyramids), pyramids
     assert any(r["clipped"] > 50 and r["covered"] > 100 for r in results)
+    # the large triangles drawn without overdraw counts (the raster's sole-piece tiles)
+    assert any(r["case"].startswith("quad") and r["case"].endswith("no overdraw")
+               and r["covered"] > 33 * 17 // 2 for r in results)
 
 
 def test_no_oclgrind_reports_in_clraster_kernels(oclgrind_run):
