@@ -305,8 +305,8 @@ ALWAYS_INLINE bool sole_piece_tile(int tx0, int ty0, int e0,
     LANE_COUNTER(npass);
     int nx = tx1 - tx0 + 1;
     for (int y = ty0; y <= ty1; ++y) {
-        /* the row's outputs, written out whole by store_row (blocks of eight stored
-         * non-temporally as they were made ran slower: half lines of three streams) */
+        /* the row's outputs, written out whole by store_row: whole lines of each stream
+         * (blocks stored as they are made would be half lines of three streams at once) */
         float rd[TILE_SIZE] __attribute__((aligned(32)));
         float rb[3 * TILE_SIZE] __attribute__((aligned(32)));
         int ri[TILE_SIZE] __attribute__((aligned(32)));
