@@ -584,6 +584,20 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         /* eight columns at a time (tile rows are multiples of 8 wide) */
         for (int lx0 = 0; lx0 < nx; lx0 += 8) {
             int e = win[lrow + lx0];
+            if (e < 0 && lx0 + 8 <= nx && !use_window) {
+                /* no winner in the eight (a silhouette tile's background): its depth as it
+                 * stands, id -1, barycentrics 0, in lanes (sign bits: all eight are -1) */
+                int8 w8 = *(int8 *)&win[lrow + lx0];
+                int4 a4 = w8.lo & w8.hi;
+                int2 a2 = a4.lo & a4.hi;
+                if ((a2.x & a2.y) < 0) {
+                    *(float8 *)&rd[lx0] = *(float8 *)&zbuf[lrow + lx0];
+                    *(int8 *)&ri[lx0] = (int8)(-1);
+                    if (want_bary)
+                        for (int j = 0; j < 3; ++j) *(float8 *)&rb[3 * lx0 + 8 * j] = (float8)(0.0f);
+                    continue;
+                }
+            }
             if (e >= 0 && lx0 + 8 <= nx) {
                 /* one winner over all eight pixels (a piece wider than a few pixels: most
                  * pixels of the plant's first-person frame and of a framed spot): its
