@@ -58,39 +58,36 @@ def main() -> int:
               # two triangles past the image's edges, slanted
               "quad": Mesh([[-3.0, -2.0, -1.0], [3.0, -2.0, -2.0], [3.0, 2.0, -3.0],
                             [-3.0, 2.0, -1.5]], [[0, 1, 2], [0, 2, 3]])}
+    def compared(case, a, b):
+        """The comparison record of OpenCL frame ``a`` against the twin's ``b``."""
+        return {
+            "case": case,
+            "id_mismatch": int((a.triangle_id != b.triangle_id).sum()),
+            "depth_mismatch": int((a.depth != b.depth).sum()),
+            "bary_max_diff": float(np.abs(a.barycentrics - b.barycentrics).max()),
+            "counts_equal": a.stats.counts() == b.stats.counts(),
+            # fragments tested per pixel (the raster's overdraw paths) add up
+            "overdraw_ok": (a.overdraw is None
+                            or int(a.overdraw.sum()) == a.stats.fragments_tested),
+            "covered": int(a.mask.sum()),
+            "clipped": a.stats.clipped,
+        }
+
     results = []
     for tile_log2 in ((3,) if quick else (3, 4, 6)):
         config = RasterConfig(tile_log2=tile_log2, bin_chunks=7)
         r = Renderer(w, h, config=config, context=ctx)
         for name, mesh in meshes.items():
             for cull in (("none",) if quick else ("none", "back")):
-                a = r.render(mesh, cam, cull=cull, overdraw=True)
+                case = f"{name} tile_log2={tile_log2} cull={cull}"
                 b = reference.render(mesh, cam, w, h, cull=cull, config=config)
-                results.append({
-                    "case": f"{name} tile_log2={tile_log2} cull={cull}",
-                    "id_mismatch": int((a.triangle_id != b.triangle_id).sum()),
-                    "depth_mismatch": int((a.depth != b.depth).sum()),
-                    "bary_max_diff": float(np.abs(a.barycentrics - b.barycentrics).max()),
-                    "counts_equal": a.stats.counts() == b.stats.counts(),
-                    # fragments tested per pixel (the raster's overdraw paths) add up
-                    "overdraw_ok": int(a.overdraw.sum()) == a.stats.fragments_tested,
-                    "covered": int(a.mask.sum()),
-                    "clipped": a.stats.clipped,
-                })
+                results.append(compared(case, r.render(mesh, cam, cull=cull, overdraw=True),
+                                        b))
                 if name in ("one", "quad"):
                     # without overdraw: a tile whose list is one wide piece takes the
                     # raster's sole-piece path (raster.cl sole_piece_tile)
-                    c = r.render(mesh, cam, cull=cull)
-                    results.append({
-                        "case": f"{name} tile_log2={tile_log2} cull={cull} no overdraw",
-                        "id_mismatch": int((c.triangle_id != b.triangle_id).sum()),
-                        "depth_mismatch": int((c.depth != b.depth).sum()),
-                        "bary_max_diff": float(np.abs(c.barycentrics - b.barycentrics).max()),
-                        "counts_equal": c.stats.counts() == b.stats.counts(),
-                        "overdraw_ok": True,
-                        "covered": int(c.mask.sum()),
-                        "clipped": c.stats.clipped,
-                    })
+                    results.append(compared(case + " no overdraw",
+                                            r.render(mesh, cam, cull=cull), b))
     # the depth pyramid against its twin, at sizes whose rows are not 32-byte aligned and
     # whose blocks take both the float8 first level and the clamped one (pyramid.cl)
     from clraster.pipeline.reference import pyramid as ref_pyramid
