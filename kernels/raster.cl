@@ -182,22 +182,57 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
     }
 }
 
+/* For a fragment whose depth ties tile pixel i's (tile origin tx0, ty0): the triangle id
+ * it must be below to win there, that of the pixel's winning entry (win >= 0), else, in a
+ * later pass (load), the earlier pass's id there; INT_MIN for the background (the clear
+ * value, or a window's shut pixel), which no tie beats. Ties are rare (coplanar overlaps,
+ * depths that round alike), so the tile keeps no per-pixel id buffer for them: the id was
+ * a load and a store in every depth-test block. */
+inline int tie_id(__global const Piece *entries, int win, int load, __global const int *id_out,
+                  int i, int tx0, int ty0, const int width)
+{
+    if (win >= 0) return entries[win].id;
+    if (!load) return INT_MIN;
+    int id0 = id_out[(size_t)(ty0 + (i >> TILE_LOG2)) * width + tx0 + (i & (TILE_SIZE - 1))];
+    return id0 < 0 ? INT_MIN : id0;
+}
+
+/* The tile's test context for tie_id: its entries, origin, and the earlier pass's ids. */
+typedef struct {
+    __global const Piece *entries;
+    __global const int *id_out;
+    int load, tx0, ty0, width;
+} TieCtx;
+
 /* The depth test of one block of eight columns of a tile row, pixels (row + b .. + 7) of
  * the tile's private buffers, lanes lx = b + 0..7 where `in` is set: fragment depth
  * common.h depth_at per lane, maxf(zrow + dzdx·(lx − rx0), zlo) (rx0: the plane's reference
  * column in the tile; the same operations, so the same bits), LESS with the lower id
- * winning ties and nothing beating the clear value; winners store their depth, id and
+ * winning ties (tie_id) and nothing beating the clear value; winners store their depth and
  * entry k. Returns the lanes that passed. */
-ALWAYS_INLINE int8 depth_block8(float *zbuf, int *wid, int *win, int i, int8 lx, int8 in,
-                                float zrow, float dzdx, int rx0, float zlo, int id, int k)
+ALWAYS_INLINE int8 depth_block8(float *zbuf, int *win, int i, int8 lx, int8 in,
+                                float zrow, float dzdx, int rx0, float zlo, int id, int k,
+                                const TieCtx *T)
 {
     float8 zf = (float8)(zrow) + (float8)(dzdx) * CONVERT_VEC(lx - (int8)(rx0), float8);
     float8 z = zf >= (float8)(zlo) ? zf : (float8)(zlo);   /* maxf */
     float8 zb = *(float8 *)&zbuf[i];
-    int8 wd = *(int8 *)&wid[i], wk = *(int8 *)&win[i];
-    int8 pass = in & ((z < zb) | ((z == zb) & ((int8)(id) < wd) & (wd != (int8)(INT_MAX))));
+    int8 wk = *(int8 *)&win[i];
+    int8 pass = in & (z < zb);
+    int8 tie = in & (z == zb);
+    int4 t4 = tie.lo | tie.hi;
+    int2 t2 = t4.lo | t4.hi;
+    if (t2.x | t2.y) {
+        int tm[8] __attribute__((aligned(32))), wv[8] __attribute__((aligned(32)));
+        int pm[8] __attribute__((aligned(32)));
+        *(int8 *)tm = tie; *(int8 *)wv = wk; *(int8 *)pm = pass;
+        for (int j = 0; j < 8; ++j)
+            if (tm[j] && id < tie_id(T->entries, wv[j], T->load, T->id_out, i + j, T->tx0,
+                                     T->ty0, T->width))
+                pm[j] = -1;
+        pass = *(int8 *)pm;
+    }
     *(float8 *)&zbuf[i] = pass ? z : zb;
-    *(int8 *)&wid[i] = pass ? (int8)(id) : wd;
     *(int8 *)&win[i] = pass ? (int8)(k) : wk;
     return pass;
 }
@@ -381,12 +416,10 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
     int tx1 = imin(tx0 + TILE_SIZE, width) - 1, ty1 = imin(ty0 + TILE_SIZE, height) - 1;
     float zbuf[TILE_PIXELS] __attribute__((aligned(32)));
     int win[TILE_PIXELS] __attribute__((aligned(32)));   /* winning entry, -1 = none */
-    int wid[TILE_PIXELS] __attribute__((aligned(32)));   /* its triangle id; INT_MAX for
-                                                            * background */
     int odc[TILE_PIXELS] __attribute__((aligned(32)));   /* fragments tested per pixel
                                                             * (after the tile Hi-Z) */
     for (int i = 0; i < TILE_PIXELS; ++i) {
-        zbuf[i] = 1.0f; win[i] = -1; wid[i] = INT_MAX; odc[i] = 0;
+        zbuf[i] = 1.0f; win[i] = -1; odc[i] = 0;
     }
     if (load) {
         /* continue from an earlier pass over the same image (two-phase occlusion culling):
@@ -395,9 +428,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             for (int x = tx0; x <= tx1; ++x) {
                 int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
                 size_t o = (size_t)y * width + x;
-                zbuf[i] = depth_out[o];
-                int id0 = id_out[o];
-                wid[i] = id0 < 0 ? INT_MAX : id0;
+                zbuf[i] = depth_out[o];   /* (its ids: tie_id) */
                 if (want_overdraw) odc[i] = overdraw[o];
             }
     }
@@ -426,6 +457,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         for (int x = tx1 - tx0 + 1; x < TILE_SIZE; ++x) zbuf[(y << TILE_LOG2) + x] = -INFINITY;
     /* without a load or a window every pixel in the image starts at the clear value 1 */
     bool known = !load && !use_window;
+    TieCtx T = {entries, id_out, load, tx0, ty0, width};
     float tzmax = 1.0f;
     int zarg = 0;   /* pixel (0, 0) of the tile is always inside the image */
 
@@ -478,11 +510,11 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 float z = depth_at(&P, depth_row(&P, y), x);
                 int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
                 float zb = zbuf[i];
-                int wd = wid[i];
                 ++tested;
                 if (want_overdraw) ++odc[i];
-                if (z < zb || (z == zb && id < wd && wd != INT_MAX)) {
-                    zbuf[i] = z; wid[i] = id; win[i] = k;
+                if (z < zb || (z == zb && id < tie_id(entries, win[i], load, id_out, i, tx0,
+                                                      ty0, width))) {
+                    zbuf[i] = z; win[i] = k;
                     ++passed;
                 }
             }
@@ -507,7 +539,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
          * In every path the test is LESS; on equal depth the lower triangle id wins, which
          * is "first drawn wins" for triangles submitted in id order, whatever order
          * culling or clustering actually submits them in. Nothing beats the clear value
-         * (wid INT_MAX). */
+         * (tie_id INT_MIN). */
         bool wide = x1 - x0 >= WIDE_RUN;
         long8 lane8 = CONVERT_VEC(LANE8, long8);
         long8 sv[3] = {lane8 * (long8)(E.sx[0]), lane8 * (long8)(E.sx[1]),
@@ -539,8 +571,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 for (int b = c0 & ~7; b <= c1; b += 8) {
                     int8 lx = (int8)(b) + LANE8;
                     int8 in = (lx >= (int8)(c0)) & (lx <= (int8)(c1));
-                    int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, P.dzdx,
-                                             rx0, P.zlo, id, k);
+                    int8 pass = depth_block8(zbuf, win, row + b, lx, in, zrow, P.dzdx,
+                                             rx0, P.zlo, id, k, &T);
                     COUNT_LANES(npass, pass);
                 }
                 if (want_overdraw)
@@ -552,8 +584,8 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
             for (int b = c0 & ~7; b <= c1; b += 8) {
                 int8 lx = (int8)(b) + LANE8;
                 int8 in = edges_inside8(&E, sv, b) & (lx >= (int8)(c0)) & (lx <= (int8)(c1));
-                int8 pass = depth_block8(zbuf, wid, win, row + b, lx, in, zrow, P.dzdx, rx0,
-                                         P.zlo, id, k);
+                int8 pass = depth_block8(zbuf, win, row + b, lx, in, zrow, P.dzdx, rx0,
+                                         P.zlo, id, k, &T);
                 COUNT_LANES(npass, pass);
                 COUNT_LANES(ntest, in);
                 if (want_overdraw) {
