@@ -207,6 +207,38 @@ def test_depth_test_less_first_drawn_wins_ties():
     assert (frev.depth[frev.mask] < f01.depth[frev.mask]).all()
 
 
+def test_lower_id_wins_ties_when_drawn_later():
+    """Two coplanar triangles facing the camera (equal depth wherever both cover a pixel),
+    drawn in the opposite order of their ids: clusters take faces in the Morton order of
+    their centroids, 128 at a time, so face 1 (left, with 127 small faces far to the left,
+    outside the view) fills the first cluster and face 0 (right) the second, drawn after
+    it. The depth test breaks exact ties by the lower id, not by drawing order: face 0 must
+    win every pixel the two share (the tile keeps no per-pixel ids: a tie reads the
+    winner's id from its entry)."""
+    w, h = 64, 48
+    cam = MatrixCamera(perspective(60.0, w / h, 0.5, 10.0))
+    z = -3.0
+    right = np.array([[-0.6, -1.2, z], [1.6, -1.2, z], [0.4, 1.2, z]])   # face 0
+    left = right - [1.0, 0.0, 0.0]                                       # face 1
+    small = np.array([[0.0, 0.0, z], [0.01, 0.0, z], [0.0, 0.01, z]])
+    far_left = np.concatenate([small + [-100.0 - 0.1 * k, 0.0, 0.0] for k in range(127)])
+    verts = np.concatenate([right, left, far_left])
+    mesh = Mesh(verts, np.arange(len(verts)).reshape(-1, 3))
+    a, b = render_both(mesh, cam, w, h, cull="back")
+    assert_frames_equal(a, b, "ties drawn in reverse id order")
+    only_right = render_cl(Mesh(right, [[0, 1, 2]]), cam, w, h).mask
+    only_left = render_cl(Mesh(left, [[0, 1, 2]]), cam, w, h).mask
+    both = only_right & only_left
+    assert both.sum() > 100 and (only_left & ~only_right).sum() > 100
+    # face 1 was drawn first (else this would not test the tie rule): face 0 passed again
+    # at every shared pixel
+    assert a.stats.fragments_passed == (only_left | only_right).sum() + both.sum()
+    ids = a.triangle_id
+    assert (ids[both] == 0).all()
+    assert (ids[only_left & ~only_right] == 1).all() and (ids[only_right & ~only_left] == 0).all()
+    assert (a.depth[both] == a.depth[both][0]).all()   # equal depths: real ties
+
+
 def test_look_at_camera_depth_matches_eye_distance():
     """Through Camera.look_at (not a raw matrix): a quad facing the camera at distance 5."""
     w, h = 40, 30
