@@ -182,27 +182,28 @@ ALWAYS_INLINE void resolve8_mixed(__global const Piece *entries, const int *w, i
     }
 }
 
-/* For a fragment whose depth ties tile pixel i's (tile origin tx0, ty0): the triangle id
- * it must be below to win there, that of the pixel's winning entry (win >= 0), else, in a
- * later pass (load), the earlier pass's id there; INT_MIN for the background (the clear
- * value, or a window's shut pixel), which no tie beats. Ties are rare (coplanar overlaps,
- * depths that round alike), so the tile keeps no per-pixel id buffer for them: the id was
- * a load and a store in every depth-test block. */
-inline int tie_id(__global const Piece *entries, int win, int load, __global const int *id_out,
-                  int i, int tx0, int ty0, const int width)
-{
-    if (win >= 0) return entries[win].id;
-    if (!load) return INT_MIN;
-    int id0 = id_out[(size_t)(ty0 + (i >> TILE_LOG2)) * width + tx0 + (i & (TILE_SIZE - 1))];
-    return id0 < 0 ? INT_MIN : id0;
-}
-
-/* The tile's test context for tie_id: its entries, origin, and the earlier pass's ids. */
+/* What a tile's depth ties are decided from: its entries, its origin (tx0, ty0), and, in
+ * a later pass (load), the earlier pass's ids in the frame. */
 typedef struct {
     __global const Piece *entries;
     __global const int *id_out;
     int load, tx0, ty0, width;
 } TieCtx;
+
+/* For a fragment whose depth ties tile pixel i's (its winning entry win, -1: none): the
+ * triangle id it must be below to win there, that of the winning entry, else, in a later
+ * pass, the earlier pass's id there; INT_MIN for the background (the clear value, or a
+ * window's shut pixel), which no tie beats. Ties are rare (coplanar overlaps, depths that
+ * round alike), so the tile keeps no per-pixel id buffer for them: the id was a load and a
+ * store in every depth-test block. */
+inline int tie_id(const TieCtx *T, int win, int i)
+{
+    if (win >= 0) return T->entries[win].id;
+    if (!T->load) return INT_MIN;
+    int id0 = T->id_out[(size_t)(T->ty0 + (i >> TILE_LOG2)) * T->width + T->tx0
+                        + (i & (TILE_SIZE - 1))];
+    return id0 < 0 ? INT_MIN : id0;
+}
 
 /* The depth test of one block of eight columns of a tile row, pixels (row + b .. + 7) of
  * the tile's private buffers, lanes lx = b + 0..7 where `in` is set: fragment depth
@@ -227,8 +228,7 @@ ALWAYS_INLINE int8 depth_block8(float *zbuf, int *win, int i, int8 lx, int8 in,
         int pm[8] __attribute__((aligned(32)));
         *(int8 *)tm = tie; *(int8 *)wv = wk; *(int8 *)pm = pass;
         for (int j = 0; j < 8; ++j)
-            if (tm[j] && id < tie_id(T->entries, wv[j], T->load, T->id_out, i + j, T->tx0,
-                                     T->ty0, T->width))
+            if (tm[j] && id < tie_id(T, wv[j], i + j))
                 pm[j] = -1;
         pass = *(int8 *)pm;
     }
@@ -512,8 +512,7 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                 float zb = zbuf[i];
                 ++tested;
                 if (want_overdraw) ++odc[i];
-                if (z < zb || (z == zb && id < tie_id(entries, win[i], load, id_out, i, tx0,
-                                                      ty0, width))) {
+                if (z < zb || (z == zb && id < tie_id(&T, win[i], i))) {
                     zbuf[i] = z; win[i] = k;
                     ++passed;
                 }
