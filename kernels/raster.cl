@@ -3,11 +3,12 @@
  *
  * Per entry: intersect the piece's pixel box with the tile and find the covered pixel
  * centres exactly (top-left rule via edge_bias): from the coverage bits setup found for a
- * box of at most 2 x 2 centres (Piece.cover), else from three exact 64-bit edge functions,
- * a row's run or its blocks of eight columns at a time; interpolate window depth linearly
- * in screen space from the piece's depth plane (set up from the unsnapped vertices) and
- * depth-test LESS against the tile's private z-buffer (equal depth: the lower triangle id
- * wins, i.e. first drawn in id order). Only the winning entry per pixel is kept; depth, id
+ * box of at most 4 x 4 centres (Piece.cover) when few of them lie in the tile, else from
+ * three exact 64-bit edge functions, a row's run or its blocks of eight columns at a time;
+ * interpolate window depth linearly in screen space from the piece's depth plane (set up
+ * from the unsnapped vertices) and depth-test LESS against the tile's private z-buffer
+ * (equal depth: the lower triangle id wins, i.e. first drawn in id order). Only the
+ * winning entry per pixel is kept; depth, id
  * and perspective-correct barycentrics (relative to the parent triangle's vertices) are
  * resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
  * farthest depth is skipped untested (tile Hi-Z, see raster_tile). A tile whose list is one
@@ -74,6 +75,28 @@ inline void edge_columns(long r, long s, int *lo, int *hi)
     else         /* inside up to lx = floor(r / -s) */
         *hi = (int)floor_div(r, -s);
 }
+
+/* an entry with setup's cover bits takes the one-centre-at-a-time path (cover_fragments)
+ * when at most this many of its centres lie in the tile (raster_tile) */
+#define COVER_FRAGMENTS 4
+
+/* The set bits of a 16-bit mask m. Oclgrind's interpreter has no llvm.ctpop, which Clang
+ * makes of popcount() and of loops that count bits, so there (CLRASTER_PORTABLE) the
+ * nibbles are looked up instead. */
+ALWAYS_INLINE uint bits16(uint m)
+{
+#ifdef CLRASTER_PORTABLE
+    const uchar n4[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+    return (uint)n4[m & 15] + n4[(m >> 4) & 15] + n4[(m >> 8) & 15] + n4[(m >> 12) & 15];
+#else
+    return popcount(m);
+#endif
+}
+
+/* the cover path's masks (raster_tile) are written for boxes of 4 x 4 centres */
+#if COVER_SPAN != 4
+#error "raster_tile's cover masks assume COVER_SPAN == 4"
+#endif
 
 /* Perspective-correct barycentrics of pixel (x, y) of piece pc, relative to its parent
  * triangle's vertices: screen-space weights from the unsnapped value planes (setup.cl),
@@ -399,6 +422,35 @@ ALWAYS_INLINE bool sole_piece_tile(int tx0, int ty0, int e0,
     return true;
 }
 
+/* The depth tests of entry k (record pc) at its covered centres `covered` (setup's cover
+ * bits, bit k + 4j for column k and row j of its box, masked to the tile whose origin is
+ * (tx0, ty0)), one at a time: depth_at's operations, LESS with the lower id winning ties,
+ * winners' depth and entry into zbuf and win; odc (or 0): fragments counted per pixel.
+ * Returns the fragments that passed. Not inlined: inlined into raster_tile, even in part,
+ * it made the other paths slower (the blocks' loops, the sole-piece tiles; registers:
+ * bench/README.md's performance log). */
+__attribute__((noinline)) int cover_fragments(__global const Piece *pc, uint covered, int k,
+                                               int tx0, int ty0, float *zbuf, int *win,
+                                               const TieCtx *T, int *odc)
+{
+    DepthPlane P;
+    depth_plane(pc, &P);
+    int bx = P.x0, by = P.y0, id = pc->id, passed = 0;
+    for (uint m = covered; m; m &= m - 1) {
+        int b = CTZ(m);   /* lowest set bit */
+        int x = bx + (b & 3), y = by + (b >> 2);
+        float z = depth_at(&P, depth_row(&P, y), x);
+        int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
+        float zb = zbuf[i];
+        if (odc) ++odc[i];
+        if (z < zb || (z == zb && id < tie_id(T, win[i], i))) {
+            zbuf[i] = z; win[i] = k;
+            ++passed;
+        }
+    }
+    return passed;
+}
+
 /* One non-empty tile: walk its list, then resolve its pixels into the outputs. */
 inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
                         __global const float *clip_bary, __global const Piece *entries,
@@ -493,31 +545,25 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
         }
         int cover = pc->cover;
         if (cover) {
-            /* a box of at most 2 x 2 pixel centres, whose coverage setup found
-             * (layout.py COVER_KNOWN; most entries of a dense mesh): the same fragments
-             * and depths as the edge-function blocks below, without their edge set-up and
-             * lane masks for at most four centres */
-            DepthPlane P;
-            depth_plane(pc, &P);
-            int bx = P.x0, by = P.y0, id = pc->id;
-            /* the covered centres inside this tile: columns bx, bx + 1 are bits 0, 1 of
-             * each row's pair, rows by, by + 1 the pairs */
-            int cols = (x0 <= bx ? 5 : 0) | (x1 > bx ? 10 : 0);
-            int rows = (y0 <= by ? 3 : 0) | (y1 > by ? 12 : 0);
-            for (int m = cover & cols & rows; m; m &= m - 1) {
-                int b = CTZ((uint)m);   /* lowest set bit */
-                int x = bx + (b & 1), y = by + (b >> 1);
-                float z = depth_at(&P, depth_row(&P, y), x);
-                int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
-                float zb = zbuf[i];
-                ++tested;
-                if (want_overdraw) ++odc[i];
-                if (z < zb || (z == zb && id < tie_id(&T, win[i], i))) {
-                    zbuf[i] = z; win[i] = k;
-                    ++passed;
-                }
+            /* a box of at most 4 x 4 pixel centres whose coverage setup found (layout.py
+             * COVER_KNOWN, COVER_SPAN; most entries of a dense mesh). Its covered centres
+             * inside this tile (columns x0 - bx .. x1 - bx and rows y0 - by .. y1 - by of
+             * the box, all within 0 .. 3; bit k + 4j is column k of row j); when at most
+             * COVER_FRAGMENTS of them: the same fragments and depths as the edge-function
+             * blocks below, one at a time (cover_fragments), without the blocks' edge
+             * set-up and lane masks (more of them go through the blocks, in lanes) */
+            int bx = bb_x(pc->bb_min), by = bb_y(pc->bb_min);
+            uint cols = ((0xFu << (x0 - bx)) & (0xFu >> (3 - (x1 - bx)))) * 0x1111u;
+            uint rows = (0xFFFFu << (4 * (y0 - by))) & (0xFFFFu >> (4 * (3 - (y1 - by))));
+            uint covered = (uint)cover & cols & rows;
+            uint nc = bits16(covered);
+            if (nc <= COVER_FRAGMENTS) {
+                tested += nc;
+                if (nc)
+                    passed += cover_fragments(pc, covered, k, tx0, ty0, zbuf, win, &T,
+                                              want_overdraw ? odc : 0);
+                continue;
             }
-            continue;
         }
         /* the edges at the tile's first column of row y0 */
         PieceEdges E;

@@ -188,10 +188,47 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
     pc->pad = 0;
 }
 
+/* The centres of the 4 x 4 pixels from the one E is set up at that lie inside its three
+ * edges, as bits k + 4j (column k, row j). small: the piece's vertices span fewer than
+ * SMALL_COVER_SPAN sub-pixels each way, so every edge value there is under 2^24 (offsets
+ * and edge deltas under 2^11): the same exact integers in int lanes, one centre per lane,
+ * a centre inside iff the OR of its three values is >= 0; else 64-bit, one at a time. Not
+ * inlined: in setup_triangles' loop it cost more than its own work (registers). */
+__attribute__((noinline)) uint box_cover(const PieceEdges *E, int small)
+{
+    if (small) {
+        const int16 lk = (int16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
+        const int16 lj = (int16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+        int16 o = (int16)((int)E->e[0]) + lk * (int16)((int)E->sx[0])
+                  + lj * (int16)((int)E->sy[0]);
+        o |= (int16)((int)E->e[1]) + lk * (int16)((int)E->sx[1]) + lj * (int16)((int)E->sy[1]);
+        o |= (int16)((int)E->e[2]) + lk * (int16)((int)E->sx[2]) + lj * (int16)((int)E->sy[2]);
+        int16 b = (o >= (int16)(0)) & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024,
+                                              2048, 4096, 8192, 16384, 32768);
+        int8 b8 = b.lo | b.hi;
+        int4 b4 = b8.lo | b8.hi;
+        int2 b2 = b4.lo | b4.hi;
+        return (uint)(b2.x | b2.y);
+    }
+    uint c = 0;
+    for (int j = 0; j < COVER_SPAN; ++j)
+        for (int k = 0; k < COVER_SPAN; ++k)
+            c |= (uint)edges_inside(E, k, j) << (COVER_SPAN * j + k);
+    return c;
+}
+
+/* piece_cover tests the centres of a box in int lanes when the piece's vertices span fewer
+ * sub-pixels than this in x and in y (its edge values there then stay far below 2^31) */
+#define SMALL_COVER_SPAN (8 << SUBPIXEL_BITS)
+#if COVER_SPAN != 4
+#error "box_cover and piece_cover are written for COVER_SPAN == 4"
+#endif
+
 /* make_piece's coverage part: the doubled area (ST_DEGENERATE at 0), vertices 1 and 2
  * swapped where it is negative (*swapped, *area2 then positive), the pixel box
- * (ST_NO_SAMPLE without a centre) and the 2 x 2 cover test; on ST_RASTER the piece's
- * x, y, bb_min, bb_max and cover are set, and value_planes is what is left. */
+ * (ST_NO_SAMPLE without a centre) and the cover test of a box of at most COVER_SPAN x
+ * COVER_SPAN centres (`known`: the bits the lanes found for a 2 x 2 box); on ST_RASTER
+ * the piece's x, y, bb_min, bb_max and cover are set, and value_planes is what is left. */
 ALWAYS_INLINE int piece_cover(int2 v0, int2 v1, int2 v2, int width, int height, int known,
                               Piece *pc, int *swapped, long *area2_out)
 {
@@ -213,21 +250,19 @@ ALWAYS_INLINE int piece_cover(int2 v0, int2 v1, int2 v2, int width, int height, 
     int py0 = imax((ymin - SUB_HALF + SUB_ONE - 1) >> SUBPIXEL_BITS, 0);
     int py1 = imin((ymax - SUB_HALF) >> SUBPIXEL_BITS, height - 1);
     if (px0 > px1 || py0 > py1) return ST_NO_SAMPLE;
-    int cover = known;   /* Piece.cover */
-    if (!known && px1 - px0 <= 1 && py1 - py0 <= 1) {
-        /* A box of at most 2 x 2 pixel centres (most pieces of a dense mesh): test them
-         * here, with the raster's edges (common.h piece_edges), and drop the piece if it
-         * covers none: on a dense mesh most 1-centre boxes cover nothing, and were set
-         * up, binned and rasterized for no fragment. No branches: the four centres'
-         * tests combined with & and |. */
+    int cover = known ? known | COVER_KNOWN : 0;   /* Piece.cover */
+    if (!known && px1 - px0 < COVER_SPAN && py1 - py0 < COVER_SPAN) {
+        /* A box of at most COVER_SPAN x COVER_SPAN pixel centres (most pieces of a dense
+         * mesh): test them here, with the raster's edges (common.h piece_edges), and drop
+         * the piece if it covers none: on a dense mesh most small boxes cover nothing,
+         * and were set up, binned and rasterized for no fragment. */
         PieceEdges E;
         piece_edges(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, px0, py0, &E);
-        bool two_x = px1 > px0, two_y = py1 > py0;
-        int c00 = edges_inside(&E, 0, 0);
-        int c10 = two_x & edges_inside(&E, 1, 0);
-        int c01 = two_y & edges_inside(&E, 0, 1);
-        int c11 = two_x & two_y & edges_inside(&E, 1, 1);
-        cover = c00 | (c10 << 1) | (c01 << 2) | (c11 << 3);
+        /* the box's centres as bits k + 4j, those outside it masked off */
+        uint box = ((0xFu >> (3 - (px1 - px0))) * 0x1111u)
+                   & (0xFFFFu >> (4 * (3 - (py1 - py0))));
+        cover = (int)(box_cover(&E, xmax - xmin < SMALL_COVER_SPAN
+                                        && ymax - ymin < SMALL_COVER_SPAN) & box);
         if (!cover) return ST_NO_SAMPLE;
         /* the raster reads these bits instead of evaluating the edges (layout.py
          * COVER_KNOWN): its per-pixel edge tests were mispredicted branches, and their
@@ -621,7 +656,8 @@ inline void user_dists(__global const float *pos, __global const double *uplanes
  * then make_piece's area, box and 2 x 2 test for triangles under SMALL_EXTENT sub-pixels
  * wide and high, where every product fits in 32 bits); only the triangles still open after
  * that (a sample found, or a larger box) go on, SETUP_LAG batches later: make_piece's
- * coverage one after the other (raster_piece: piece_cover), then their value planes
+ * coverage one after the other (raster_piece: piece_cover, which tests the centres of the
+ * boxes of up to 4 x 4 the lanes left to it), then their value planes
  * SETUP_LANES pieces at a time in double lanes (value_planes8). Same statuses, records and
  * tile words as the scalar make_piece: a lane test is the scalar test on the same integers
  * and doubles (FP_CONTRACT is off). */
@@ -932,7 +968,7 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
     /* a mesh's back faces come in runs (a cluster's triangles are neighbours): a batch
      * with no lane left open skips the rest */
-    int8 kc = (int8)0;   /* the cover bits found here (COVER_KNOWN added), else 0 */
+    int8 kc = (int8)0;   /* cover bits found here (piece_cover adds COVER_KNOWN), else 0 */
     if (any8(open)) {
         /* make_piece's first steps for small triangles: area, box, the 2 x 2 test */
 #define WX(i) V->wx[i]
@@ -966,11 +1002,13 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
         EDGE8(X1, Y1, X2, Y2, m22, e0, sx0, sy0);
         EDGE8(X2, Y2, x0, y0, m22, e1, sx1, sy1);
         EDGE8(x0, y0, X1, Y1, m22, e2, sx2, sy2);
-        /* Piece.cover's bits: centre (k, j) at bit k + 2j (make_piece) */
+        /* Piece.cover's bits: centre (k, j) at bit k + COVER_SPAN·j (piece_cover); the
+         * larger small boxes are tested by piece_cover, one piece at a time */
         int8 cover = (INSIDE8(0, 0) & 1) | (two_x & INSIDE8(1, 0) & 2)
-                     | (two_y & INSIDE8(0, 1) & 4) | (two_x & two_y & INSIDE8(1, 1) & 8);
+                     | (two_y & INSIDE8(0, 1) & (1 << COVER_SPAN))
+                     | (two_x & two_y & INSIDE8(1, 1) & (2 << COVER_SPAN));
         DECIDE(m22 & (cover == 0), ST_NO_SAMPLE);
-        kc = (cover | COVER_KNOWN) & m22 & open;
+        kc = cover & m22 & open;
     }
     *(uchar8 *)(known + lt0) = CONVERT_VEC(kc, uchar8);
     /* the decided lanes' status and tile word; the open ones are written by raster_piece.

@@ -213,6 +213,29 @@ def test_random_small_triangles_against_spec_reference():
     assert checked > 2000
 
 
+def test_tiny_triangles_on_centres_against_spec_reference():
+    """Triangles whose boxes hold at most 4 x 4 pixel centres (setup tests those centres
+    itself: layout.COVER_SPAN), with vertices on pixel centres or quarter pixels off them, so
+    that edges run through centres: each one's coverage is the rule text's."""
+    rng = np.random.default_rng(11)
+    w, h = 16, 16
+    tris = []
+    while len(tris) < 400:
+        base = np.floor(rng.uniform(-1, 17, 2)) + 0.5
+        pts = base + rng.integers(-2, 3, (3, 2)) + rng.choice([0.0, 0.0, 0.25, -0.25], (3, 2))
+        ext = pts.max(0) - pts.min(0)
+        if ext.max() > 3.5 or ext.min() < 1.0:   # boxes of 2..4 centres a side
+            continue
+        tris.append(pts)
+    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h)
+    checked = 0
+    for i, (tri, cov) in enumerate(zip(tris, got, strict=True)):
+        exp = top_left_coverage(tri, w, h)
+        assert np.array_equal(cov, exp), f"triangle {i} {tri.tolist()}:\n{cov.astype(int)}"
+        checked += int(exp.sum())
+    assert checked > 400
+
+
 # --- fans, quads, grids: each pixel centre covered exactly once --------------------------
 
 def fan_window(centre, ring) -> list[np.ndarray]:

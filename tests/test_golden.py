@@ -312,6 +312,13 @@ def _on_oclgrind(names: list[str]) -> dict[str, list[dict[str, str]]]:
         pytest.skip("Oclgrind is not installed")
     env = dict(os.environ, CLRASTER_DEVICE="oclgrind")
     env.pop("PYOPENCL_CTX", None)
+    # the subprocess must import the same clraster as this process (a script's own folder,
+    # not the working directory, heads its path: it would take an installed copy)
+    import clraster
+
+    pkg_root = str(Path(clraster.__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = os.pathsep.join([pkg_root, env.get("PYTHONPATH", "")]).rstrip(
+        os.pathsep)
     proc = subprocess.run([sys.executable, "-W", "ignore", str(Path(__file__)), "--print",
                            *names], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]

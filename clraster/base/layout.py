@@ -64,7 +64,7 @@ ST_INVALID = 2  #: a vertex is NaN/Inf (or its clip position is): dropped and co
 ST_TRIVIAL_REJECT = 3  #: all three vertices outside one frustum plane or one user clip plane
 ST_BACKFACE = 4  #: culled by the cull mode
 ST_DEGENERATE = 5  #: zero area after the fixed-point snap
-ST_NO_SAMPLE = 6  #: covers no pixel centre (box holds none, or a <= 2x2 box tested exactly)
+ST_NO_SAMPLE = 6  #: covers no pixel centre (box holds none, or a <= 4x4 box tested exactly)
 STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "degenerate",
                 "no_sample")
 
@@ -72,10 +72,12 @@ STATUS_NAMES = ("raster", "clipped", "invalid", "trivial_reject", "backface", "d
 PF_SWAPPED = 1  #: vertices 1 and 2 were swapped to make the window-space area positive
 PF_CLIPPED = 2  #: made by the clipper; parent barycentrics live in the clipped-bary buffer
 PF_INDEX_SHIFT = 2  #: clipped pieces: flags >> 2 is their index in the clipped-bary buffer
-#: Piece.cover: set when bits 0..3 hold the coverage of the piece's pixel box of at most
-#: 2 x 2 centres, bit 2·oy + ox for the centre (bb_min x + ox, bb_min y + oy); 0 when the
-#: box is larger (the raster evaluates the edges then)
-COVER_KNOWN = 16
+#: Piece.cover: the pixel boxes whose coverage setup tests centre by centre are at most
+#: COVER_SPAN x COVER_SPAN centres; bit COVER_SPAN·oy + ox holds the centre (bb_min x + ox,
+#: bb_min y + oy), and COVER_KNOWN is set with them; 0 when the box is larger (the raster
+#: evaluates the edges then)
+COVER_SPAN = 4
+COVER_KNOWN = 1 << 16
 
 # Cull modes (the setup kernel's `cull` argument).
 CULL_NONE, CULL_BACK, CULL_FRONT = 0, 1, 2
@@ -185,7 +187,7 @@ assert DRAW_DTYPE.itemsize == 32
 #: and culling (Hi-Z, pyramid.cl's error model) relies on no fragment being nearer than its
 #: vertices. Only that side: a fragment extrapolated farther cannot make culling unsafe, and
 #: every clamped pixel moves the value away from the ray caster's (tests/test_accuracy.py).
-#: cover: for a box of at most 2 x 2 pixel centres, which of them the piece covers
+#: cover: for a box of at most 4 x 4 pixel centres, which of them the piece covers
 #: (`COVER_KNOWN`; setup tests them anyway, and the raster then skips its edge functions);
 #: 0 otherwise. pad: keeps the record 16-byte aligned.
 PIECE_DTYPE = np.dtype([
@@ -236,8 +238,8 @@ C_DEFINES: tuple[tuple[str, tuple[str, ...]], ...] = (
       "ST_DEGENERATE", "ST_NO_SAMPLE")),
     ("Piece flags; clipped pieces: flags >> PF_INDEX_SHIFT = index into the clipped-bary buffer",
      ("PF_SWAPPED", "PF_CLIPPED", "PF_INDEX_SHIFT")),
-    ("Piece.cover: the coverage bits of a box of at most 2 x 2 pixel centres are known",
-     ("COVER_KNOWN",)),
+    ("Piece.cover: the coverage bits of a box of at most COVER_SPAN x COVER_SPAN pixel centres "
+     "are known", ("COVER_SPAN", "COVER_KNOWN")),
     ("Cull modes", ("CULL_NONE", "CULL_BACK", "CULL_FRONT")),
     ("Clipping: user clip planes; vertices of a clipped triangle and of the clipper's polygon",
      ("USER_PLANES_MAX", "MAX_CLIP_VERTICES", "POLY_MAX")),

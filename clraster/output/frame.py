@@ -81,7 +81,7 @@ class FrameStats:
         backface_culled: facing away under the cull mode.
         degenerate: zero area (edge-on, or after the 1/256-pixel snap).
         no_sample: covers no pixel centre: its bounding box holds none, or (a box of at
-            most 2 × 2 centres, tested exactly in setup) none of them is inside it.
+            most 4 × 4 centres, tested exactly in setup) none of them is inside it.
         clipped: went through the clip-space clipper (near/far/guard band).
         clip_pieces: triangles the clipper produced that survived.
         rasterized: pieces sent to binning (unclipped survivors + clip_pieces).

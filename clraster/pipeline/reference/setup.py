@@ -13,6 +13,7 @@ import numpy as np
 
 from ...base.layout import (
     COVER_KNOWN,
+    COVER_SPAN,
     CULL_MODES,
     DRAW_MIRRORED,
     OC_FRUSTUM,
@@ -171,9 +172,10 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
     py1 = np.minimum((Y.max(1) - half) >> SUBPIXEL_BITS, height - 1)
     alive = status == ST_RASTER
     status[alive & ((px0 > px1) | (py0 > py1))] = ST_NO_SAMPLE
-    # a box of at most 2 x 2 pixel centres that covers none of them (exact edge functions,
-    # top-left rule): no sample either (setup.cl make_piece)
-    small = np.flatnonzero((status == ST_RASTER) & (px1 - px0 <= 1) & (py1 - py0 <= 1))
+    # a box of at most COVER_SPAN x COVER_SPAN pixel centres that covers none of them (exact
+    # edge functions, top-left rule): no sample either (setup.cl piece_cover)
+    span = COVER_SPAN - 1
+    small = np.flatnonzero((status == ST_RASTER) & (px1 - px0 <= span) & (py1 - py0 <= span))
     cover = np.zeros(k, np.int32)   # PIECE_DTYPE cover (layout.COVER_KNOWN)
     if small.size:
         Xs, Ys = X[small], Y[small]
@@ -185,14 +187,14 @@ def make_pieces(wv: np.ndarray, c: np.ndarray, width: int, height: int, zs: floa
             return dx * (qy - ay) - dy * (qx - ax) >= bias
 
         bits = np.zeros(small.size, np.int32)
-        for oy in (0, 1):
-            for ox in (0, 1):
+        for oy in range(COVER_SPAN):
+            for ox in range(COVER_SPAN):
                 qxp, qyp = px0[small] + ox, py0[small] + oy
                 inbox = (qxp <= px1[small]) & (qyp <= py1[small])
                 qx = (qxp << SUBPIXEL_BITS) + half
                 qy = (qyp << SUBPIXEL_BITS) + half
                 hit = inbox & edge(1, 2, qx, qy) & edge(2, 0, qx, qy) & edge(0, 1, qx, qy)
-                bits |= hit.astype(np.int32) << (2 * oy + ox)
+                bits |= hit.astype(np.int32) << (COVER_SPAN * oy + ox)
         status[small[bits == 0]] = ST_NO_SAMPLE
         cover[small] = np.where(bits != 0, bits | COVER_KNOWN, 0)
     ok = status == ST_RASTER
