@@ -190,8 +190,9 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
 
 /* The centres of the 4 x 4 pixels from the one E is set up at that lie inside its three
  * edges, as bits k + 4j (column k, row j). small: the piece's vertices span fewer than
- * SMALL_COVER_SPAN sub-pixels each way, so every edge value there is under 2^24 (offsets
- * and edge deltas under 2^11): the same exact integers in int lanes, one centre per lane,
+ * SMALL_COVER_SPAN sub-pixels each way, so every edge value there is under 2^24 (edge
+ * deltas under 2^11, offsets under 2^12 with the lanes past a narrower box): the same
+ * exact integers in int lanes, one centre per lane,
  * a centre inside iff the OR of its three values is >= 0; else 64-bit, one at a time. Not
  * inlined: in setup_triangles' loop it cost more than its own work (registers). */
 __attribute__((noinline)) uint box_cover(const PieceEdges *E, int small)

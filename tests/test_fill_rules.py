@@ -213,10 +213,15 @@ def test_random_small_triangles_against_spec_reference():
     assert checked > 2000
 
 
-def test_tiny_triangles_on_centres_against_spec_reference():
+@pytest.mark.parametrize("tile_log2", [3, 4])
+def test_tiny_triangles_on_centres_against_spec_reference(tile_log2):
     """Triangles whose boxes hold at most 4 x 4 pixel centres (setup tests those centres
-    itself: layout.COVER_SPAN), with vertices on pixel centres or quarter pixels off them, so
-    that edges run through centres: each one's coverage is the rule text's."""
+    itself: layout.COVER_SPAN, and the raster takes its bits), with vertices on pixel centres
+    or quarter pixels off them, so that edges run through centres: each one's coverage is the
+    rule text's. With 8-pixel tiles many boxes cross a tile seam. Also: right triangles
+    whose right angle lies a quarter pixel beyond a 4 x 4 box's corner centre (every centre
+    of the box, the far corner included, in play), and large triangles whose box is cut to
+    at most 4 x 4 centres by the image's corner (setup's 64-bit path for wide spans)."""
     rng = np.random.default_rng(11)
     w, h = 16, 16
     tris = []
@@ -227,7 +232,21 @@ def test_tiny_triangles_on_centres_against_spec_reference():
         if ext.max() > 3.5 or ext.min() < 1.0:   # boxes of 2..4 centres a side
             continue
         tris.append(pts)
-    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h)
+    for _ in range(40):
+        o = np.floor(rng.uniform(-1, 14, 2)) + 0.25   # the box's centres: o + 0.25 .. o + 3.25
+        sx, sy = rng.choice([0, 1], 2)   # the corner of the right angle
+        c = o + 3.5 * np.array([sx, sy])
+        tris.append(np.array([c, [o[0] + 3.5 * (1 - sx), c[1]], [c[0], o[1] + 3.5 * (1 - sy)]]))
+    for corner in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        for far in (37.0, 300.0, 1234.5, 4000.0):
+            cx = 3.75 if corner[0] == 0 else w - 3.75
+            cy = 3.75 if corner[1] == 0 else h - 3.75
+            far_x = -far if corner[0] == 0 else w + far
+            far_y = -0.7 * far if corner[1] == 0 else h + 0.7 * far
+            tris.append(np.array([[far_x, cy], [cx, cy], [cx, far_y]]))
+            tris.append(np.array([[far_x, cy + (1 if corner[1] == 0 else -1) * 2.25],
+                                  [cx, cy], [cx - (1 if corner[0] == 0 else -1) * 2.5, far_y]]))
+    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h, tile_log2=tile_log2)
     checked = 0
     for i, (tri, cov) in enumerate(zip(tris, got, strict=True)):
         exp = top_left_coverage(tri, w, h)
@@ -403,8 +422,9 @@ def test_tilted_fan_through_near_plane(tilt):
 def test_overdraw_counts_every_covering_face(tile_log2):
     """Without the tile Hi-Z every covered centre of every face is tested: the overdraw of a
     soup equals, per pixel, the number of faces whose lone rendering covers it — through
-    each of the raster's paths (2 × 2 boxes from setup's coverage bits, narrow pieces' edge
-    lanes, wide pieces' runs), across tile seams and at the image's cut edge."""
+    each of the raster's paths (boxes of up to 4 × 4 centres from setup's coverage bits,
+    narrow pieces' edge lanes, wide pieces' runs), across tile seams and at the image's cut
+    edge."""
     w, h = 61, 37   # tiles cut by the right and bottom edges
     rng = np.random.default_rng(11)
     tris = []
