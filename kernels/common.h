@@ -394,6 +394,18 @@ ALWAYS_INLINE void edges_down(PieceEdges *E, long j)
     E->e[2] += j * E->sy[2];
 }
 
+/* Piece.cover's bits (layout.py COVER_SPAN, COVER_KNOWN: bit k + 4j is column k, row j of
+ * the piece's pixel box) of columns k0 .. k1 and rows j0 .. j1, all within 0 .. 3: setup
+ * masks a box's centres with it, the raster the part of a box inside a tile. */
+#if COVER_SPAN != 4
+#error "cover_mask is written for COVER_SPAN == 4"
+#endif
+inline uint cover_mask(int k0, int k1, int j0, int j1)
+{
+    uint cols = ((0xFu << k0) & (0xFu >> (3 - k1))) * 0x1111u;
+    return cols & (0xFFFFu << (4 * j0)) & (0xFFFFu >> (4 * (3 - j1)));
+}
+
 /* A piece's depth plane (setup.cl value_planes, from the unsnapped vertices): window depth
  * z0 at its reference pixel (x0, y0), the first column and row of its pixel box; dzdx, dzdy
  * per pixel; zlo, its nearest vertex's depth. */

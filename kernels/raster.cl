@@ -8,9 +8,8 @@
  * interpolate window depth linearly in screen space from the piece's depth plane (set up
  * from the unsnapped vertices) and depth-test LESS against the tile's private z-buffer
  * (equal depth: the lower triangle id wins, i.e. first drawn in id order). Only the
- * winning entry per pixel is kept; depth, id
- * and perspective-correct barycentrics (relative to the parent triangle's vertices) are
- * resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
+ * winning entry per pixel is kept; depth, id and perspective-correct barycentrics
+ * (relative to the parent triangle's vertices) are resolved once at the end. With hiz, an entry whose nearest depth is behind the tile's
  * farthest depth is skipped untested (tile Hi-Z, see raster_tile). A tile whose list is one
  * wide piece, drawn into cleared outputs, goes row by row without the private buffers
  * (sole_piece_tile: the interior of a large triangle).
@@ -92,11 +91,6 @@ ALWAYS_INLINE uint bits16(uint m)
     return popcount(m);
 #endif
 }
-
-/* the cover path's masks (raster_tile) are written for boxes of 4 x 4 centres */
-#if COVER_SPAN != 4
-#error "raster_tile's cover masks assume COVER_SPAN == 4"
-#endif
 
 /* Perspective-correct barycentrics of pixel (x, y) of piece pc, relative to its parent
  * triangle's vertices: screen-space weights from the unsnapped value planes (setup.cl),
@@ -423,15 +417,14 @@ ALWAYS_INLINE bool sole_piece_tile(int tx0, int ty0, int e0,
 }
 
 /* The depth tests of entry k (record pc) at its covered centres `covered` (setup's cover
- * bits, bit k + 4j for column k and row j of its box, masked to the tile whose origin is
- * (tx0, ty0)), one at a time: depth_at's operations, LESS with the lower id winning ties,
+ * bits, bit k + 4j for column k and row j of its box, masked to the tile T), one at a time: depth_at's operations, LESS with the lower id winning ties,
  * winners' depth and entry into zbuf and win; odc (or 0): fragments counted per pixel.
  * Returns the fragments that passed. Not inlined: inlined into raster_tile, even in part,
  * it made the other paths slower (the blocks' loops, the sole-piece tiles; registers:
  * bench/README.md's performance log). */
 __attribute__((noinline)) int cover_fragments(__global const Piece *pc, uint covered, int k,
-                                               int tx0, int ty0, float *zbuf, int *win,
-                                               const TieCtx *T, int *odc)
+                                               float *zbuf, int *win, const TieCtx *T,
+                                               int *odc)
 {
     DepthPlane P;
     depth_plane(pc, &P);
@@ -440,7 +433,7 @@ __attribute__((noinline)) int cover_fragments(__global const Piece *pc, uint cov
         int b = CTZ(m);   /* lowest set bit */
         int x = bx + (b & 3), y = by + (b >> 2);
         float z = depth_at(&P, depth_row(&P, y), x);
-        int i = ((y - ty0) << TILE_LOG2) + (x - tx0);
+        int i = ((y - T->ty0) << TILE_LOG2) + (x - T->tx0);
         float zb = zbuf[i];
         if (odc) ++odc[i];
         if (z < zb || (z == zb && id < tie_id(T, win[i], i))) {
@@ -553,14 +546,12 @@ inline void raster_tile(int tile, int tx0, int ty0, int e0, int e1,
              * blocks below, one at a time (cover_fragments), without the blocks' edge
              * set-up and lane masks (more of them go through the blocks, in lanes) */
             int bx = bb_x(pc->bb_min), by = bb_y(pc->bb_min);
-            uint cols = ((0xFu << (x0 - bx)) & (0xFu >> (3 - (x1 - bx)))) * 0x1111u;
-            uint rows = (0xFFFFu << (4 * (y0 - by))) & (0xFFFFu >> (4 * (3 - (y1 - by))));
-            uint covered = (uint)cover & cols & rows;
+            uint covered = (uint)cover & cover_mask(x0 - bx, x1 - bx, y0 - by, y1 - by);
             uint nc = bits16(covered);
             if (nc <= COVER_FRAGMENTS) {
                 tested += nc;
                 if (nc)
-                    passed += cover_fragments(pc, covered, k, tx0, ty0, zbuf, win, &T,
+                    passed += cover_fragments(pc, covered, k, zbuf, win, &T,
                                               want_overdraw ? odc : 0);
                 continue;
             }

@@ -192,18 +192,18 @@ ALWAYS_INLINE void value_planes(double4 a, double4 b, double4 c, int X0, int Y0,
  * edges, as bits k + 4j (column k, row j). small: the piece's vertices span fewer than
  * SMALL_COVER_SPAN sub-pixels each way, so every edge value there is under 2^24 (edge
  * deltas under 2^11, offsets under 2^12 with the lanes past a narrower box): the same
- * exact integers in int lanes, one centre per lane,
- * a centre inside iff the OR of its three values is >= 0; else 64-bit, one at a time. Not
- * inlined: in setup_triangles' loop it cost more than its own work (registers). */
+ * exact integers in int lanes, one centre per lane, a centre inside iff the OR of its
+ * three values is >= 0; else 64-bit, one at a time. Not inlined: in setup_triangles' loop
+ * it cost more than its own work (registers). */
 __attribute__((noinline)) uint box_cover(const PieceEdges *E, int small)
 {
     if (small) {
         const int16 lk = (int16)(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
         const int16 lj = (int16)(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
-        int16 o = (int16)((int)E->e[0]) + lk * (int16)((int)E->sx[0])
-                  + lj * (int16)((int)E->sy[0]);
-        o |= (int16)((int)E->e[1]) + lk * (int16)((int)E->sx[1]) + lj * (int16)((int)E->sy[1]);
-        o |= (int16)((int)E->e[2]) + lk * (int16)((int)E->sx[2]) + lj * (int16)((int)E->sy[2]);
+        int16 o = (int16)(0);
+        for (int i = 0; i < 3; ++i)
+            o |= (int16)((int)E->e[i]) + lk * (int16)((int)E->sx[i])
+                 + lj * (int16)((int)E->sy[i]);
         int16 b = (o >= (int16)(0)) & (int16)(1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024,
                                               2048, 4096, 8192, 16384, 32768);
         int8 b8 = b.lo | b.hi;
@@ -221,9 +221,6 @@ __attribute__((noinline)) uint box_cover(const PieceEdges *E, int small)
 /* piece_cover tests the centres of a box in int lanes when the piece's vertices span fewer
  * sub-pixels than this in x and in y (its edge values there then stay far below 2^31) */
 #define SMALL_COVER_SPAN (8 << SUBPIXEL_BITS)
-#if COVER_SPAN != 4
-#error "box_cover and piece_cover are written for COVER_SPAN == 4"
-#endif
 
 /* make_piece's coverage part: the doubled area (ST_DEGENERATE at 0), vertices 1 and 2
  * swapped where it is negative (*swapped, *area2 then positive), the pixel box
@@ -260,8 +257,7 @@ ALWAYS_INLINE int piece_cover(int2 v0, int2 v1, int2 v2, int width, int height, 
         PieceEdges E;
         piece_edges(v0.x, v0.y, v1.x, v1.y, v2.x, v2.y, px0, py0, &E);
         /* the box's centres as bits k + 4j, those outside it masked off */
-        uint box = ((0xFu >> (3 - (px1 - px0))) * 0x1111u)
-                   & (0xFFFFu >> (4 * (3 - (py1 - py0))));
+        uint box = cover_mask(0, px1 - px0, 0, py1 - py0);
         cover = (int)(box_cover(&E, xmax - xmin < SMALL_COVER_SPAN
                                         && ymax - ymin < SMALL_COVER_SPAN) & box);
         if (!cover) return ST_NO_SAMPLE;

@@ -192,6 +192,18 @@ def top_left_coverage(tri: np.ndarray, w: int, h: int) -> np.ndarray:
     return cov
 
 
+def spec_checked(tris, w: int, h: int, tile_log2: int = 4) -> int:
+    """Each triangle of ``tris`` (window space) rendered alone has the rule text's coverage
+    (`top_left_coverage`); returns the covered centres checked."""
+    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h, tile_log2=tile_log2)
+    checked = 0
+    for i, (tri, cov) in enumerate(zip(tris, got, strict=True)):
+        exp = top_left_coverage(tri, w, h)
+        assert np.array_equal(cov, exp), f"triangle {i} {tri.tolist()}:\n{cov.astype(int)}"
+        checked += int(exp.sum())
+    return checked
+
+
 def test_random_small_triangles_against_spec_reference():
     rng = np.random.default_rng(7)
     w, h = 16, 16
@@ -204,13 +216,7 @@ def test_random_small_triangles_against_spec_reference():
         else:
             pts = base + rng.normal(0, 4, (3, 2))
         tris.append(np.rint(pts * 256) / 256)
-    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h)
-    checked = 0
-    for i, (tri, cov) in enumerate(zip(tris, got, strict=True)):
-        exp = top_left_coverage(tri, w, h)
-        assert np.array_equal(cov, exp), f"triangle {i} {tri.tolist()}:\n{cov.astype(int)}"
-        checked += int(exp.sum())
-    assert checked > 2000
+    assert spec_checked(tris, w, h) > 2000
 
 
 @pytest.mark.parametrize("tile_log2", [3, 4])
@@ -246,13 +252,7 @@ def test_tiny_triangles_on_centres_against_spec_reference(tile_log2):
             tris.append(np.array([[far_x, cy], [cx, cy], [cx, far_y]]))
             tris.append(np.array([[far_x, cy + (1 if corner[1] == 0 else -1) * 2.25],
                                   [cx, cy], [cx - (1 if corner[0] == 0 else -1) * 2.5, far_y]]))
-    got = single_masks(window_mesh(tris, w, h), NDC_CAMERA, w, h, tile_log2=tile_log2)
-    checked = 0
-    for i, (tri, cov) in enumerate(zip(tris, got, strict=True)):
-        exp = top_left_coverage(tri, w, h)
-        assert np.array_equal(cov, exp), f"triangle {i} {tri.tolist()}:\n{cov.astype(int)}"
-        checked += int(exp.sum())
-    assert checked > 400
+    assert spec_checked(tris, w, h, tile_log2) > 400
 
 
 # --- fans, quads, grids: each pixel centre covered exactly once --------------------------
