@@ -621,6 +621,90 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
         assert (np.abs(q[:, :3]) < q[:, 3:4]).all()
 
 
+@pytest.mark.parametrize("mesh_name", ["quad", "cube", "spot", "bunny"])
+def test_one_flat_instance_path_equals_the_general_path(mesh_name, monkeypatch, bunny):
+    # A flat path of one instance (a bare Mesh of up to FLAT_CLUSTERS clusters) takes the
+    # flat tables as they are (cull._flat_one) instead of the general path's per-instance
+    # ranges and gathers. Over random transforms (mirrored ones too) and views from inside,
+    # across and outside the mesh, perspective and orthographic, each cull mode with cones
+    # on and off: the same pairs, inside flags, cone-culled pairs and counts both ways.
+    import clraster.culling.cull as cull_mod
+
+    monkeypatch.setattr(cull_mod, "FLAT_CLUSTERS", 10**9)   # the bunny's 540 clusters too
+    if mesh_name == "bunny":
+        mesh = bunny
+    elif mesh_name == "spot":
+        if not (MESHES / "spot.ply").is_file():
+            pytest.skip(f"shared mesh spot.ply not found in {MESHES}")
+        mesh = Mesh.load(MESHES / "spot.ply")
+    else:
+        mesh = quad_mesh("+y") if mesh_name == "quad" else cube_mesh()
+    rng = np.random.default_rng(len(mesh_name))
+    n_views = n_cut = 0
+    for k in range(40):
+        t = np.eye(4)
+        t[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0] * rng.uniform(0.5, 2.0, 3)
+        if k % 3 == 1:
+            t[:3, :3] = t[:3, :3] @ np.diag([1.0, -1.0, 1.0])   # mirrored
+        t[:3, 3] = rng.uniform(-1, 1, 3)
+        scene = Scene.from_mesh(mesh, t)
+        lo, hi = scene.bounds()
+        c, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+        eye = c + rng.normal(size=3) * size * rng.uniform(0.05, 2.0)
+        look = c + rng.normal(size=3) * size * rng.uniform(0.0, 1.5)
+        if k % 5 == 4:
+            vp = ortho(-size / 3, size / 3, -size / 4, size / 4, 0.01, 4 * size) @ \
+                Camera.look_at(eye, look).view
+        else:
+            vp = Camera.look_at(eye, look, fov_y=float(rng.uniform(20, 90)), near=size * 0.01,
+                                far=size * rng.uniform(0.5, 4)).view_projection(640, 480)
+        for cull, cones in (("back", True), ("front", True), ("none", True), ("back", False)):
+            lists = []
+            for one in (True, False):
+                monkeypatch.setattr(cull_mod, "FLAT_ONE", one)
+                lists.append(build_draw_list(scene, vp, cull=cull, cones=cones,
+                                             keep_cone_culled=True))
+            a, b = lists
+            np.testing.assert_array_equal(a.instance, b.instance)
+            np.testing.assert_array_equal(a.cluster, b.cluster)
+            np.testing.assert_array_equal(a.inside, b.inside)
+            np.testing.assert_array_equal(a.cone_culled, b.cone_culled)
+            assert a.counts == b.counts
+            check_counts(a, scene)
+            n_views += len(a) > 0
+            n_cut += 0 < len(a) + a.counts["clusters_cone_culled"] < a.counts["clusters_total"]
+    assert n_views > 40 and (n_cut > 10 or mesh_name in ("quad", "cube"))   # not vacuous
+
+
+@pytest.mark.parametrize("traversal", [False, True])
+def test_one_instance_of_a_big_mesh_lists_its_clusters_in_order(traversal, monkeypatch, bunny):
+    # A bare Mesh over FLAT_CLUSTERS clusters goes through its mesh's group, whose
+    # clusters, when they come in order, are not sorted again (cull._PathResult.ordered):
+    # drawn whole (INSIDE, or the frustum test off) and across the frustum, through the
+    # BVH's dense rows or its traversal, the list is in draw order, and the clusters drawn
+    # whole are the same with the frustum test on and off.
+    import clraster.culling.cull as cull_mod
+
+    if traversal:   # the cluster BVH's batched traversal, not its dense rows
+        monkeypatch.setattr(cull_mod, "DENSE_PAIRS", 0)
+    scene = Scene.from_mesh(bunny)
+    assert clusters_of(bunny).n_clusters > cull_mod.FLAT_CLUSTERS
+    lo, hi = scene.bounds()
+    c, size = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    far = Camera.look_at(c + [0, 0, 3 * size], c, fov_y=40, near=size * 0.1, far=size * 10)
+    close = Camera.look_at(c + [0, 0, 0.4 * size], c, fov_y=40, near=size * 0.01,
+                           far=size * 10)
+    off = build_draw_list(scene, far.view_projection(640, 480), frustum=False)
+    whole = build_draw_list(scene, far.view_projection(640, 480))
+    cut = build_draw_list(scene, close.view_projection(640, 480))
+    assert whole.inside.all() and not off.inside.any()
+    assert 0 < len(cut) and cut.counts["clusters_frustum_culled"] > 0
+    for dl in (off, whole, cut):
+        check_counts(dl, scene)   # (draw order included)
+    np.testing.assert_array_equal(whole.cluster, off.cluster)
+    assert set(cut.cluster.tolist()) <= set(range(clusters_of(bunny).n_clusters))
+
+
 def test_draw_order_is_fixed():
     # A mixed scene (small meshes on the flat path, a bigger one through its BVH, a NaN
     # instance, an empty one): with nothing culled the list enumerates every (instance,

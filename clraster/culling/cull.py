@@ -432,6 +432,69 @@ def _flat_frustum(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarra
             prep.g_tri[g], g)
 
 
+#: Whether a flat path of one instance goes through `_flat_one` (tests turn it off to
+#: compare it with the general path).
+FLAT_ONE = True
+
+
+def _flat_one(prep: _SceneCull, inst_state: np.ndarray, inst_mask: np.ndarray,
+              view: _ViewPlanes, cone_view: _ConeView | None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
+                         float]:
+    """`_flat_frustum`, then `_flat_cone_cull`, for a flat path of one instance without
+    user planes (a bare Mesh of up to FLAT_CLUSTERS clusters: most small meshes): its
+    pairs are the columns of the flat tables, in order, so both tests take the tables as
+    they are — no per-instance ranges, repeats, merges or gathers — on the same values as
+    the general path (the same box and cone arithmetic: tests/test_cull.py compares the
+    two). Returns (inst, cl, ins, triangles, back, frustum seconds) as `all`'s flat task
+    splits them."""
+    t0 = time.perf_counter()
+    i = int(prep.flat_ids[0])
+    state = inst_state[i]
+    n = int(prep.flat_count[0])
+    keep = None   # the pairs kept, or None: every one
+    if state == OUTSIDE:
+        keep = np.zeros(0, np.int64)
+        ins = np.zeros(0, bool)
+    elif state == INTERSECTING and inst_mask[i] != 0:
+        fb = prep.flat_boxes
+        dmin, dmax, mterm = box_extremes(view.planes, view.scales, fb[0:3], fb[3:6],
+                                         fb[6:9])
+        cst, cmask = classify_extremes(dmin, dmax, mterm,
+                                       np.full(n, inst_mask[i], inst_mask.dtype),
+                                       view.inside_margin, view.outside_margin)
+        ins = view.inside(cmask)
+        alive = cst != OUTSIDE
+        if not alive.all():
+            keep = np.flatnonzero(alive)
+            ins = ins[keep]
+    else:   # INSIDE, or nothing left to test: every pair
+        ins = np.full(n, state == INSIDE)
+    if keep is None:
+        g, cl = prep.flat_g, prep.flat_cl
+        inst = np.full(n, i, np.int64)
+    else:
+        g, cl = prep.flat_g[keep], prep.flat_cl[keep]
+        inst = np.full(keep.size, i, np.int64)
+    tri = prep.g_tri[g]
+    t1 = time.perf_counter()
+    back = None
+    if cone_view is not None and g.size:
+        can = prep.g_can_cone[g]
+        # the instance's eye, side and margin broadcast over its pairs: the same values
+        # `_flat_cone_cull` gathers per pair
+        eye, side, sin_m = (cone_view.eye_obj[i][:, None], cone_view.side[i:i + 1],
+                            cone_view.sin_m[i:i + 1])
+        table = prep.g_cones if keep is None else np.take(prep.g_cones, g, axis=1)
+        if can.all():
+            back = cone_kernel(table, eye, side, sin_m, cone_view.ortho)
+        else:
+            back = np.zeros(g.size, bool)
+            sel = np.flatnonzero(can)
+            back[sel] = cone_kernel(table[:, sel], eye, side, sin_m, cone_view.ortho)
+    return inst, cl.astype(np.int64), ins, tri, back, t1 - t0
+
+
 @dataclass(frozen=True)
 class _ConeView:
     """The normal-cone test's inputs for one view, per instance (I = scene.n_instances)."""
@@ -511,6 +574,8 @@ def _cone_cull(mc: _MeshCull, inst: np.ndarray, cl: np.ndarray, visible: np.ndar
         e = eye_obj[visible].T[:, :, None]  # (3, Q, 1)
         dense = cone_kernel(mc.cones[:, None, :], e, side[visible][:, None],
                             sin_m[visible][:, None], ortho)  # (Q, C)
+        if visible.size == 1:   # one instance (a bare Mesh): its row
+            return dense[0, cl]
         row = np.searchsorted(visible, inst)
         return dense[row, cl]
     table = np.take(mc.cones, cl, axis=1)
@@ -802,6 +867,9 @@ class _PathResult:
     back: np.ndarray | None
     t_frustum: float
     t_cones: float
+    #: the pairs come in draw order (instance, then cluster): the flat path's always, a
+    #: group's when it holds one instance and its clusters came in order
+    ordered: bool = True
 
 
 #: CPUs this process may run on (read once: os.cpu_count() took ~15 µs a call, a tenth of
@@ -1064,6 +1132,12 @@ class ViewCull:
         cone_view = self.cone_view if in_view else None
 
         def flat_task() -> _PathResult:   # small meshes: all their (instance, cluster) pairs
+            if prep.flat_ids.size == 1 and not view.n_user and FLAT_ONE:
+                t1 = time.perf_counter()
+                inst, cl, ins, tri, back, t_frustum = _flat_one(prep, inst_state, inst_mask,
+                                                                view, cone_view)
+                return _PathResult(inst, cl, ins, tri, back, t_frustum,
+                                   time.perf_counter() - t1 - t_frustum)
             t0 = time.perf_counter()
             inst, cl, ins, tri, g = _flat_frustum(prep, inst_state, inst_mask, view)
             t1 = time.perf_counter()
@@ -1078,7 +1152,11 @@ class ViewCull:
             t1 = time.perf_counter()
             back = (_cone_cull(mc, inst, cl, members[vis], cone_view)
                     if cone_view is not None and mc.can_cone and cl.size else None)
-            return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1)
+            # one instance whose clusters come in order (a bare Mesh: its BVH lists them
+            # in their own order) needs no sort into draw order
+            ordered = members.size == 1 and bool((cl[1:] > cl[:-1]).all())
+            return _PathResult(inst, cl, ins, tri, back, t1 - t0, time.perf_counter() - t1,
+                               ordered)
 
         tasks: list = []
         work: list[int] = []   # bounds on the pairs each task looks at (`_run_tasks`)
@@ -1091,7 +1169,7 @@ class ViewCull:
                 tasks.append((group_task, (mc, members, vis)))
                 work.append(members.size * mc.cm.n_clusters)
         for k, res in enumerate(_run_tasks(tasks, work)):
-            if k > 0 or not prep.flat_ids.size:
+            if k > 0 or not res.ordered:
                 pairs.in_order = False   # groups emit pairs out of draw order
             pairs.t_clusters += res.t_frustum
             pairs.frustum_done(res.cl, res.tri)
