@@ -622,7 +622,7 @@ def test_draw_list_is_conservative_on_the_bunny(seed, path, monkeypatch, bunny):
 
 
 @pytest.mark.parametrize("mesh_name", ["quad", "cube", "spot", "bunny"])
-def test_one_flat_instance_path_equals_the_general_path(mesh_name, monkeypatch, bunny):
+def test_one_flat_instance_path_equals_the_general_path(mesh_name, monkeypatch, request):
     # A flat path of one instance (a bare Mesh of up to FLAT_CLUSTERS clusters) takes the
     # flat tables as they are (cull._flat_one) instead of the general path's per-instance
     # ranges and gathers. Over random transforms (mirrored ones too) and views from inside,
@@ -632,7 +632,7 @@ def test_one_flat_instance_path_equals_the_general_path(mesh_name, monkeypatch, 
 
     monkeypatch.setattr(cull_mod, "FLAT_CLUSTERS", 10**9)   # the bunny's 540 clusters too
     if mesh_name == "bunny":
-        mesh = bunny
+        mesh = request.getfixturevalue("bunny")
     elif mesh_name == "spot":
         if not (MESHES / "spot.ply").is_file():
             pytest.skip(f"shared mesh spot.ply not found in {MESHES}")
