@@ -22,6 +22,10 @@ three equivalent-in-spirit, all-conservative paths chosen by mesh size:
   cluster) box precomputed once in world space (the exact box around the transformed
   cluster box) and tested against the world planes, all instances at once.
 
+A scene of one instance (a bare Mesh, the usual frame) takes the same tests without the
+bookkeeping of many: its flat tables as they are (`_flat_one`), or its group's clusters in
+the order its BVH keeps, not sorted again; the lists are the same.
+
 Planes move to object space as rows times the object transform and boxes are never
 transformed (see :mod:`clraster.culling.frustum`), so every path stays exact under any affine
 transform; INSIDE and OUTSIDE use the float32 margins described there.
