@@ -27,6 +27,7 @@ import argparse
 import collections
 import functools
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -40,9 +41,8 @@ from clraster.pipeline import params as params_mod
 from clraster.pipeline.stages import bin as bin_stage
 from clraster.pipeline.stages import chain, geometry, raster, setup
 
-MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-FILES = {"spot": "spot.ply", "bunny": "stanford_bunny.ply",
-         "dragon": "stanford_dragon_vrip.ply"}
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from kernel_times import FILES, MESHES, record_launches  # noqa: E402  (bench/ is not a package)
 
 #: (owner, attribute, label) of every host step timed; properties by their getter
 STEPS = [
@@ -115,15 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     w, h = 1920, 1080
     target, cam = scene(a.scene, w, h)
-    launches: list[tuple[str, cl.Event]] = []
-    call = cl.Kernel.__call__
-
-    def recording_call(self, *args, **kw):   # every launch of the frame, with its event
-        ev = call(self, *args, **kw)
-        launches.append((self.function_name, ev))
-        return ev
-
-    cl.Kernel.__call__ = recording_call
+    launches = record_launches()
     instrument()
     r = Renderer(w, h)
     for _ in range(4):   # kernel builds, buffer growth

@@ -30,6 +30,21 @@ FILES = {"spot": "spot.ply", "bunny": "stanford_bunny.ply",
          "dragon": "stanford_dragon_vrip.ply"}
 
 
+def record_launches() -> list[tuple[str, cl.Event]]:
+    """From now on, every kernel launch of this process (name, event) is appended to the
+    list returned (clear it between frames)."""
+    launches: list[tuple[str, cl.Event]] = []
+    call = cl.Kernel.__call__
+
+    def recording_call(self, *args, **kw):
+        ev = call(self, *args, **kw)
+        launches.append((self.function_name, ev))
+        return ev
+
+    cl.Kernel.__call__ = recording_call
+    return launches
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", choices=[*FILES, "plant10m", "quad", "empty"])
@@ -39,15 +54,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="touch this many MB between frames (cold caches)")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
-    launches: list[tuple[str, cl.Event]] = []
-    call = cl.Kernel.__call__
-
-    def recording_call(self, *args, **kw):   # every launch of the frame, with its event
-        ev = call(self, *args, **kw)
-        launches.append((self.function_name, ev))
-        return ev
-
-    cl.Kernel.__call__ = recording_call
+    launches = record_launches()
     from clraster import Camera, Mesh, Renderer
     kw = {}
     if a.scene in ("quad", "empty"):   # the harness's fill scenes (clraster.bench.spec)

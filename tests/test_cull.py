@@ -377,6 +377,17 @@ def check_counts(dl, scene):
     assert dl.inside.dtype == bool
 
 
+def check_same_lists(a, b, scene):
+    """Draw lists ``a`` and ``b`` (made with keep_cone_culled) are the same: pairs, inside
+    flags, cone-culled pairs and counts; ``a``'s counts and order are checked too."""
+    np.testing.assert_array_equal(a.instance, b.instance)
+    np.testing.assert_array_equal(a.cluster, b.cluster)
+    np.testing.assert_array_equal(a.inside, b.inside)
+    np.testing.assert_array_equal(a.cone_culled, b.cone_culled)
+    assert a.counts == b.counts
+    check_counts(a, scene)
+
+
 def test_grid_of_cubes_orthographic_top_view():
     # Cubes of side 1 at (3i, 0, 3j). Looking down −y (eye above, up = −z) with an
     # orthographic box covering x in [−1.5, 7.5], z in [−1.5, 4.5]: exactly the cubes with
@@ -665,12 +676,7 @@ def test_one_flat_instance_path_equals_the_general_path(mesh_name, monkeypatch, 
                 lists.append(build_draw_list(scene, vp, cull=cull, cones=cones,
                                              keep_cone_culled=True))
             a, b = lists
-            np.testing.assert_array_equal(a.instance, b.instance)
-            np.testing.assert_array_equal(a.cluster, b.cluster)
-            np.testing.assert_array_equal(a.inside, b.inside)
-            np.testing.assert_array_equal(a.cone_culled, b.cone_culled)
-            assert a.counts == b.counts
-            check_counts(a, scene)
+            check_same_lists(a, b, scene)
             n_views += len(a) > 0
             n_cut += 0 < len(a) + a.counts["clusters_cone_culled"] < a.counts["clusters_total"]
     assert n_views > 40 and (n_cut > 10 or mesh_name in ("quad", "cube"))   # not vacuous
@@ -758,12 +764,7 @@ def test_culling_threads_give_the_same_draw_list(threads, monkeypatch):
         lists[on] = [build_draw_list(scene, vp, keep_cone_culled=True, **kw) for kw in cases]
     for a, b in zip(lists[True], lists[False], strict=True):
         assert len(a) > 0 and a.counts["clusters_frustum_culled"] > 0
-        np.testing.assert_array_equal(a.instance, b.instance)
-        np.testing.assert_array_equal(a.cluster, b.cluster)
-        np.testing.assert_array_equal(a.inside, b.inside)
-        np.testing.assert_array_equal(a.cone_culled, b.cone_culled)
-        assert a.counts == b.counts
-        check_counts(a, scene)
+        check_same_lists(a, b, scene)
     assert len(lists[True][0].cone_culled) > 0   # the cone paths ran
 
 
