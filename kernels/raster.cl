@@ -812,3 +812,35 @@ __kernel void raster_tiles(__global const float *clip_bary,
     seg_stats[2 * g] = tested;
     seg_stats[2 * g + 1] = passed;
 }
+
+/* The cleared frame (RasterStage.clear: a frame, or a first pass, with nothing to draw):
+ * depth 1.0, id -1 and, with want_overdraw, overdraw 0 — raster_tiles' clear values — for
+ * the n pixels, each work-item a contiguous share of whole blocks of eight (the last one
+ * the remainder), in non-temporal float8/int8 stores: two long streams a core, where
+ * raster_tiles over an empty tile list wrote a segment's tile rows one 64-pixel row at a
+ * time. The barycentrics are fresh zero pages the host made (raster.py zeros_array). */
+__kernel void clear_frame(__global float *restrict depth_out, __global int *restrict id_out,
+                          __global int *restrict overdraw, const int want_overdraw,
+                          const int n)
+{
+    int blocks = (n + 7) >> 3, items = (int)get_global_size(0);
+    int per = (blocks + items - 1) / items;
+    int a = (int)get_global_id(0) * per, b = imin(blocks, a + per);   /* blocks [a, b) */
+    if (a >= b) return;
+    int full = b == blocks ? n >> 3 : b;   /* whole blocks: the last may be partial */
+    /* buffers are page-aligned and a block is 32 bytes: aligned vector stores */
+    __global float8 *d8 = (__global float8 *)depth_out;
+    __global int8 *i8 = (__global int8 *)id_out;
+    __global int8 *o8 = (__global int8 *)overdraw;
+    for (int j = a; j < full; ++j) {
+        NT_STORE((float8)(1.0f), d8 + j);
+        NT_STORE((int8)(-1), i8 + j);
+    }
+    if (want_overdraw)
+        for (int j = a; j < full; ++j) NT_STORE((int8)(0), o8 + j);
+    for (int x = 8 * imax(full, a); x < imin(n, 8 * b); ++x) {
+        depth_out[x] = 1.0f;
+        id_out[x] = -1;
+        if (want_overdraw) overdraw[x] = 0;
+    }
+}

@@ -176,3 +176,29 @@ def test_empty_frame_behind_abandoned_work_is_interruptible():
         assert time.perf_counter() - sent[0] < 2.0
     device.wait(r.queue)
     assert (r.render(mesh, away).depth == 1.0).all()
+
+
+@pytest.mark.parametrize("size", [(64, 48), (203, 77), (9, 7), (1, 1)])
+def test_cleared_frame_overwrites_every_pixel_of_reused_arrays(size):
+    """A frame with nothing in view (`RasterStage.clear`: kernel clear_frame, contiguous
+    shares of blocks of eight pixels, the last block partial where width · height is not a
+    multiple of 8) is depth 1.0, id −1, barycentrics and overdraw 0 at every pixel, also
+    in arrays a dropped frame that drew everywhere leaves to the frame pool."""
+    from clraster import Camera, Mesh, Renderer
+
+    w, h = size
+    quad = Mesh(np.array([[-9, -9, -2], [9, -9, -2], [9, 9, -2], [-9, 9, -2]], np.float32),
+                np.array([[0, 1, 2], [0, 2, 3]], np.int32))
+    ahead = Camera.look_at(eye=(0, 0, 0), target=(0, 0, -1), up=(0, 1, 0))
+    away = Camera.look_at(eye=(0, 0, 0), target=(0, 0, 1), up=(0, 1, 0))
+    r = Renderer(w, h)
+    for _ in range(2):
+        drawn = r.render(quad, ahead, overdraw=True)
+        assert (drawn.triangle_id >= 0).all() and (drawn.overdraw == 1).all()
+        del drawn   # its arrays go back to the pool
+        for overdraw in (True, False):
+            f = r.render(quad, away, overdraw=overdraw)
+            assert (f.depth == 1.0).all() and (f.triangle_id == -1).all()
+            assert (f.barycentrics == 0.0).all()
+            assert not overdraw or (f.overdraw == 0).all()
+            del f

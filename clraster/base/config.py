@@ -35,7 +35,7 @@ import numpy as np
 from .layout import CLUSTER_MAX
 
 __all__ = [
-    "CLIP_TEST_DRAWS", "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS",
+    "CLEAR_SHARES", "CLIP_TEST_DRAWS", "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS",
     "DENSE_INSTANCES", "DENSE_PAIRS",
     "FLAT_CLUSTERS", "FLAT_MAX_PAIRS", "GUARD_BAND_PIXELS", "HIZ_TEST_LOCAL",
     "KERNEL_TUNABLES", "LINES_LOCAL", "MAX_IMAGE_SIZE", "MIN_CHUNK_TRIANGLES",
@@ -72,6 +72,10 @@ KERNEL_TUNABLES = ("WIDE_RUN", "TRIM_ROWS", "QUERY_SPAN")
 #: from inside: 16 px tiles in 256 px segments balanced, 64 px tiles in 1024 px segments did
 #: not; bench/README.md).
 SEG_PIXELS = 128
+#: stages/raster.py: contiguous shares of a cleared frame (`RasterStage.clear`, kernel
+#: clear_frame) per compute unit. >= 1; a few, so that a core the host's thread holds for a
+#: moment leaves its shares to the others.
+CLEAR_SHARES = 4
 #: stages/setup.py: ranges of the clip-count scan, one work-item each. >= 1; a few per core.
 SCAN_CHUNKS = 64
 #: stages/bin.py: fewest triangles per bin chunk (RasterConfig.bin_chunks caps the count).

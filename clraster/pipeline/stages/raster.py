@@ -11,7 +11,7 @@ from typing import Any, cast
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import SEG_PIXELS, RasterConfig
+from ...base.config import CLEAR_SHARES, SEG_PIXELS, RasterConfig
 from ..arraypool import ArrayPool
 from ..device import device_busy, kernel, program, shares_host_memory, wait
 from ..params import FrameParams
@@ -58,7 +58,12 @@ class FrameBuffers:
 
 class RasterStage:
     def __init__(self, ctx: cl.Context, config: RasterConfig) -> None:
-        self.kernel = kernel(program(ctx, "raster", config.build_options()), "raster_tiles")
+        prog = program(ctx, "raster", config.build_options())
+        self.kernel = kernel(prog, "raster_tiles")
+        self._clear_kernel = kernel(prog, "clear_frame")
+        #: work-items of `clear`: a few contiguous shares per compute unit, so a core that
+        #: the host's thread holds for a moment leaves its shares to the others
+        self._clear_items = CLEAR_SHARES * ctx.devices[0].max_compute_units
         self.config = config
         self.buffers = FrameBuffers(GrowBuffer(ctx, host=True), GrowBuffer(ctx))
         self._window_src: np.ndarray | None = None
@@ -66,36 +71,27 @@ class RasterStage:
         #: memory of dropped frames' arrays, reused for new ones (at most two frames'
         #: worth is kept: `run` raises the bound to the image size)
         self.pool = ArrayPool(0)
-        self._zero_starts = GrowBuffer(ctx)   # an all-empty tile list (`clear`)
-        self._zero_tiles = 0
 
     def clear(self, queue: cl.CommandQueue, params: FrameParams, overdraw: bool = False,
               bary: bool = True) -> RasterOutput:
         """Fresh outputs holding the cleared frame (depth 1.0, id −1, barycentrics and
-        overdraw 0), complete and readable on return: the raster kernel over an empty tile
-        list, so both cores clear depth and ids in long runs, while the barycentrics are
-        fresh zero pages (`zeros_array`) that nothing touches until a later pass draws.
-        An empty frame at 1080p: 16.6 MB written on the device instead of 41 MB on the
-        host."""
-        width, height, n_tiles = params.width, params.height, params.n_tiles
+        overdraw 0), complete and readable on return: depth and ids (and overdraw) written
+        by `clear_frame` in contiguous shares, the barycentrics fresh zero pages
+        (`zeros_array`) that nothing touches until a later pass draws. An empty frame at
+        1080p: 16.6 MB written on the device instead of 41 MB on the host."""
+        width, height = params.width, params.height
         self.pool.max_bytes = max(self.pool.max_bytes, 2 * 24 * width * height)
-        into = RasterOutput.allocate(self.ctx, width, height, overdraw, bary, self.pool,
-                                     bary_zeros=True)
-        starts = self._zero_starts.ensure(4 * (n_tiles + 1))
-        if self._zero_tiles < n_tiles + 1:   # (a buffer grown since was filled here)
-            cl.enqueue_fill_buffer(queue, starts, np.int32(0), 0, 4 * (n_tiles + 1))
-            self._zero_tiles = n_tiles + 1
-        want = into.overdraw is not None
-        n = segments(params, self.config.tile_log2)
-        ev = self.kernel(queue, (n,), (1,), starts, starts, starts, np.int32(width),
-                    np.int32(height), np.int32(params.tiles_x), *into.bufs[:2], into.bufs[1],
-                    self.buffers.seg_stats.ensure(16 * n), np.int32(0),
-                    np.int32(want), into.bufs[-1] if want else into.bufs[1], np.int32(0),
-                    self.buffers.window.ensure(1), np.int32(0), starts, np.int32(0),
-                    np.int32(0))
+        into = RasterOutput.allocate(self.ctx, width, height, overdraw, False, self.pool)
+        ev = self._clear_kernel(queue, (self._clear_items,), (1,), *into.bufs[:2],
+                                into.bufs[-1] if overdraw else into.bufs[1],
+                                np.int32(overdraw), np.int32(width * height))
+        if bary:   # (made while the kernel runs: it does not touch them)
+            into.bary = zeros_array((height, width, 3), np.float32)
+            into.bufs.insert(2, cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE
+                                          | cl.mem_flags.USE_HOST_PTR, hostbuf=into.bary))
         if device_busy():
             # an interrupted frame's work still runs ahead of the clear: wait interruptibly
-            wait(queue, keep=(into, self.buffers))   # (the kernel writes seg_stats too)
+            wait(queue, keep=(into,))
         else:
             # one C call, not `wait`'s interruptible hand-over (its waiter thread's wake-ups):
             # a clear is a few ms at most (16.6 MB at 1080p)
@@ -224,15 +220,13 @@ class RasterOutput:
 
     @classmethod
     def allocate(cls, ctx: cl.Context, width: int, height: int, overdraw: bool,
-                 bary: bool = True, pool: ArrayPool | None = None,
-                 bary_zeros: bool = False) -> RasterOutput:
+                 bary: bool = True, pool: ArrayPool | None = None) -> RasterOutput:
         """Uninitialised page-aligned arrays (from ``pool``, else a pool of their own) and
-        the buffers over them; ``bary_zeros``: the barycentrics are `zeros_array`."""
+        the buffers over them."""
         pool = pool or ArrayPool(0)
         arrs = [pool.empty((height, width), np.float32), pool.empty((height, width), np.int32)]
         if bary:
-            arrs.append(zeros_array((height, width, 3), np.float32) if bary_zeros
-                        else pool.empty((height, width, 3), np.float32))
+            arrs.append(pool.empty((height, width, 3), np.float32))
         if overdraw:
             arrs.append(pool.empty((height, width), np.int32))
         flags = cl.mem_flags.READ_WRITE | cl.mem_flags.USE_HOST_PTR
