@@ -816,9 +816,9 @@ __kernel void raster_tiles(__global const float *clip_bary,
 /* The cleared frame (RasterStage.clear: a frame, or a first pass, with nothing to draw):
  * depth 1.0, id -1 and, with want_overdraw, overdraw 0 — raster_tiles' clear values — for
  * the n pixels, each work-item a contiguous share of whole blocks of eight (the last one
- * the remainder), in non-temporal float8/int8 stores: two long streams a core, where
- * raster_tiles over an empty tile list wrote a segment's tile rows one 64-pixel row at a
- * time. The barycentrics are fresh zero pages the host made (raster.py zeros_array). */
+ * the remainder), in non-temporal float8/int8 stores: a few long streams per core, which
+ * the memory takes faster than a tile row's short rows. The barycentrics are fresh zero
+ * pages the host made (raster.py zeros_array). */
 __kernel void clear_frame(__global float *restrict depth_out, __global int *restrict id_out,
                           __global int *restrict overdraw, const int want_overdraw,
                           const int n)
