@@ -12,7 +12,7 @@ from conftest import ortho
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from clraster.culling.bvh import BVH
+from clraster.culling.bvh import BVH, classify_extremes, classify_one
 from clraster.culling.clusters import clusters_of
 from clraster.culling.cull import COUNT_NAMES, ViewCull, build_draw_list
 from clraster.culling.frustum import (
@@ -309,6 +309,36 @@ def test_bvh_cull_equals_brute_force(k, seed, leaf_size, mask):
         np.testing.assert_array_equal(items, keep)
         np.testing.assert_array_equal(state, bs[keep])
         np.testing.assert_array_equal(masks[state == X], bm[keep][state == X])
+
+
+@pytest.mark.parametrize("k", [6, 8, 14])
+def test_classify_one_equals_classify_extremes(k):
+    """The one-volume classification in Python floats (`classify_one`: a bare Mesh's root
+    box) gives `classify_extremes`' state and mask for every mask, with values on the
+    margins' edges (products and comparisons exactly at equality), NaN, and per-plane
+    margins (user planes), from the same `box_extremes`."""
+    rng = np.random.default_rng(k)
+    margins = [(1e-5, 2e-5), (0.0, 0.0),
+               (np.r_[np.full(6, 1e-5), np.full(k - 6, 3e-4)],
+                np.r_[np.full(6, 2e-5), np.full(k - 6, 3e-4)])]
+    seen = set()
+    for trial in range(400):
+        mi, mo = margins[trial % 3]
+        m = rng.uniform(0.5, 2.0, (k, 1))
+        lo = rng.normal(size=(k, 1))
+        hi = lo + np.abs(rng.normal(size=(k, 1)))
+        edge = rng.random((k, 1)) < 0.3   # some planes exactly on a margin's edge
+        lo = np.where(edge, m * np.broadcast_to(mi, (k,))[:, None], lo)
+        hi = np.where(rng.random((k, 1)) < 0.3,
+                      m * -np.broadcast_to(mo, (k,))[:, None], hi)
+        if trial % 17 == 0:
+            lo[rng.integers(k)] = np.nan
+        mask = int(rng.integers(0, 1 << k)) if trial % 5 else (1 << k) - 1
+        ref_st, ref_mask = classify_extremes(lo, hi, m, np.full(1, mask, np.uint16), mi, mo)
+        st_, mk = classify_one(lo, hi, m, mask, mi, mo)
+        assert (st_, mk) == (int(ref_st[0]), int(ref_mask[0])), trial
+        seen.add(st_)
+    assert seen == {IN, X, OUT}
 
 
 def test_bvh_100k_and_batches():

@@ -83,6 +83,7 @@ from .bvh import (
     box_extremes_table,
     box_magnitudes,
     classify_extremes,
+    classify_one,
     concat_ranges,
     dense_row_states,
     plane_table,
@@ -737,15 +738,13 @@ def _classify_instances(prep: _SceneCull, view: _ViewPlanes
             # one bounded instance: the root test `BVH.cull` makes, without its traversal
             # machinery (same states and masks; a third of the time for a framed mesh)
             box = prep.inst_root
-            k = view.planes.shape[0]
-            mask = np.full(1, view.start, np.uint8 if k <= 8 else np.uint16)
-            st, mk = classify_extremes(
+            st, mk = classify_one(
                 *box_extremes(view.planes, view.scales, box[0:3], box[3:6], box[6:9]),
-                mask, view.inside_margin, view.outside_margin)
-            if st[0] != OUTSIDE:
+                view.start, view.inside_margin, view.outside_margin)
+            if st != OUTSIDE:
                 i = prep.inst_ids[0]
-                inst_state[i] = st[0]
-                inst_mask[i] = mk[0]
+                inst_state[i] = st
+                inst_mask[i] = mk
         elif prep.inst_ids.size <= DENSE_INSTANCES:
             # every instance box on its own (`BVH.cull` equals that by contract): three
             # matrix products instead of a traversal (the same states and masks; ~5× faster
