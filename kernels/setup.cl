@@ -591,28 +591,25 @@ ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
     return any;
 }
 
-/* Which triangle this work-item of the clipper's kernels works on: local triangle
- * get_local_id of draw get_group_id (work-groups of CLUSTER_MAX; the draw is uniform over
- * the group). Gives its slot in the frame's triangle stream, its three vertices in the
- * geometry pool, its id and its draw's flags. Returns 0 for idle work-items. */
-inline int triangle_of(uint n_draws, __global const Draw *draws,
-                       __global const int4 *clusters, __global const uchar4 *local_tris,
-                       __global const int *face_ids, int *slot, int *i0, int *i1, int *i2,
-                       int *id, int *flags)
+/* The triangle a work-item of the clipper's kernels works on: entry g of setup_triangles'
+ * list of clipped triangles, (draw, local triangle). Gives its draw, its slot in the
+ * frame's triangle stream, its three vertices in the geometry pool and its id. */
+inline void clipped_triangle(__global const int2 *clip_list, int g,
+                             __global const Draw *draws, __global const int4 *clusters,
+                             __global const uchar4 *local_tris,
+                             __global const int *face_ids, int *d, int *slot, int *i0,
+                             int *i1, int *i2, int *id)
 {
-    uint d = get_group_id(0), lt = get_local_id(0);
-    if (d >= n_draws) return 0;
-    Draw dr = draws[d];
+    int2 e = clip_list[g];
+    Draw dr = draws[e.x];
     int4 ci = clusters[dr.cluster];
-    if ((int)lt >= ci.y) return 0;
-    uchar4 tv = local_tris[ci.x + lt];
-    *slot = dr.tri_base + (int)lt;
+    uchar4 tv = local_tris[ci.x + e.y];
+    *d = e.x;
+    *slot = dr.tri_base + e.y;
     *i0 = ci.z + tv.x;
     *i1 = ci.z + tv.y;
     *i2 = ci.z + tv.z;
-    *id = dr.face_base + face_ids[ci.x + lt];
-    *flags = dr.flags;
-    return 1;
+    *id = dr.face_base + face_ids[ci.x + e.y];
 }
 
 #define DRAW_ARGS                                                                          \
@@ -892,8 +889,9 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
                                const DrawVerts *V, int n_user, uint uclip, int width,
                                int height, int cull,
                                __global const Piece *pieces, __global uchar *status,
-                               __global int *tile1, __global int *any_clipped,
-                               __global int *clip_count, uchar *known, int codes)
+                               __global int *tile1, __global int *n_clipped,
+                               __global int *clip_count, __global int2 *clip_list,
+                               uint d, uchar *known, int codes)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     int8 open = lane < (int8)n;               /* lanes whose fate is not decided yet */
@@ -950,17 +948,24 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     DECIDE(clipped, ST_CLIPPED);
     /* the host skips the clipper's count and scan when no triangle needs it; its pieces
      * are counted by setup_count_clipped (the clipper's polygon arrays inlined here made
-     * every work-item pay for them) */
+     * every work-item pay for them), which runs over the clipped triangles listed here
+     * (draw d, local triangle) alone: few of a frame's triangles are clipped (2.9K of the
+     * 186K of the plant's first-person frame), and over every triangle of the frame the
+     * clipper's kernels spent most of their time on the others. The list's order varies
+     * from run to run; each triangle's pieces go to its place in the stream
+     * (clip_offset, a scan over the slots), so the output does not. */
     if (any8(clipped)) {
-        atomic_or(any_clipped, 1);
         /* no pieces until setup_count_clipped counts them: a pass the host enqueued
          * binning for without that count (every draw DRAW_INSIDE or DRAW_NO_CLIP, which
          * the host's margins make this branch never see) bins none of this triangle, and
-         * the host raises on the flag, rather than binning from unwritten counts */
+         * the host raises on the count, rather than binning from unwritten counts */
         int c_[8] __attribute__((aligned(32)));
         *(int8 *)c_ = clipped;
         for (int j = 0; j < n; ++j)
-            if (c_[j]) clip_count[dr.tri_base + lt0 + j] = 0;
+            if (c_[j]) {
+                clip_count[dr.tri_base + lt0 + j] = 0;
+                clip_list[atomic_inc(n_clipped)] = (int2)((int)d, lt0 + j);
+            }
     }
     DECIDE((o_or & OC_W_NONPOS) != 0, ST_DEGENERATE);   /* a vertex at w = 0 */
     /* a mesh's back faces come in runs (a cluster's triangles are neighbours): a batch
@@ -1044,8 +1049,9 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
                               __global Piece *restrict pieces,
                               __global uchar *restrict status,
                               const int tiles_x, __global int *restrict tile1,
-                              __global int *restrict any_clipped,
-                              __global int *restrict clip_count)
+                              __global int *restrict n_clipped,
+                              __global int *restrict clip_count,
+                              __global int2 *restrict clip_list)
 {
     DEPTH_MODE(reversed);
     /* one work-item per draw (work-groups of one): its triangles in batches of SETUP_LANES */
@@ -1078,7 +1084,8 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
             int lt0 = SETUP_LANES * h;
             open[h] = batch_fates(lt0, imin(nt - lt0, SETUP_LANES), dr, tv, &V, n_user,
                                   uclip, width, height, cull, pieces,
-                                  status, tile1, any_clipped, clip_count, known, codes);
+                                  status, tile1, n_clipped, clip_count, clip_list, d,
+                                  known, codes);
         }
         if (h < SETUP_LAG) continue;
         int lt0 = SETUP_LANES * (h - SETUP_LAG);
@@ -1100,8 +1107,8 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
  * distances, then clip_and_emit
  * with (write, out, out_bary, base), its piece count into `count`. A macro because the
  * buffers are kernel arguments of both kernels. */
-#define CLIP_TRIANGLE(count, write, out, out_bary, base) do {                             \
-    Draw dr_ = draws[get_group_id(0)];                                                    \
+#define CLIP_TRIANGLE(dix, count, write, out, out_bary, base) do {                        \
+    Draw dr_ = draws[dix];                                                                \
     uint oc0_, oc1_, oc2_, uc0_, uc1_, uc2_;                                              \
     float4 c0_ = vertex_of(pos, mvps, uplanes, n_user, i0, dr_.instance, dr_.flags, kx, ky, \
                            &oc0_, &uc0_);                                                 \
@@ -1123,42 +1130,40 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
 } while (0)
 
 /* Clipped pieces per ST_CLIPPED triangle (the clipper run without writing), into
- * clip_count; other triangles' entries are left unwritten (read through status). */
+ * clip_count; other triangles' entries are left unwritten (read through status). One
+ * work-item per entry of the list of clipped triangles (n_clip of them). */
 __kernel void setup_count_clipped(DRAW_ARGS,
                                   const int width, const int height, const float kx,
                                   const float ky, const int reversed,
-                                  __global const uchar *restrict status,
+                                  __global const int2 *restrict clip_list, const int n_clip,
                                   __global int *restrict clip_count)
 {
     DEPTH_MODE(reversed);
-    /* a draw inside the frustum by a margin has no outcode bits (vertex_outcode), so without
-     * clipping user planes none of its triangles is clipped: its group leaves at once
-     * (most of a framed mesh; the kernel runs over every triangle of the frame) */
-    uint g = get_group_id(0);
-    if (g < n_draws && (draws[g].flags & DRAW_INSIDE) && !(n_user > 0 && uclip)) return;
-    int t, i0, i1, i2, id, dflags;
-    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED)
-        return;
-    CLIP_TRIANGLE(clip_count[t], 0, 0, 0, 0);
+    int g = (int)get_global_id(0);
+    if (g >= n_clip) return;
+    int d, t, i0, i1, i2, id;
+    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
+                     &i2, &id);
+    CLIP_TRIANGLE(d, clip_count[t], 0, 0, 0, 0);
 }
 
 __kernel void setup_clipped(DRAW_ARGS,
                             const int width, const int height, const float kx, const float ky,
-                            const int reversed, __global const uchar *restrict status,
-                            __global const int *restrict clip_count,
+                            const int reversed, __global const int2 *restrict clip_list,
+                            const int n_clip, __global const int *restrict clip_count,
                             __global const int *restrict clip_offset,
                             __global Piece *restrict clip_pieces,
                             __global float *restrict clip_bary)
 {
     DEPTH_MODE(reversed);
-    int t, i0, i1, i2, id, dflags;
-    if (!triangle_of(n_draws, draws, clusters, local_tris, face_ids, &t,
-                     &i0, &i1, &i2, &id, &dflags) || status[t] != ST_CLIPPED
-        || clip_count[t] == 0)
-        return;
+    int g = (int)get_global_id(0);
+    if (g >= n_clip) return;
+    int d, t, i0, i1, i2, id;
+    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
+                     &i2, &id);
+    if (clip_count[t] == 0) return;
     int written;   /* clip_count[t], counted before */
-    CLIP_TRIANGLE(written, 1, clip_pieces, clip_bary, clip_offset[t]);
+    CLIP_TRIANGLE(d, written, 1, clip_pieces, clip_bary, clip_offset[t]);
 }
 
 /* Exclusive scan of clip_count into clip_offset (and the total), in two launches over

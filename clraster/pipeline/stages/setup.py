@@ -12,7 +12,7 @@ import numpy as np
 import pyopencl as cl
 
 from ...base.config import SCAN_CHUNKS, RasterConfig
-from ...base.layout import CLUSTER_MAX, PIECE_DTYPE
+from ...base.layout import PIECE_DTYPE
 from ..device import kernel, program, wait
 from ..features import local_size
 from ..params import BinBudgetExceeded, FrameParams
@@ -34,6 +34,9 @@ class SetupBuffers:
     clip_total: int32 (1,) P.
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
+    clip_list: int32 (M, 2) (draw, local triangle) of each clipped triangle, the first
+    C = the count setup_triangles leaves in `SetupStage.flag` entries valid, in no fixed
+    order: the clipper's kernels run over these alone.
     tile1: int32 (M,) what binning needs of each slot without reading its 96-byte record
     (kernels/common.h TILE1_*): the one tile of a piece whose pixel box lies in one tile,
     the top-left tile and tile mask of one over at most 2 × 2 tiles, −1 nothing to bin,
@@ -49,6 +52,7 @@ class SetupBuffers:
     clip_pieces: GrowBuffer
     clip_bary: GrowBuffer
     tile1: GrowBuffer
+    clip_list: GrowBuffer
     n_tris: int = 0
     n_clip_pieces: int = 0
 
@@ -62,17 +66,18 @@ class SetupStage:
         # one work-group per draw (setup_triangles: one work-item, the draw's triangles
         # SETUP_LANES at a time)
         local_size(self.k_setup, ctx.devices[0], 1, exact=True)
-        for k in (self.k_clipped, self.k_count):
-            local_size(k, ctx.devices[0], CLUSTER_MAX, exact=True)
+        for k in (self.k_clipped, self.k_count):   # one work-item per clipped triangle
+            local_size(k, ctx.devices[0], 1, exact=True)
         self.k_partials = kernel(prg, "scan_partials")
         self.k_offsets = kernel(prg, "scan_offsets")
-        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(8)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
+        self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(9)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.buffers.clip_total = GrowBuffer(ctx, host=True)   # read after a wait
         self.partial = GrowBuffer(ctx)
-        self.flag = GrowBuffer(ctx, host=True)   # any triangle ST_CLIPPED (setup_triangles)
+        #: triangles ST_CLIPPED (setup_triangles), the length of `SetupBuffers.clip_list`
+        self.flag = GrowBuffer(ctx, host=True)
 
     def prepare(self, queue: cl.CommandQueue) -> None:
-        """Zero the any-clipped flag `run` reads; call before the pass's first kernel,
+        """Zero the count of clipped triangles `run` reads; call before the pass's first kernel,
         while the queue is idle. (As a command enqueued behind a running kernel, this
         host-to-device write blocked the calling thread, GIL held, until that kernel was
         done: ~15 ms of a 3.5M-triangle frame in which no other Python thread ran,
@@ -116,17 +121,16 @@ class SetupStage:
                      geo.zrows.buf, geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip),
                      geo.mvps.buf)
         size = np.int32(params.width), np.int32(params.height)
-        # one work-group per draw (kernels/setup.cl triangle_of); setup_triangles: one
-        # work-item per draw
-        gsize = (max(n_draws, 1) * CLUSTER_MAX,)
-        lsize = (CLUSTER_MAX,)
+        # setup_triangles: one work-item per draw; the clipper's kernels: one per clipped
+        # triangle (its list, clip_list)
         flag = cast(cl.Buffer, self.flag.buf)   # zeroed by `prepare`
         ev = [self.k_setup(queue, (max(n_draws, 1),), (1,), *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
                            b.status.ensure(m),
                            np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag,
-                           b.clip_count.ensure(4 * max(m, 1)))]
+                           b.clip_count.ensure(4 * max(m, 1)),
+                           b.clip_list.ensure(8 * max(m, 1)))]
         # Most passes clip nothing: then the clipper's count, the scan and their launches
         # are skipped; the wait here replaces the one after the scan. When no triangle can
         # be clipped (geo.may_clip: every draw inside the frustum by a margin, no clipping
@@ -140,10 +144,11 @@ class SetupStage:
         # bin's arguments (read for clipped slots only); clip_count is written by k_count
         # (setup_triangles zeroes the clipped slots' first)
         b.clip_offset.ensure(4 * max(m, 1))
-        if m and total[0]:
-            ev.append(self.k_count(queue, gsize, lsize, *draw_args, *size,
+        n_clip = int(total[0])
+        if m and n_clip:
+            ev.append(self.k_count(queue, (n_clip,), (1,), *draw_args, *size,
                                    np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
-                                   b.status.buf, b.clip_count.buf))
+                                   b.clip_list.buf, np.int32(n_clip), b.clip_count.buf))
             chunks = np.uint32(min(SCAN_CHUNKS, m))
             part = self.partial.ensure(4 * SCAN_CHUNKS)
             ev.append(self.k_partials(queue, (int(chunks),), (1,), b.status.buf,
@@ -161,9 +166,9 @@ class SetupStage:
         if max_pieces is not None and p > max_pieces:
             raise BinBudgetExceeded(p, max_pieces, ev)
         if p:
-            ev.append(self.k_clipped(queue, gsize, lsize, *draw_args, *size,
+            ev.append(self.k_clipped(queue, (n_clip,), (1,), *draw_args, *size,
                                      np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
-                                     b.status.buf, b.clip_count.buf,
+                                     b.clip_list.buf, np.int32(n_clip), b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))
         else:  # the kernels still need valid buffer arguments downstream
