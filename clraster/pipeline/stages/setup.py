@@ -66,8 +66,7 @@ class SetupStage:
         # one work-group per draw (setup_triangles: one work-item, the draw's triangles
         # SETUP_LANES at a time)
         local_size(self.k_setup, ctx.devices[0], 1, exact=True)
-        for k in (self.k_clipped, self.k_count):   # one work-item per clipped triangle
-            local_size(k, ctx.devices[0], 1, exact=True)
+        # (the clipper's kernels: work-groups of one, a listed clipped triangle each)
         self.k_partials = kernel(prg, "scan_partials")
         self.k_offsets = kernel(prg, "scan_offsets")
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(9)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
