@@ -1166,6 +1166,58 @@ __kernel void setup_clipped(DRAW_ARGS,
     CLIP_TRIANGLE(d, written, 1, clip_pieces, clip_bary, clip_offset[t]);
 }
 
+/* The clipper once (the host's choice when the bound below fits its scratch budget): one
+ * work-item per entry g of the clipped triangles' list, its pieces and their parent
+ * barycentrics written to rows g·bound .. g·bound + count − 1 of the scratch buffers (bound:
+ * the most pieces a triangle can give, 1 + the planes that clip: each adds a polygon vertex
+ * at most), its count to clip_count[t]; setup_clip_place then moves them to their places
+ * in the stream (the scan's clip_offset). The same pieces as setup_count_clipped then
+ * setup_clipped make, which run the clipper twice. */
+__kernel void setup_clip_scratch(DRAW_ARGS,
+                                 const int width, const int height, const float kx,
+                                 const float ky, const int reversed,
+                                 __global const int2 *restrict clip_list, const int n_clip,
+                                 const int bound, __global int *restrict clip_count,
+                                 __global Piece *restrict scratch,
+                                 __global float *restrict scratch_bary)
+{
+    DEPTH_MODE(reversed);
+    int g = (int)get_global_id(0);
+    if (g >= n_clip) return;
+    int d, t, i0, i1, i2, id;
+    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
+                     &i2, &id);
+    int count;
+    CLIP_TRIANGLE(d, count, 1, scratch, scratch_bary, g * bound);
+    clip_count[t] = count;
+}
+
+/* setup_clip_scratch's pieces of list entry g to clip_pieces[clip_offset[t] ..] and their
+ * parent barycentrics to clip_bary, each record's clip index (flags >> PF_INDEX_SHIFT,
+ * where its barycentrics are) made its place in the stream. */
+__kernel void setup_clip_place(__global const int2 *restrict clip_list, const int n_clip,
+                               const int bound, __global const Draw *restrict draws,
+                               __global const int *restrict clip_count,
+                               __global const int *restrict clip_offset,
+                               __global const Piece *restrict scratch,
+                               __global const float *restrict scratch_bary,
+                               __global Piece *restrict clip_pieces,
+                               __global float *restrict clip_bary)
+{
+    int g = (int)get_global_id(0);
+    if (g >= n_clip) return;
+    int2 e = clip_list[g];
+    int t = draws[e.x].tri_base + e.y;
+    int c = clip_count[t], o = clip_offset[t];
+    for (int k = 0; k < c; ++k) {
+        Piece pc = scratch[g * bound + k];
+        pc.flags = (pc.flags & ((1 << PF_INDEX_SHIFT) - 1)) | ((o + k) << PF_INDEX_SHIFT);
+        clip_pieces[o + k] = pc;
+        for (int j = 0; j < 9; ++j)
+            clip_bary[9 * (o + k) + j] = scratch_bary[9 * (g * bound + k) + j];
+    }
+}
+
 /* Exclusive scan of clip_count into clip_offset (and the total), in two launches over
  * `chunks` contiguous ranges: scan_partials sums each range; scan_offsets adds the sums of
  * the ranges before it and writes the prefix. One work-item per range, no barriers or local

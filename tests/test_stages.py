@@ -41,6 +41,7 @@ from clraster.pipeline.params import FrameParams, FrameTotals
 from clraster.pipeline.reference import bin as ref_bin
 from clraster.pipeline.reference import setup as ref_setup
 from clraster.pipeline.reference import vertex as ref_vertex
+from clraster.pipeline.stages import setup as setup_stage
 from clraster.pipeline.stages.chain import StageChain
 
 #: (seed, (width, height), tile_log2, cull, lens): sizes on both sides of powers of two,
@@ -88,8 +89,15 @@ def _assert_records(stage: str, what: str, got: np.ndarray, want: np.ndarray) ->
                              f"first at {i}: OpenCL {got[i]!r} vs twin {want[i]!r}")
 
 
+@pytest.mark.parametrize("clip_once", [True, False], ids=["clip-once", "clip-twice"])
 @pytest.mark.parametrize("seed, size, tile_log2, cull, lens", CASES)
-def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
+def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens, clip_once,
+                                  monkeypatch):
+    """clip_once: the clipper run once into scratch rows and its pieces then moved to their
+    places (the default), or, with no scratch budget (CLIP_SCRATCH_BYTES 0), run twice,
+    counting first: the same bytes either way."""
+    if not clip_once:
+        monkeypatch.setattr(setup_stage, "CLIP_SCRATCH_BYTES", 0)
     ctx, queue = device
     w, h = size
     rng = np.random.default_rng(seed)
@@ -148,8 +156,9 @@ def test_stage_outputs_match_twin(device, seed, size, tile_log2, cull, lens):
         s0, s1 = int(tile_start[t]), int(tile_start[t + 1])
         _assert_records("bin", f"list of tile {t} (x {t % params.tiles_x}, "
                         f"y {t // params.tiles_x})", got[s0:s1], entries[s0:s1])
-    # the soup really reached every boundary (not vacuous)
+    # the soup really reached every boundary (not vacuous), through the path asked for
     assert live.any() and p > 0 and entries.size > 0, (int(live.sum()), p, entries.size)
+    assert (chain.setup.scratch.buf is not None) == clip_once
 
 
 @pytest.mark.parametrize("frustum", [False, True])

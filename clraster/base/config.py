@@ -35,8 +35,8 @@ import numpy as np
 from .layout import CLUSTER_MAX
 
 __all__ = [
-    "CLEAR_SHARES", "CLIP_TEST_DRAWS", "CLUSTER_LEAF_SIZE", "DENSE_CHUNK", "DENSE_CLUSTERS",
-    "DENSE_INSTANCES", "DENSE_PAIRS",
+    "CLEAR_SHARES", "CLIP_SCRATCH_BYTES", "CLIP_TEST_DRAWS", "CLUSTER_LEAF_SIZE",
+    "DENSE_CHUNK", "DENSE_CLUSTERS", "DENSE_INSTANCES", "DENSE_PAIRS",
     "FLAT_CLUSTERS", "FLAT_MAX_PAIRS", "GUARD_BAND_PIXELS", "HIZ_TEST_LOCAL",
     "KERNEL_TUNABLES", "LINES_LOCAL", "MAX_IMAGE_SIZE", "MIN_CHUNK_TRIANGLES",
     "OCCLUSION_FIRST_CLUSTERS", "QUERY_SPAN", "SCAN_CHUNKS", "SEG_PIXELS", "THREAD_PAIRS",
@@ -78,6 +78,11 @@ SEG_PIXELS = 128
 CLEAR_SHARES = 4
 #: stages/setup.py: ranges of the clip-count scan, one work-item each. >= 1; a few per core.
 SCAN_CHUNKS = 64
+#: stages/setup.py: the clipped triangles of a pass are clipped once, into scratch rows of as
+#: many pieces as one triangle can give (7 + the clipping user planes, 132 bytes each),
+#: while those rows take at most this much; more are clipped twice, counting first (the
+#: scratch would be as big as the pass's triangles times ~1 KB). Bytes; 0: always twice.
+CLIP_SCRATCH_BYTES = 64 << 20
 #: stages/bin.py: fewest triangles per bin chunk (RasterConfig.bin_chunks caps the count).
 #: Triangles; >= 1. The per-chunk rows of tile counts are a fixed cost per chunk that small
 #: meshes would otherwise pay 64 times.

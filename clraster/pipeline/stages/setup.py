@@ -1,7 +1,8 @@
 """Triangle setup host side (kernels/setup.cl): the draws' vertices (object → clip space,
 outcodes, window positions: the vertex stage, made by each draw's work-item), status per
-triangle, setup records (pieces) for unclipped survivors, then count → scan → write for
-clipped triangles."""
+triangle, setup records (pieces) for unclipped survivors; the clipped triangles listed,
+then clipped once into scratch rows → scan → moved to their places (or, where those rows
+would pass CLIP_SCRATCH_BYTES, count → scan → write)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from typing import cast
 import numpy as np
 import pyopencl as cl
 
-from ...base.config import SCAN_CHUNKS, RasterConfig
+from ...base.config import CLIP_SCRATCH_BYTES, SCAN_CHUNKS, RasterConfig
 from ...base.layout import PIECE_DTYPE
 from ..device import kernel, program, wait
 from ..features import local_size
@@ -63,6 +64,8 @@ class SetupStage:
         self.k_setup = kernel(prg, "setup_triangles")
         self.k_clipped = kernel(prg, "setup_clipped")
         self.k_count = kernel(prg, "setup_count_clipped")
+        self.k_scratch = kernel(prg, "setup_clip_scratch")
+        self.k_place = kernel(prg, "setup_clip_place")
         # one work-group per draw (setup_triangles: one work-item, the draw's triangles
         # SETUP_LANES at a time)
         local_size(self.k_setup, ctx.devices[0], 1, exact=True)
@@ -72,6 +75,10 @@ class SetupStage:
         self.buffers = SetupBuffers(*(GrowBuffer(ctx) for _ in range(9)))  # type: ignore[arg-type]  # one GrowBuffer per buffer field
         self.buffers.clip_total = GrowBuffer(ctx, host=True)   # read after a wait
         self.partial = GrowBuffer(ctx)
+        # setup_clip_scratch's pieces and parent barycentrics, `bound` rows per clipped
+        # triangle, before setup_clip_place moves them (at most CLIP_SCRATCH_BYTES in all)
+        self.scratch = GrowBuffer(ctx)
+        self.scratch_bary = GrowBuffer(ctx)
         #: triangles ST_CLIPPED (setup_triangles), the length of `SetupBuffers.clip_list`
         self.flag = GrowBuffer(ctx, host=True)
 
@@ -144,10 +151,20 @@ class SetupStage:
         # (setup_triangles zeroes the clipped slots' first)
         b.clip_offset.ensure(4 * max(m, 1))
         n_clip = int(total[0])
+        clip_args = (*draw_args, *size, np.float32(kx), np.float32(ky),
+                     np.int32(params.reversed_z), b.clip_list.buf, np.int32(n_clip))
+        # the clipper once into scratch rows of `bound` pieces (then moved to their places)
+        # where those fit CLIP_SCRATCH_BYTES, else twice: counting, then writing in place
+        bound = 1 + 6 + int(geo.uclip).bit_count()   # pieces of one triangle at most
+        once = n_clip * bound * (rec + 36) <= CLIP_SCRATCH_BYTES
         if m and n_clip:
-            ev.append(self.k_count(queue, (n_clip,), (1,), *draw_args, *size,
-                                   np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
-                                   b.clip_list.buf, np.int32(n_clip), b.clip_count.buf))
+            if once:
+                ev.append(self.k_scratch(queue, (n_clip,), (1,), *clip_args, np.int32(bound),
+                                         b.clip_count.buf,
+                                         self.scratch.ensure(rec * bound * n_clip),
+                                         self.scratch_bary.ensure(36 * bound * n_clip)))
+            else:
+                ev.append(self.k_count(queue, (n_clip,), (1,), *clip_args, b.clip_count.buf))
             chunks = np.uint32(min(SCAN_CHUNKS, m))
             part = self.partial.ensure(4 * SCAN_CHUNKS)
             ev.append(self.k_partials(queue, (int(chunks),), (1,), b.status.buf,
@@ -164,10 +181,13 @@ class SetupStage:
         p = int(total[0])
         if max_pieces is not None and p > max_pieces:
             raise BinBudgetExceeded(p, max_pieces, ev)
-        if p:
-            ev.append(self.k_clipped(queue, (n_clip,), (1,), *draw_args, *size,
-                                     np.float32(kx), np.float32(ky), np.int32(params.reversed_z),
-                                     b.clip_list.buf, np.int32(n_clip), b.clip_count.buf,
+        if p and once:
+            ev.append(self.k_place(queue, (n_clip,), (1,), b.clip_list.buf, np.int32(n_clip),
+                                   np.int32(bound), geo.draws.buf, b.clip_count.buf,
+                                   b.clip_offset.buf, self.scratch.buf, self.scratch_bary.buf,
+                                   b.clip_pieces.ensure(rec * p), b.clip_bary.ensure(36 * p)))
+        elif p:
+            ev.append(self.k_clipped(queue, (n_clip,), (1,), *clip_args, b.clip_count.buf,
                                      b.clip_offset.buf, b.clip_pieces.ensure(rec * p),
                                      b.clip_bary.ensure(36 * p)))
         else:  # the kernels still need valid buffer arguments downstream
