@@ -88,8 +88,8 @@ def main() -> None:
             geo.uplanes.buf, np.int32(geo.n_user), np.uint32(geo.uclip), geo.mvps.buf,
             np.int32(params.width), np.int32(params.height), np.int32(params.cull_mode),
             np.float32(params.kx), np.float32(params.ky), np.int32(params.reversed_z),
-            b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf, stage.flag.buf,
-            b.clip_count.buf)
+            b.pieces.buf, b.status.buf, np.int32(params.tiles_x), b.tile1.buf,
+            stage.n_clipped.buf, b.clip_count.buf, b.clip_list.buf)
     gsize, lsize = (max(geo.n_draws, 1),), (1,)   # a work-item per draw (kernels/setup.cl)
     source = dev.kernel_source("setup")
     options = [*RasterConfig().build_options(), *dev.feature_options(r.context)]

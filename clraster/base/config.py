@@ -153,14 +153,15 @@ class RasterConfig:
             vertex transform → bin → raster) in consecutive batches of at most this many
             triangles, each rasterized into the same frame buffers
             (`clraster.pipeline.streaming`), so the setup and bin buffers are sized by the
-            batch, never by the scene: at most 145 bytes per triangle of the budget
+            batch, never by the scene: at most 153 bytes per triangle of the budget
             (`StageChain.budget_bounds`: draw records, the setup record, status and tile
-            words, the list of slots to bin). A draw (one cluster, ≤ CLUSTER_MAX triangles)
-            is the smallest unit, so values below CLUSTER_MAX are refused. Never changes the
-            image or the counts. Each extra pass costs a few launches and waits, and the
-            raster reloads the tiles it touches. Default ``1 << 20`` (145 MiB of these
-            buffers): the dragon (871K triangles) in one pass; smaller budgets were slower,
-            larger ones no faster (bench/README.md, "Streamed frames").
+            words, the list of clipped triangles, the list of slots to bin). A draw (one
+            cluster, ≤ CLUSTER_MAX triangles) is the smallest unit, so values below
+            CLUSTER_MAX are refused. Never changes the image or the counts. Each extra pass
+            costs a few launches and waits, and the raster reloads the tiles it touches.
+            Default ``1 << 20`` (153 MiB of these buffers): the dragon (871K triangles) in
+            one pass; smaller budgets were slower, larger ones no faster (bench/README.md,
+            "Streamed frames").
         batch_entries: the (piece, tile) entries of one pass's bin list, at most (clipped
             pieces count against it too). A batch whose count step finds more is split and
             drawn again in smaller batches (never truncated, never refused); a single draw

@@ -91,9 +91,11 @@ class Renderer:
                        kept to make the next frames' arrays without page faults
                        (`clraster.arraypool`: a frame's arrays are its own as long as
                        anything refers to them)
-      + per pass       ≤ 145·M + 228·E bytes (601 MiB at the defaults; draws, setup
+      + per pass       ≤ 153·M + 228·E bytes (609 MiB at the defaults; draws, setup
                        records, clipped pieces, bin entries; `StageChain.budget_bounds`
                        computes them, tests/test_budget_text.py checks these figures)
+      + clipper        ≤ CLIP_SCRATCH_BYTES (64 MiB) of scratch rows for clipping a
+                       pass's clipped triangles once (`clraster.base.config`)
       + per tile       (4·bin_chunks + 24)·T bytes, T = tiles of the image
       + per scene      the unique geometry (~17 bytes per vertex + 8 per triangle) and
                        96 bytes per instance (its matrix and depth rows) — not per drawn

@@ -84,15 +84,16 @@ class StageChain:
     def budget_bounds(self) -> dict:
         """Bytes each per-pass buffer may need under the config's budget (GrowBuffer →
         bytes), M = batch_triangles, E = batch_entries: draw records 32·M (a draw has at
-        least one triangle), setup 109·M (96-byte record, status, clip count and
-        offset, single tile), clipped pieces 132·E (record + barycentrics; a pass with more
-        pieces than E is split like one with too many entries), bin entries 96·E and the
-        list of slots to bin 4·M. The per-tile buffers (C·T counts, tile starts, tile
-        stats) depend on the image only."""
+        least one triangle), setup 117·M (96-byte record, status, clip count and offset,
+        single tile, the clipped triangles' list), clipped pieces 132·E (record +
+        barycentrics; a pass with more pieces than E is split like one with too many
+        entries), bin entries 96·E and the list of slots to bin 4·M. The per-tile buffers
+        (C·T counts, tile starts, tile stats) depend on the image only."""
         m, e = self.config.batch_triangles, self.config.batch_entries
         g, s, b = self.geometry.buffers, self.setup.buffers, self.binning.buffers
         return {g.draws: DRAW_DTYPE.itemsize * m, s.pieces: PIECE_DTYPE.itemsize * m,
                 s.status: m, s.clip_count: 4 * m, s.clip_offset: 4 * m, s.tile1: 4 * m,
+                s.clip_list: 8 * m,
                 s.clip_pieces: PIECE_DTYPE.itemsize * e, s.clip_bary: 36 * e,
                 b.entries: PIECE_DTYPE.itemsize * e, b.live: 4 * m}
 
@@ -107,7 +108,9 @@ class StageChain:
         stages: list[Any] = [self.geometry, self.setup, self.binning]
         if self.raster is not None:
             stages.append(self.raster)
-        total = self.setup.partial.capacity + self.setup.flag.capacity
+        su = self.setup
+        total = (su.partial.capacity + su.n_clipped.capacity + su.scratch.capacity
+                 + su.scratch_bary.capacity)
         for st in stages:
             total += sum(gb.capacity for gb in vars(st.buffers).values()
                          if isinstance(gb, GrowBuffer))

@@ -36,7 +36,7 @@ class SetupBuffers:
     clip_pieces: PIECE_DTYPE (P,) in submission order. clip_bary: float32 (P, 3, 3) parent
     barycentrics of each clipped piece's vertices.
     clip_list: int32 (M, 2) (draw, local triangle) of each clipped triangle, the first
-    C = the count setup_triangles leaves in `SetupStage.flag` entries valid, in no fixed
+    C = the count setup_triangles leaves in `SetupStage.n_clipped` entries valid, in no fixed
     order: the clipper's kernels run over these alone.
     tile1: int32 (M,) what binning needs of each slot without reading its 96-byte record
     (kernels/common.h TILE1_*): the one tile of a piece whose pixel box lies in one tile,
@@ -80,7 +80,7 @@ class SetupStage:
         self.scratch = GrowBuffer(ctx)
         self.scratch_bary = GrowBuffer(ctx)
         #: triangles ST_CLIPPED (setup_triangles), the length of `SetupBuffers.clip_list`
-        self.flag = GrowBuffer(ctx, host=True)
+        self.n_clipped = GrowBuffer(ctx, host=True)
 
     def prepare(self, queue: cl.CommandQueue) -> None:
         """Zero the count of clipped triangles `run` reads; call before the pass's first kernel,
@@ -88,7 +88,7 @@ class SetupStage:
         host-to-device write blocked the calling thread, GIL held, until that kernel was
         done: ~15 ms of a 3.5M-triangle frame in which no other Python thread ran,
         tests/test_processes.py. In host mode it is a plain store.)"""
-        self.flag.write(queue, np.zeros(1, np.int32))
+        self.n_clipped.write(queue, np.zeros(1, np.int32))
 
     def check_unclipped(self, queue: cl.CommandQueue, geo: GeometryBuffers) -> None:
         """After the pass's wait: where `run` did not wait for the clip count because of
@@ -101,7 +101,7 @@ class SetupStage:
         # outcode tests, so there is nothing to check, and no read on a discrete device)
         if not geo.host_clip_test or not geo.n_tris:
             return
-        if int(self.flag.read(queue, np.int32, 1)[0]):
+        if int(self.n_clipped.read(queue, np.int32, 1)[0]):
             raise RuntimeError(
                 "internal error: setup clipped triangles of draws the host had found to need "
                 "no clipping (DRAW_INSIDE / DRAW_NO_CLIP), so the image lacks them. Please "
@@ -129,12 +129,12 @@ class SetupStage:
         size = np.int32(params.width), np.int32(params.height)
         # setup_triangles: one work-item per draw; the clipper's kernels: one per clipped
         # triangle (its list, clip_list)
-        flag = cast(cl.Buffer, self.flag.buf)   # zeroed by `prepare`
+        n_clipped = cast(cl.Buffer, self.n_clipped.buf)   # zeroed by `prepare`
         ev = [self.k_setup(queue, (max(n_draws, 1),), (1,), *draw_args, *size,
                            np.int32(params.cull_mode), np.float32(kx), np.float32(ky),
                            np.int32(params.reversed_z), b.pieces.ensure(rec * m, "setup buffer"),
                            b.status.ensure(m),
-                           np.int32(params.tiles_x), b.tile1.ensure(4 * m), flag,
+                           np.int32(params.tiles_x), b.tile1.ensure(4 * m), n_clipped,
                            b.clip_count.ensure(4 * max(m, 1)),
                            b.clip_list.ensure(8 * max(m, 1)))]
         # Most passes clip nothing: then the clipper's count, the scan and their launches
@@ -144,11 +144,11 @@ class SetupStage:
         # behind setup at once, saving the device's idle time between the two.
         if geo.may_clip:
             wait(queue)   # interruptibly, with the GIL free (device.wait)
-            total = self.flag.read(queue, np.int32, 1)
+            total = self.n_clipped.read(queue, np.int32, 1)
         else:
             total = np.zeros(1, np.int32)
-        # bin's arguments (read for clipped slots only); clip_count is written by k_count
-        # (setup_triangles zeroes the clipped slots' first)
+        # bin's arguments (read for clipped slots only); clip_count is written by k_scratch
+        # or k_count (setup_triangles zeroes the clipped slots' first)
         b.clip_offset.ensure(4 * max(m, 1))
         n_clip = int(total[0])
         clip_args = (*draw_args, *size, np.float32(kx), np.float32(ky),
