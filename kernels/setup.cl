@@ -949,11 +949,10 @@ ALWAYS_INLINE uint batch_fates(int lt0, int n, Draw dr, __global const uchar4 *t
     /* the host skips the clipper's count and scan when no triangle needs it; its pieces
      * are counted by setup_count_clipped (the clipper's polygon arrays inlined here made
      * every work-item pay for them), which runs over the clipped triangles listed here
-     * (draw d, local triangle) alone: few of a frame's triangles are clipped (2.9K of the
-     * 186K of the plant's first-person frame), and over every triangle of the frame the
-     * clipper's kernels spent most of their time on the others. The list's order varies
-     * from run to run; each triangle's pieces go to its place in the stream
-     * (clip_offset, a scan over the slots), so the output does not. */
+     * (draw d, local triangle) alone: few of a frame's triangles are clipped, and over
+     * every triangle of the frame the clipper's kernels spent most of their time on the
+     * others. The list's order varies from run to run; each triangle's pieces go to its
+     * place in the stream (clip_offset, a scan over the slots), so the output does not. */
     if (any8(clipped)) {
         /* no pieces until setup_count_clipped counts them: a pass the host enqueued
          * binning for without that count (every draw DRAW_INSIDE or DRAW_NO_CLIP, which
@@ -1100,13 +1099,13 @@ __kernel void setup_triangles(DRAW_ARGS, const int width, const int height, cons
     if (q.n > 0) value_planes8(&q, &V, pieces);
 }
 
-/* The clipper on triangle (i0, i1, i2) (pool vertices) of this work-item's draw
- * (setup_count_clipped and setup_clipped, whose arguments carry these names): its corners
+/* The clipper on triangle (i0, i1, i2) (pool vertices) of draw `dix` (setup_count_clipped,
+ * setup_clipped and setup_clip_scratch, whose arguments carry these names): its corners
  * (vertex_of: the clip positions, outcodes and user plane bits setup_triangles made), its
  * frustum/guard-band planes and clipping user planes from those codes, the user-plane
  * distances, then clip_and_emit
  * with (write, out, out_bary, base), its piece count into `count`. A macro because the
- * buffers are kernel arguments of both kernels. */
+ * buffers are kernel arguments of each of those kernels. */
 #define CLIP_TRIANGLE(dix, count, write, out, out_bary, base) do {                        \
     Draw dr_ = draws[dix];                                                                \
     uint oc0_, oc1_, oc2_, uc0_, uc1_, uc2_;                                              \
