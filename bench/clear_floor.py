@@ -37,7 +37,8 @@ import numpy as np
 import pyopencl as cl
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from kernel_times import record_launches  # noqa: E402  (bench/ is not a package)
+from host_timeline import scene  # noqa: E402  (bench/ is not a package)
+from kernel_times import record_launches  # noqa: E402
 
 # The fill as the raster's clear writes: float8 / int8 rows, non-temporal where the compiler
 # has the builtin (clang's: PoCL, Intel's CPU runtime), else ordinary stores.
@@ -76,7 +77,6 @@ def main(argv: list[str] | None = None) -> int:
     w, h = (int(v) for v in a.size.lower().split("x"))
     launches = record_launches()
     from clraster import Renderer
-    from clraster.bench.spec import close_camera, quad_mesh
 
     r = Renderer(w, h)
     ctx, queue = r.context, r.queue
@@ -92,14 +92,13 @@ def main(argv: list[str] | None = None) -> int:
     depth = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
     ids = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
     scratch = cl.Buffer(ctx, mf.READ_WRITE, 4)
-    target = quad_mesh()
-    cam = close_camera(*target.bounds(), w, h, away=True)
+    target, cam = scene("empty", w, h)   # the harness's empty frame
     host = np.empty(2 * n, np.float32)
     junk = np.ones(a.evict << 17) if a.evict else None   # float64: MB << 17 of them
 
     def evict() -> None:
         if junk is not None:
-            junk.__iadd__(1.0)
+            np.add(junk, 1.0, out=junk)
 
     for _ in range(3):   # builds, PoCL's per-size specializations, the frame pool
         for k in fills.values():

@@ -591,16 +591,19 @@ ALWAYS_INLINE uint draw_vertices(__global const float *pos, int first, int nv,
     return any;
 }
 
-/* The triangle a work-item of the clipper's kernels works on: entry g of setup_triangles'
- * list of clipped triangles, (draw, local triangle). Gives its draw, its slot in the
- * frame's triangle stream, its three vertices in the geometry pool and its id. */
-inline void clipped_triangle(__global const int2 *clip_list, int g,
-                             __global const Draw *draws, __global const int4 *clusters,
-                             __global const uchar4 *local_tris,
-                             __global const int *face_ids, int *d, int *slot, int *i0,
-                             int *i1, int *i2, int *id)
+/* The triangle this work-item of the clipper's kernels works on: entry get_global_id of
+ * setup_triangles' list of the n_clip clipped triangles, (draw, local triangle). Gives its
+ * draw, its slot in the frame's triangle stream, its three vertices in the geometry pool
+ * and its id. Returns 0 for idle work-items (past the list's end). */
+inline int clipped_triangle(__global const int2 *clip_list, int n_clip,
+                            __global const Draw *draws, __global const int4 *clusters,
+                            __global const uchar4 *local_tris,
+                            __global const int *face_ids, int *g, int *d, int *slot,
+                            int *i0, int *i1, int *i2, int *id)
 {
-    int2 e = clip_list[g];
+    *g = (int)get_global_id(0);
+    if (*g >= n_clip) return 0;
+    int2 e = clip_list[*g];
     Draw dr = draws[e.x];
     int4 ci = clusters[dr.cluster];
     uchar4 tv = local_tris[ci.x + e.y];
@@ -610,6 +613,7 @@ inline void clipped_triangle(__global const int2 *clip_list, int g,
     *i1 = ci.z + tv.y;
     *i2 = ci.z + tv.z;
     *id = dr.face_base + face_ids[ci.x + e.y];
+    return 1;
 }
 
 #define DRAW_ARGS                                                                          \
@@ -1138,11 +1142,10 @@ __kernel void setup_count_clipped(DRAW_ARGS,
                                   __global int *restrict clip_count)
 {
     DEPTH_MODE(reversed);
-    int g = (int)get_global_id(0);
-    if (g >= n_clip) return;
-    int d, t, i0, i1, i2, id;
-    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
-                     &i2, &id);
+    int g, d, t, i0, i1, i2, id;
+    if (!clipped_triangle(clip_list, n_clip, draws, clusters, local_tris, face_ids, &g, &d,
+                          &t, &i0, &i1, &i2, &id))
+        return;
     CLIP_TRIANGLE(d, clip_count[t], 0, 0, 0, 0);
 }
 
@@ -1155,11 +1158,10 @@ __kernel void setup_clipped(DRAW_ARGS,
                             __global float *restrict clip_bary)
 {
     DEPTH_MODE(reversed);
-    int g = (int)get_global_id(0);
-    if (g >= n_clip) return;
-    int d, t, i0, i1, i2, id;
-    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
-                     &i2, &id);
+    int g, d, t, i0, i1, i2, id;
+    if (!clipped_triangle(clip_list, n_clip, draws, clusters, local_tris, face_ids, &g, &d,
+                          &t, &i0, &i1, &i2, &id))
+        return;
     if (clip_count[t] == 0) return;
     int written;   /* clip_count[t], counted before */
     CLIP_TRIANGLE(d, written, 1, clip_pieces, clip_bary, clip_offset[t]);
@@ -1181,11 +1183,10 @@ __kernel void setup_clip_scratch(DRAW_ARGS,
                                  __global float *restrict scratch_bary)
 {
     DEPTH_MODE(reversed);
-    int g = (int)get_global_id(0);
-    if (g >= n_clip) return;
-    int d, t, i0, i1, i2, id;
-    clipped_triangle(clip_list, g, draws, clusters, local_tris, face_ids, &d, &t, &i0, &i1,
-                     &i2, &id);
+    int g, d, t, i0, i1, i2, id;
+    if (!clipped_triangle(clip_list, n_clip, draws, clusters, local_tris, face_ids, &g, &d,
+                          &t, &i0, &i1, &i2, &id))
+        return;
     int count;
     CLIP_TRIANGLE(d, count, 1, scratch, scratch_bary, g * bound);
     clip_count[t] = count;

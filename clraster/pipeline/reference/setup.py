@@ -345,15 +345,16 @@ def user_distances(pool, fd) -> np.ndarray | None:
 
 def draw_mirrored(pool, fd) -> np.ndarray:
     """bool (M,): per slot of the frame's triangle stream, whether its draw has the
-    DRAW_MIRRORED flag (mirrors triangle_of's flags in setup.cl)."""
+    DRAW_MIRRORED flag (setup.cl: setup_triangles' draw flags, dr.flags)."""
     d = fd.draws
     nt = pool.clusters[d["cluster"]][:, 1].astype(np.int64)
     return np.repeat((d["flags"] & DRAW_MIRRORED) != 0, nt)
 
 
 def draw_triangles(pool, fd) -> tuple[np.ndarray, np.ndarray]:
-    """The frame's triangle stream (mirrors triangle_of in setup.cl): per slot, the three
-    vertex-stream indices int64 (M, 3) and the triangle id int64 (M,)."""
+    """The frame's triangle stream (mirrors setup_triangles' slots, dr.tri_base + local
+    triangle, and clipped_triangle in setup.cl): per slot, the three vertex-stream indices
+    int64 (M, 3) and the triangle id int64 (M,)."""
     d = fd.draws
     info = pool.clusters[d["cluster"]].astype(np.int64)
     nt = info[:, 1]
