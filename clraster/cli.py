@@ -609,21 +609,26 @@ def _devices(argv: list[str]) -> int:
         return int(exc.code or 0)
 
     def body() -> int:
-        from .pipeline.device import choose_context, describe_choice, list_devices
+        from .pipeline.device import NoDeviceError, choose_context, describe_choice, list_devices
         from .pipeline.runtimes import wheel_runtimes
 
         rows = list_devices()
         print("OpenCL devices (* the one clraster uses):" if rows else "OpenCL devices: none")
-        ctx, reason = choose_context()
+        try:
+            ctx, reason = choose_context()
+        except NoDeviceError as exc:   # the table still helps choose; then the error
+            ctx, reason, failure = None, "", exc
         for r in rows:
             state = "compiles" if r.compiles else f"does not compile: {r.compile_error}"
             if "oclgrind" in r.platform.lower():
                 state += " (a simulator, ~1000x slower)"
-            mark = "*" if r.device == ctx.devices[0] else " "
+            mark = "*" if ctx is not None and r.device == ctx.devices[0] else " "
             print(f"{mark} {r.label}  [{r.kind}; {r.platform_version}]  {state}")
         for rt in wheel_runtimes():   # installed from PyPI, yet not usable: say why
             if rt.installed and not rt.registered:
                 print(f"  not listed: {rt.describe()}")
+        if ctx is None:
+            raise failure
         print(f"clraster uses: {describe_choice(ctx, reason)}")
         return 0
 

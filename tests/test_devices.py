@@ -153,6 +153,12 @@ def test_cli_devices_unknown_choice_exits_1():
                CLRASTER_DEVICE="no-such-runtime")
     assert res.returncode == 1
     assert "no-such-runtime" in res.stderr and "devices here:" in res.stderr
+    # the table is printed before the error, with no device marked: it is what the user
+    # chooses from (a machine whose only OpenCL device is a GPU ends here too)
+    lines = res.stdout.splitlines()
+    assert lines[0] == "OpenCL devices (* the one clraster uses):"
+    assert any("Portable Computing Language" in ln for ln in lines[1:])
+    assert not any(ln.startswith("* ") for ln in lines)
 
 
 def test_bench_machine_records_the_choice():

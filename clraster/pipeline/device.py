@@ -55,7 +55,7 @@ import numpy as np
 import pyopencl as cl
 
 from .arraypool import page_aligned  # plain NumPy, imports nothing of clraster
-from .features import feature_options
+from .features import feature_options, precision_options
 from .runtimes import hint as _runtime_hint
 from .runtimes import register_wheel_runtimes
 
@@ -323,7 +323,24 @@ def _default_context() -> cl.Context:
     why = ("; platforms that failed to compile a probe kernel: " + " | ".join(failures)
            if failures else "")
     raise NoDeviceError(f"no usable OpenCL CPU device (platforms: {names}){why}. "
-                        f"{_INSTALL_HINT}")
+                        f"{_INSTALL_HINT}{_other_devices_hint(found)}")
+
+
+def _other_devices_hint(found: list) -> str:
+    """How to choose a device that is not a CPU (never the default), naming those there
+    are; empty where there are none."""
+    others = []
+    for plat in found:
+        try:
+            others += [d.name.strip() for d in plat.get_devices()
+                       if not d.type & cl.device_type.CPU]
+        except cl.Error:
+            continue
+    if not others:
+        return ""
+    return (f" Devices that are not CPUs ({', '.join(others)}) are used only when chosen: "
+            f"CLRASTER_DEVICE={others[0]!r} (any part of a platform or device name); they "
+            f"give the same bytes, untuned for speed.")
 
 
 def _probe_error(ctx: cl.Context) -> str | None:
@@ -554,7 +571,8 @@ def program(ctx: cl.Context, stage: str, options: tuple[str, ...]) -> cl.Program
     # none for these programs without the option)
     # kernels/common.h: the Clang builtins the device's compiler lacks (or that
     # CLRASTER_FALLBACKS forces) take their portable fallbacks (clraster.pipeline.features)
-    options = (*options, "-cl-kernel-arg-info", *feature_options(ctx))
+    options = (*options, "-cl-kernel-arg-info", *feature_options(ctx),
+               *precision_options(ctx.devices[0]))
     key = (stage, tuple(options))
     with _lock:
         per_ctx = getattr(ctx, _CACHE_ATTR, None)

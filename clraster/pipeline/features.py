@@ -38,7 +38,7 @@ from .runtimes import RuntimeSetupError, cache_root
 log = logging.getLogger("clraster.device")
 
 __all__ = ["FEATURES", "FallbackError", "WorkGroupError", "compiler_features",
-           "feature_options", "forced_fallbacks", "local_size"]
+           "feature_options", "forced_fallbacks", "local_size", "precision_options"]
 
 #: probe inputs: floats with ties (x.5 both signs), values near 2^23 and 2^24 where float
 #: rounding and int→float conversion round, a negative zero; ints with one bit set, several,
@@ -158,7 +158,8 @@ def _run(ctx: cl.Context, features: list[Feature]) -> set[str]:
     ``ctx``'s device. Raises cl.Error when the program does not build."""
     with warnings.catch_warnings():   # a compiler's remarks on success are not ours
         warnings.simplefilter("ignore", cl.CompilerWarning)
-        prg = cl.Program(ctx, _kernel_source(features)).build()
+        prg = cl.Program(ctx, _kernel_source(features)).build(
+            options=list(precision_options(ctx.devices[0])))
     queue = cl.CommandQueue(ctx)
     mf = cl.mem_flags
     fi = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=_F_IN)
@@ -183,6 +184,20 @@ def _run(ctx: cl.Context, features: list[Feature]) -> set[str]:
         else:
             log.debug("probe %s gave %s %s, expected %s %s", f.name, fo, io, want_f, want_i)
     return good
+
+
+def precision_options(dev: cl.Device) -> tuple[str, ...]:
+    """``-cl-fp32-correctly-rounded-divide-sqrt`` where ``dev`` offers it (its
+    CL_DEVICE_SINGLE_FP_CONFIG has CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT), else nothing.
+
+    OpenCL lets float ``/`` and ``sqrt`` be 2.5 and 3 ulp off unless a program is built with
+    this option; CPU runtimes round them correctly either way, GPU drivers do not (they
+    divide by a reciprocal). The twin divides in IEEE float32, so the same bytes on every
+    runtime need it asked for. A device without the bit (Oclgrind reports none, and computes
+    on the host's IEEE arithmetic) is built as it is."""
+    if dev.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT:
+        return ("-cl-fp32-correctly-rounded-divide-sqrt",)
+    return ()
 
 
 def _device_key(dev: cl.Device) -> tuple[str, ...]:
