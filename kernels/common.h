@@ -89,7 +89,8 @@
 
 /* Correctly rounded float square root, a scalar: clang's builtin is one sqrtss, and eight
  * in a row one vsqrtps (PoCL's sqrt() is a call, not inlined). Fallback: OpenCL's sqrt, the
- * same bits where the runtime rounds it correctly, as OpenCL 1.2 requires of sqrt. */
+ * same bits where the runtime rounds it correctly: CPU runtimes do, a GPU driver with
+ * -cl-fp32-correctly-rounded-divide-sqrt (clraster.pipeline.features.precision_options). */
 #ifdef CLRASTER_NO_SQRTF
 #define SQRTF(x) sqrt(x)
 #else

@@ -331,6 +331,8 @@ def _other_devices_hint(found: list) -> str:
     are; empty where there are none."""
     others = []
     for plat in found:
+        if "oclgrind" in plat.name.lower():   # a simulator (a "GPU"), never suggested
+            continue
         try:
             others += [d.name.strip() for d in plat.get_devices()
                        if not d.type & cl.device_type.CPU]
@@ -521,8 +523,12 @@ def shares_host_memory(ctx: cl.Context) -> bool:
 
     PoCL's CPU drivers do (lib/CL/devices/common_driver.c: ``alloc_mem_obj`` makes the
     host pointer the device's pointer, and map/unmap copy nothing when the two are the
-    same); OpenCL in general does not promise it, so it is probed once per context: a fill
-    enqueued on such a buffer must show in its array without a map. Every map, unmap or
+    same); OpenCL in general does not promise it, so it is probed once per context, both
+    ways: a fill enqueued on such a buffer must show in its array without a map, and what
+    the host then writes into the array must be what a copy command reads. Only a CPU
+    device is asked: a GPU driver may work in the host array through the bus for one
+    command and in a copy of its own for the next (NVIDIA's OpenCL on an H200 failed the
+    host-memory tests with the path forced). Every map, unmap or
     read is a command of its own that PoCL's threads pick up one after another: the reads
     after a frame (the raster's counts, its three output maps, the bin summary, setup's
     flag) came back a measurable share of a small frame after the raster ended."""
@@ -534,6 +540,8 @@ def shares_host_memory(ctx: cl.Context) -> bool:
 
 
 def _probe_shared(ctx: cl.Context) -> bool:
+    if not ctx.devices[0].type & cl.device_type.CPU:
+        return False
     arr = page_aligned(4096).view(np.uint32)
     arr[:] = 0
     mf = cl.mem_flags
@@ -543,6 +551,14 @@ def _probe_shared(ctx: cl.Context) -> bool:
         cl.enqueue_fill_buffer(queue, buf, np.uint32(0xA5A5A5A5), 0, arr.nbytes)
         queue.finish()
         shared = bool(np.all(arr == 0xA5A5A5A5))
+        # and the other way: the host's write is what the device reads next
+        arr[:] = 0x5A5A5A5A
+        seen = np.zeros_like(arr)
+        other = cl.Buffer(ctx, mf.READ_WRITE, arr.nbytes)
+        cl.enqueue_copy(queue, other, buf)
+        cl.enqueue_copy(queue, seen, other)
+        queue.finish()
+        shared = shared and bool(np.all(seen == 0x5A5A5A5A))
         # the formal way too, so the implementation's own bookkeeping ends consistent
         mapped, _ = cl.enqueue_map_buffer(queue, buf, cl.map_flags.READ, 0, arr.shape,
                                           arr.dtype)
