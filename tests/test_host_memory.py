@@ -339,6 +339,13 @@ def test_frame_after_an_interrupted_pass_is_right(monkeypatch):
 
     from clraster.world.generators import plant, plant_overview_camera
 
+    if not device.default_context().devices[0].type & cl.device_type.CPU:
+        # the gate below is a user event in the queue; some GPU drivers stop the queue or
+        # block the enqueueing call on one (KhronosGroup/OpenCL-CTS#1661), and pyopencl
+        # holds the GIL in an enqueue, so the timer that opens the gate never runs: this
+        # test hung on NVIDIA's OpenCL (bench/results/devices/nvidia-h200)
+        pytest.skip("the user-event gate can hang a GPU driver's queue")
+
     w, h = 1280, 720
     big = plant(1_000_000)
     big_cam = plant_overview_camera(big, w, h)
