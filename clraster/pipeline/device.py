@@ -323,21 +323,15 @@ def _default_context() -> cl.Context:
     why = ("; platforms that failed to compile a probe kernel: " + " | ".join(failures)
            if failures else "")
     raise NoDeviceError(f"no usable OpenCL CPU device (platforms: {names}){why}. "
-                        f"{_INSTALL_HINT}{_other_devices_hint(found)}")
+                        f"{_INSTALL_HINT}{_other_devices_hint()}")
 
 
-def _other_devices_hint(found: list) -> str:
+def _other_devices_hint() -> str:
     """How to choose a device that is not a CPU (never the default), naming those there
     are; empty where there are none."""
-    others = []
-    for plat in found:
-        if "oclgrind" in plat.name.lower():   # a simulator (a "GPU"), never suggested
-            continue
-        try:
-            others += [d.name.strip() for d in plat.get_devices()
-                       if not d.type & cl.device_type.CPU]
-        except cl.Error:
-            continue
+    # (Oclgrind, a simulator that calls itself a GPU, is never suggested)
+    others = [r.name for r in _unprobed_devices()
+              if not r.device.type & cl.device_type.CPU and "oclgrind" not in r.platform.lower()]
     if not others:
         return ""
     return (f" Devices that are not CPUs ({', '.join(others)}) are used only when chosen: "
